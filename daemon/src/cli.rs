@@ -1,0 +1,57 @@
+//! Command line: one subcommand per job; each lives in its own module under `cmd/`.
+
+use clap::{Parser, Subcommand};
+
+use crate::cmd;
+
+/// metrolog — data acquisition and analysis for machine-tool metrology.
+#[derive(Debug, Parser)]
+#[command(name = "metrolog", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run the acquisition service from a config file (what systemd starts).
+    Run(cmd::run::Args),
+    /// Run a complete measurement on simulated instruments and report it.
+    Demo(cmd::demo::Args),
+    /// Start only the simulated instruments and print their port paths.
+    Sim(cmd::sim::Args),
+    /// Re-run steady-value detection (and analysis) from the raw topics of a log.
+    Replay(cmd::replay::Args),
+    /// Show what a log holds.
+    Info(cmd::info::Args),
+    /// Evaluate a measurement (ISO 230-2 positioning accuracy, ...).
+    #[command(subcommand)]
+    Analyze(cmd::analyze::Command),
+    /// Find what the simulation model gets wrong in measured data, and extend the model.
+    Diagnose(cmd::diagnose::Args),
+    /// Volumetric error of a three-axis machine and its compensation table.
+    Volumetric(cmd::volumetric::Args),
+    /// Identify machine errors from CapBall or PSD measurements.
+    #[command(subcommand)]
+    Identify(cmd::identify::Command),
+    /// Before/after check of measured parts (means, Welch t-test, reject rates).
+    Parts(cmd::parts::Args),
+    /// Evaluate an uncertainty budget by GUM and/or Monte Carlo.
+    Uncertainty(cmd::uncertainty::Args),
+}
+
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Run(a) => cmd::run::run(a),
+        Command::Demo(a) => cmd::demo::run(a),
+        Command::Sim(a) => cmd::sim::run(a),
+        Command::Replay(a) => cmd::replay::run(a),
+        Command::Info(a) => cmd::info::run(a),
+        Command::Analyze(c) => cmd::analyze::run(c),
+        Command::Diagnose(a) => cmd::diagnose::run(a),
+        Command::Volumetric(a) => cmd::volumetric::run(a),
+        Command::Identify(c) => cmd::identify::run(c),
+        Command::Parts(a) => cmd::parts::run(a),
+        Command::Uncertainty(a) => cmd::uncertainty::run(a),
+    }
+}

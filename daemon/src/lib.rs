@@ -1,0 +1,5 @@
+//! The `metrolog` binary's library: configuration, acquisition pipeline, MCAP log, replay and
+//! the command-line commands (one module per command under [`cmd`]).
+
+pub mod cli;
+pub mod cmd;

@@ -1,0 +1,140 @@
+//! Async drivers of metrolog's instruments. Each driver owns its port, identifies and configures
+//! the device, decodes the stream with the `protocol` decoders, timestamps and converts every
+//! sample, counts every fault, and survives unplug/replug. Drivers never block on the consumer:
+//! they send into a bounded channel and count what could not be delivered.
+//!
+//! Public surface used by the daemon:
+//! - [`Sample`], [`SampleValues`], [`Trigger`], [`DriverEvent`] — what the drivers yield;
+//! - [`Counters`] — per-instrument counters;
+//! - [`Instrument`];
+//! - `li80::spawn`, `cb3::spawn`, `psd::spawn`, `trigger::spawn_slcan`, `trigger::spawn_socketcan`
+//!   — start a driver task (see each module);
+//! - [`clock::ClockFit`] — device-clock against host-clock fit;
+//! - [`HostClock`] — the host monotonic clock as ns since the Unix epoch.
+
+use serde::Serialize;
+
+/// The instruments metrolog knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Instrument {
+    Interferometer,
+    Capball,
+    Psd,
+    Trigger,
+}
+
+impl Instrument {
+    pub fn name(self) -> &'static str {
+        match self {
+            Instrument::Interferometer => "interferometer",
+            Instrument::Capball => "capball",
+            Instrument::Psd => "psd",
+            Instrument::Trigger => "trigger",
+        }
+    }
+}
+
+/// The host clock: monotonic, expressed as ns since the Unix epoch (wall time read once at
+/// start, then advanced by the monotonic clock, so it never jumps).
+#[derive(Debug, Clone, Copy)]
+pub struct HostClock {
+    start_mono: std::time::Instant,
+    start_unix_ns: u64,
+}
+
+impl HostClock {
+    pub fn new() -> Self {
+        let start_unix_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos() as u64)
+            .unwrap_or(0);
+        HostClock { start_mono: std::time::Instant::now(), start_unix_ns }
+    }
+    /// Now, ns since the Unix epoch along the monotonic clock.
+    pub fn now_ns(&self) -> u64 {
+        self.start_unix_ns + self.start_mono.elapsed().as_nanos() as u64
+    }
+}
+
+impl Default for HostClock {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// One converted, timestamped sample of an instrument.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Sample {
+    pub instrument: Instrument,
+    /// Device sequence number, unwrapped (monotonic across wraps within one connection).
+    pub seq: u64,
+    /// Device clock, µs, unwrapped.
+    pub device_t_us: u64,
+    /// Host arrival time, ns since the Unix epoch (see [`HostClock`]).
+    pub host_ns: u64,
+    /// Device time mapped onto the host axis by the clock fit, ns since the Unix epoch
+    /// (equals `host_ns` until the fit has enough points).
+    pub fitted_ns: u64,
+    pub valid: bool,
+    pub values: SampleValues,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum SampleValues {
+    /// LI-80 `$POS`, with the compensated length.
+    Position { raw_nm: i64, position_um: f64, sig: u8, flags: u32 },
+    /// LI-80 `$ENV`, with the refractive index computed from it.
+    Environment { air_c: f64, air_pa: f64, rh_pct: f64, material_c: Vec<f64>, n_air: f64 },
+    /// CB-3 sample: volts, distance changes (polynomial) and machine-frame error (transform).
+    Capball { volts: [f64; 3], d_um: [f64; 3], e_um: [f64; 3], flags: u8 },
+    /// PSD-2 sample: position, summed photocurrent, head temperature.
+    Psd { x_um: f64, y_um: f64, sum_pa: f64, head_c: f64 },
+}
+
+/// A CNC trigger, from SocketCAN or SLCAN alike.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Trigger {
+    pub event: protocol::can::TriggerEvent,
+    pub pose: u16,
+    pub nc_ms: u32,
+    pub host_ns: u64,
+}
+
+/// Per-instrument counters. Every field only grows during a run.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Counters {
+    pub samples: u64,
+    /// Samples missing according to the sequence numbers.
+    pub gap_samples: u64,
+    /// Number of gaps (events), each of one or more samples.
+    pub gaps: u64,
+    pub rejections: std::collections::BTreeMap<protocol::RejectKind, u64>,
+    pub resyncs: u64,
+    pub reconnects: u64,
+    pub disconnects: u64,
+    /// Samples that could not be delivered because the consumer's queue was full.
+    pub dropped: u64,
+    pub invalid: u64,
+    /// Asynchronous device errors (`$ERR`).
+    pub device_errors: u64,
+    pub answers: u64,
+    /// Fitted drift of the device clock against the host clock, ppm (None until fitted).
+    pub clock_drift_ppm: Option<f64>,
+}
+
+/// Everything a driver reports.
+#[derive(Debug, Clone)]
+pub enum DriverEvent {
+    Sample(Sample),
+    Trigger(Trigger),
+    /// The device was identified (after every (re)connect).
+    Connected { instrument: Instrument, port: String, identity: String },
+    /// The port vanished or failed; the driver retries with backoff.
+    Disconnected { instrument: Instrument, port: String, reason: String },
+    /// An error the operator must read (device answered ERR or nothing).
+    Error { instrument: Instrument, port: String, message: String },
+    /// A snapshot of the counters (sent about once a second and on change of connection).
+    Counters { instrument: Instrument, counters: Counters },
+}

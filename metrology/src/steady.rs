@@ -1,0 +1,1 @@
+//! Steady-value detection: one value per programmed pose from a sampled signal.

@@ -1,0 +1,41 @@
+//! Wire formats of the instruments metrolog reads, as pure codecs: bytes in, frames and counted
+//! rejections out. No I/O and no async here, so every decoder can be fed from a port, a file, a
+//! fuzzer or a property test alike (the sans-IO shape of the `mcap` crate).
+//!
+//! One module per instrument of `shared/instruments.md`:
+//! - [`li80`]: LI-80 laser interferometer, NMEA-style ASCII lines with XOR checksum;
+//! - [`cb3`]: CB-3 CapBall ADC, COBS-framed binary payloads with CRC-16/CCITT-FALSE;
+//! - [`psd`]: PSD-2 transimpedance board, SCPI commands and unchecked CSV data lines;
+//! - [`can`]: CNC exact-stop trigger frames (CAN 2.0A payload) and [`slcan`] (Lawicel text).
+//!
+//! The host-side conversions are in [`edlen`] (refractive index of air) and [`convert`].
+
+pub mod can;
+pub mod cb3;
+pub mod convert;
+pub mod edlen;
+pub mod li80;
+pub mod psd;
+pub mod reject;
+pub mod slcan;
+
+pub use reject::{RejectKind, Rejection};
+
+/// What a streaming decoder hands out for the bytes it was fed.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Decoded<F> {
+    /// A frame that passed every check of its format.
+    Frame(F),
+    /// Bytes that were discarded, and why. The decoder has already resynchronised.
+    Reject(Rejection),
+}
+
+/// A streaming decoder: feed it chunks of any size, split anywhere; it calls `sink` for every
+/// complete frame and every rejection, in stream order, and keeps a partial frame for the next
+/// call. It never panics on any input and never loses a valid frame that follows garbage.
+pub trait StreamDecoder {
+    type Frame;
+    fn feed<S: FnMut(Decoded<Self::Frame>)>(&mut self, bytes: &[u8], sink: S);
+    /// Forget any partial frame (after a reconnect).
+    fn reset(&mut self);
+}

@@ -138,3 +138,12 @@ pub enum DriverEvent {
     /// A snapshot of the counters (sent about once a second and on change of connection).
     Counters { instrument: Instrument, counters: Counters },
 }
+
+pub mod cb3;
+pub mod clock;
+pub mod li80;
+pub mod psd;
+pub mod trigger;
+
+/// How a driver hands its events on: a bounded queue; a full queue is counted, never waited on.
+pub type EventSender = tokio::sync::mpsc::Sender<DriverEvent>;

@@ -1,0 +1,1 @@
+//! Device-clock fitting: a robust running fit of a device clock against the host clock.

@@ -3,7 +3,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use protocol::cb3::{Command, Frame, SampleFrame};
+use protocol::cb3::{Answer, Command, Frame, SampleFrame};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
@@ -43,7 +43,8 @@ impl Cb3 {
         }
     }
 
-    fn text(&self, ctx: &mut Ctx, line: &str, reply: String) {
+    fn text(&self, ctx: &mut Ctx, line: &str, reply: Answer) {
+        let reply = reply.to_text();
         protocol::cb3::encode(&Frame::Text(reply.clone()), ctx.out);
         ctx.shared.lock_record().capball.commands.push((line.to_string(), reply));
     }
@@ -156,16 +157,19 @@ impl Model for Cb3 {
 
     fn command(&mut self, line: &str, ctx: &mut Ctx) {
         let reply = match Command::parse(line) {
-            Some(Command::Id) => format!("CB-3,{},{}", self.cfg.identity.serial, self.cfg.identity.firmware),
+            Some(Command::Id) => Answer::Id {
+                serial: self.cfg.identity.serial.clone(),
+                firmware: self.cfg.identity.firmware.clone(),
+            },
             Some(Command::Rate(hz)) => {
                 if RATE_RANGE_HZ.contains(&hz) {
                     self.rate_hz = hz;
                     if let Some(c) = &self.stream {
                         self.stream = Some(Cadence::new(hz as f64, c.next_us()));
                     }
-                    "OK".into()
+                    Answer::Ok
                 } else {
-                    "ERR rate out of range".into()
+                    Answer::Err("rate out of range".into())
                 }
             }
             Some(Command::Start) => {
@@ -173,13 +177,13 @@ impl Model for Cb3 {
                     let now = ctx.now;
                     self.stream = Some(Cadence::new(self.rate_hz as f64, ctx.clock.dev_us(now)));
                 }
-                "OK".into()
+                Answer::Ok
             }
             Some(Command::Stop) => {
                 self.stream = None;
-                "OK".into()
+                Answer::Ok
             }
-            None => "ERR unknown command".into(),
+            None => Answer::Err("unknown command".into()),
         };
         self.text(ctx, line, reply);
     }

@@ -3,7 +3,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use protocol::li80::{Command, EnvFrame, ErrFrame, PosFlags, PosFrame};
+use protocol::li80::{Answer, Command, EnvFrame, ErrFrame, PosFlags, PosFrame};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
@@ -100,9 +100,11 @@ impl Li80 {
         self.interruptions.iter().position(|b| sp >= b.at_s && sp < b.at_s + b.duration_s)
     }
 
-    fn answer(&self, ctx: &mut Ctx, text: &str) {
+    fn answer(&self, ctx: &mut Ctx, line: &str, a: Answer) {
+        let text = a.to_line();
         ctx.out.extend_from_slice(text.as_bytes());
-        ctx.out.extend_from_slice(b"\r\n");
+        let text = text.trim_end().to_string();
+        ctx.shared.lock_record().interferometer.commands.push((line.to_string(), text));
     }
 
     fn send_env(&mut self, ctx: &mut Ctx, at: Instant, t_us: u64) {
@@ -259,7 +261,10 @@ impl Model for Li80 {
 
     fn command(&mut self, line: &str, ctx: &mut Ctx) {
         let reply = match Command::parse(line) {
-            Ok(Command::Idn) => format!("LI-80,{},{}", self.cfg.identity.serial, self.cfg.identity.firmware),
+            Ok(Command::Idn) => Answer::Idn {
+                serial: self.cfg.identity.serial.clone(),
+                firmware: self.cfg.identity.firmware.clone(),
+            },
             Ok(Command::Rate(hz)) => {
                 if (1..=MAX_RATE_HZ).contains(&hz) {
                     self.rate_hz = hz;
@@ -267,9 +272,9 @@ impl Model for Li80 {
                         // The new rate takes effect from the next sample on.
                         self.stream = Some(Cadence::new(hz as f64, c.next_us()));
                     }
-                    "OK".into()
+                    Answer::Ok
                 } else {
-                    "ERR 2 rate out of range".into()
+                    Answer::Err { code: 2, text: "rate out of range".into() }
                 }
             }
             Ok(Command::Stream(on)) => {
@@ -280,14 +285,14 @@ impl Model for Li80 {
                 } else if !on {
                     self.stream = None;
                 }
-                "OK".into()
+                Answer::Ok
             }
             Ok(Command::Datum) => {
                 self.datum_l20_um = self.l20_um(ctx, ctx.now);
                 self.lost_um = 0.0;
                 self.datum_lost_from = None;
                 ctx.shared.lock_record().interferometer.datums_s.push(ctx.sim_s(ctx.now));
-                "OK".into()
+                Answer::Ok
             }
             Ok(Command::EnvQuery) => {
                 let t_us = ctx.clock.dev_us(ctx.now).round() as u64;
@@ -295,10 +300,9 @@ impl Model for Li80 {
                 ctx.shared.lock_record().interferometer.commands.push((line.to_string(), "$ENV".into()));
                 return;
             }
-            Err(_) => "ERR 1 unknown command".into(),
+            Err(_) => Answer::Err { code: 1, text: "unknown command".into() },
         };
-        self.answer(ctx, &reply);
-        ctx.shared.lock_record().interferometer.commands.push((line.to_string(), reply));
+        self.answer(ctx, line, reply);
     }
 
     fn tick(&mut self, ctx: &mut Ctx) {

@@ -4,7 +4,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Instant;
 
-use protocol::psd::{Command, DataLine, SystErr};
+use protocol::psd::{Command, DataLine, Line, SystErr};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
@@ -55,8 +55,7 @@ impl Psd2 {
 
     fn answer(&self, ctx: &mut Ctx, line: &str, reply: String) {
         let reply = reply.trim_end_matches(['\r', '\n']).to_string();
-        ctx.out.extend_from_slice(reply.as_bytes());
-        ctx.out.push(b'\n');
+        protocol::psd::encode_line(&Line::Answer(reply.clone()), ctx.out);
         ctx.shared.lock_record().psd.commands.push((line.to_string(), reply));
     }
 
@@ -159,7 +158,7 @@ impl Model for Psd2 {
             }
             Some(Command::Opc) => self.answer(ctx, line, "1".into()),
             Some(Command::SystErr) => {
-                let e = self.errors.pop_front().unwrap_or(SystErr { code: 0, text: "No error".into() });
+                let e = self.errors.pop_front().unwrap_or_else(SystErr::no_error);
                 self.answer(ctx, line, e.to_line());
             }
             Some(Command::ConfRate(hz)) => {

@@ -5,15 +5,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use protocol::can::{TriggerEvent, TriggerFrame};
-use protocol::slcan::CanFrame;
+use protocol::slcan::{CanFrame, Command, Message};
 
 use crate::device::{Ctx, Model};
 use crate::record::{SentTrigger, TriggerFate};
 use crate::scenario::{MissingTrigger, ProgramStart, TriggerAdapter};
 use crate::{Device, Shared};
-
-const ACK: &[u8] = b"\r";
-const NACK: &[u8] = b"\x07";
 
 pub(crate) struct Slcan {
     cfg: TriggerAdapter,
@@ -105,38 +102,41 @@ impl Model for Slcan {
         if line.is_empty() {
             return;
         }
-        let (reply, text): (Vec<u8>, &str) = match line.as_bytes() {
-            b"C" => {
+        let reply = match (Command::parse(line), line) {
+            (Some(Command::Close), _) => {
                 self.open = false;
-                (ACK.to_vec(), "ack")
+                Message::Ack
             }
-            [b'S', d @ b'0'..=b'8'] if !self.open => {
-                self.bitrate = Some(d - b'0');
-                (ACK.to_vec(), "ack")
+            // Lawicel: the bit rate can only be set while the channel is closed.
+            (Some(Command::Bitrate(n)), _) if !self.open => {
+                self.bitrate = Some(n);
+                Message::Ack
             }
-            b"O" | b"L" if !self.open => {
+            (Some(Command::Open), _) | (None, "L") if !self.open => {
                 self.open = true;
                 if self.start == ProgramStart::OnCanOpen {
                     let at = ctx.now + Duration::from_secs_f64(self.start_delay_s);
                     ctx.shared.start_program_at(at);
                 }
-                (ACK.to_vec(), "ack")
+                Message::Ack
             }
-            [b'Z', b'0'] => {
-                self.timestamps = false;
-                (ACK.to_vec(), "ack")
+            (Some(Command::Timestamps(on)), _) => {
+                self.timestamps = on;
+                Message::Ack
             }
-            [b'Z', b'1'] => {
-                self.timestamps = true;
-                (ACK.to_vec(), "ack")
-            }
-            b"V" => (format!("V{}\r", self.cfg.version).into_bytes(), "version"),
-            b"N" => (format!("N{}\r", self.cfg.serial).into_bytes(), "serial"),
-            b"F" => (b"F00\r".to_vec(), "status"),
-            _ => (NACK.to_vec(), "nack"),
+            (None, "V") => Message::Other(format!("V{}", self.cfg.version)),
+            (None, "N") => Message::Other(format!("N{}", self.cfg.serial)),
+            (None, "F") => Message::Other("F00".into()),
+            _ => Message::Nack,
         };
-        ctx.out.extend_from_slice(&reply);
-        ctx.shared.lock_record().trigger.device.commands.push((line.to_string(), text.to_string()));
+        protocol::slcan::encode_message(&reply, ctx.out);
+        let text = match &reply {
+            Message::Ack => "ack".to_string(),
+            Message::Nack => "nack".to_string(),
+            Message::Other(s) => s.clone(),
+            Message::Frame(_) => String::new(),
+        };
+        ctx.shared.lock_record().trigger.device.commands.push((line.to_string(), text));
     }
 
     fn tick(&mut self, ctx: &mut Ctx) {

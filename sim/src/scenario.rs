@@ -140,7 +140,13 @@ pub struct PoseRow {
 
 impl PoseRow {
     pub fn coords(&self) -> Coords {
-        Coords { x_mm: self.x_mm, y_mm: self.y_mm, z_mm: self.z_mm, a_deg: self.a_deg, c_deg: self.c_deg }
+        Coords {
+            x_mm: self.x_mm,
+            y_mm: self.y_mm,
+            z_mm: self.z_mm,
+            a_deg: self.a_deg,
+            c_deg: self.c_deg,
+        }
     }
 }
 
@@ -156,7 +162,11 @@ pub struct Ringing {
 
 impl Default for Ringing {
     fn default() -> Self {
-        Ringing { amplitude_um: 2.0, frequency_hz: 35.0, decay_s: 0.02 }
+        Ringing {
+            amplitude_um: 2.0,
+            frequency_hz: 35.0,
+            decay_s: 0.02,
+        }
     }
 }
 
@@ -194,7 +204,13 @@ fn hour() -> f64 {
 
 impl Slow {
     pub const fn constant(mean: f64) -> Slow {
-        Slow { mean, amplitude: 0.0, period_s: 3600.0, phase_rad: 0.0, drift_per_h: 0.0 }
+        Slow {
+            mean,
+            amplitude: 0.0,
+            period_s: 3600.0,
+            phase_rad: 0.0,
+            drift_per_h: 0.0,
+        }
     }
     pub fn at(&self, t_s: f64) -> f64 {
         let cyc = if self.period_s > 0.0 {
@@ -319,7 +335,11 @@ impl Default for Capball {
             identity: Identity::new("CB3-SIM-0042", "1.7.0", -42.0),
             sensor_directions: dirs,
             zero_offset_um: [3.0, -2.0, 1.5],
-            poly: [[10.0, 0.02, -0.001], [10.0, -0.015, 0.0], [10.0, 0.01, 0.0005]],
+            poly: [
+                [10.0, 0.02, -0.001],
+                [10.0, -0.015, 0.0],
+                [10.0, 0.01, 0.0005],
+            ],
             noise_um: 0.02,
             ringing_gain: 0.5,
             truth: LinkErrors::default(),
@@ -390,7 +410,13 @@ impl Default for Psd {
             straightness_y_um: vec![-5.0, -0.6, 0.4],
             noise_um: 0.05,
             sum_pa: 1.2e6,
-            head_c: Slow { mean: 21.5, amplitude: 0.2, period_s: 1800.0, phase_rad: 0.0, drift_per_h: 0.1 },
+            head_c: Slow {
+                mean: 21.5,
+                amplitude: 0.2,
+                period_s: 1800.0,
+                phase_rad: 0.0,
+                drift_per_h: 0.1,
+            },
             ringing_gain: 0.7,
         }
     }
@@ -505,7 +531,10 @@ pub struct MissingTrigger {
 pub enum ScenarioError {
     /// cannot read scenario file {path}: {source}
     #[error("cannot read scenario file {path}: {source}")]
-    Read { path: String, source: std::io::Error },
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
     /// scenario is not valid TOML for metrolog-sim: {0}
     #[error("scenario is not valid TOML for metrolog-sim: {0}")]
     Parse(#[from] toml::de::Error),
@@ -535,8 +564,10 @@ impl Scenario {
 
     /// Read, parse and validate a scenario file.
     pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ScenarioError::Read { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
         Scenario::from_toml(&text)
     }
 
@@ -553,14 +584,20 @@ impl Scenario {
             return bad(format!("time_scale must be > 0, got {}", self.time_scale));
         }
         if !(0.2..=100.0).contains(&self.batch_ms) {
-            return bad(format!("batch_ms must be within 0.2..=100, got {}", self.batch_ms));
+            return bad(format!(
+                "batch_ms must be within 0.2..=100, got {}",
+                self.batch_ms
+            ));
         }
         let p = &self.program;
         if p.poses.is_empty() {
             return bad("program.poses is empty: give at least one pose".into());
         }
         if p.poses.len() > u16::MAX as usize {
-            return bad(format!("program.poses has {} rows, at most 65535 fit a trigger frame", p.poses.len()));
+            return bad(format!(
+                "program.poses has {} rows, at most 65535 fit a trigger frame",
+                p.poses.len()
+            ));
         }
         for (what, v) in [
             ("program.move_s", p.move_s),
@@ -576,7 +613,10 @@ impl Scenario {
         for (i, r) in p.poses.iter().enumerate() {
             for v in [r.move_s, r.dwell_s].into_iter().flatten() {
                 if !(v.is_finite() && v >= 0.0) {
-                    return bad(format!("pose {}: move_s/dwell_s must be ≥ 0, got {v}", i + 1));
+                    return bad(format!(
+                        "pose {}: move_s/dwell_s must be ≥ 0, got {v}",
+                        i + 1
+                    ));
                 }
             }
             for v in [r.x_mm, r.y_mm, r.z_mm, r.a_deg, r.c_deg] {
@@ -590,7 +630,9 @@ impl Scenario {
         }
         let n_mat = self.environment.material_c.len();
         if !(1..=3).contains(&n_mat) {
-            return bad(format!("environment.material_c must have 1 to 3 sensors, got {n_mat}"));
+            return bad(format!(
+                "environment.material_c must have 1 to 3 sensors, got {n_mat}"
+            ));
         }
         let a = &self.axis;
         if a.targets_mm.is_empty()
@@ -608,21 +650,31 @@ impl Scenario {
             ("psd", &self.psd.identity),
         ] {
             if !(id.clock_ppm.is_finite() && id.clock_ppm.abs() < 10_000.0) {
-                return bad(format!("{name}.identity.clock_ppm must be within ±10000, got {}", id.clock_ppm));
+                return bad(format!(
+                    "{name}.identity.clock_ppm must be within ±10000, got {}",
+                    id.clock_ppm
+                ));
             }
             if id.serial.contains([',', '\n', '\r']) || id.firmware.contains([',', '\n', '\r']) {
-                return bad(format!("{name}.identity: serial and firmware must not contain commas or line ends"));
+                return bad(format!(
+                    "{name}.identity: serial and firmware must not contain commas or line ends"
+                ));
             }
         }
         for (i, dir) in self.capball.sensor_directions.iter().enumerate() {
             let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
             if !finite_pos(n) {
-                return bad(format!("capball.sensor_directions[{i}] must be a non-zero vector"));
+                return bad(format!(
+                    "capball.sensor_directions[{i}] must be a non-zero vector"
+                ));
             }
         }
         for (i, c) in self.capball.poly.iter().enumerate() {
             if !finite_pos(c[0]) {
-                return bad(format!("capball.poly[{i}]: c1 must be > 0 µm/V, got {}", c[0]));
+                return bad(format!(
+                    "capball.poly[{i}]: c1 must be > 0 µm/V, got {}",
+                    c[0]
+                ));
             }
         }
         if !finite_pos(self.psd.sum_pa) {
@@ -634,9 +686,16 @@ impl Scenario {
             ("psd", &self.faults.psd),
         ] {
             let total = f.garbage_rate + f.bad_checksum_rate + f.truncated_rate + f.drop_rate;
-            for v in [f.garbage_rate, f.bad_checksum_rate, f.truncated_rate, f.drop_rate] {
+            for v in [
+                f.garbage_rate,
+                f.bad_checksum_rate,
+                f.truncated_rate,
+                f.drop_rate,
+            ] {
                 if !(0.0..=1.0).contains(&v) {
-                    return bad(format!("faults.{name}: rates are probabilities in 0..=1, got {v}"));
+                    return bad(format!(
+                        "faults.{name}: rates are probabilities in 0..=1, got {v}"
+                    ));
                 }
             }
             if total > 1.0 {

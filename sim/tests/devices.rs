@@ -34,11 +34,23 @@ fn li80_answers_are_exact() {
     let env = Env::start(quick());
     let mut p = env.open(Device::Interferometer);
     let crlf = || ends_with(b"\r\n");
-    assert_eq!(ask(&mut *p, "*IDN?\n", crlf()), b"LI-80,LI80-SIM-0001,2.4.1\r\n");
-    assert_eq!(ask(&mut *p, "RATE 0\n", crlf()), b"ERR 2 rate out of range\r\n");
-    assert_eq!(ask(&mut *p, "RATE 10001\n", crlf()), b"ERR 2 rate out of range\r\n");
+    assert_eq!(
+        ask(&mut *p, "*IDN?\n", crlf()),
+        b"LI-80,LI80-SIM-0001,2.4.1\r\n"
+    );
+    assert_eq!(
+        ask(&mut *p, "RATE 0\n", crlf()),
+        b"ERR 2 rate out of range\r\n"
+    );
+    assert_eq!(
+        ask(&mut *p, "RATE 10001\n", crlf()),
+        b"ERR 2 rate out of range\r\n"
+    );
     assert_eq!(ask(&mut *p, "RATE 10000\r\n", crlf()), b"OK\r\n");
-    assert_eq!(ask(&mut *p, "HELLO\n", crlf()), b"ERR 1 unknown command\r\n");
+    assert_eq!(
+        ask(&mut *p, "HELLO\n", crlf()),
+        b"ERR 1 unknown command\r\n"
+    );
     assert_eq!(ask(&mut *p, "DATUM\n", crlf()), b"OK\r\n");
     assert_eq!(ask(&mut *p, "STREAM OFF\n", crlf()), b"OK\r\n");
     let env_line = ask(&mut *p, "ENV?\n", crlf());
@@ -99,7 +111,10 @@ fn li80_streams_at_rate_with_env_and_configured_drift() {
     }
     assert!((1..=3).contains(&envs), "{envs} $ENV lines in 1.5 s");
     let drift_ppm = (slope(&pts) - 1.0) * 1e6;
-    assert!((drift_ppm - 5000.0).abs() < 1500.0, "measured drift {drift_ppm} ppm");
+    assert!(
+        (drift_ppm - 5000.0).abs() < 1500.0,
+        "measured drift {drift_ppm} ppm"
+    );
     assert!(pos.iter().all(|f| f.sig >= 25 && f.flags.0 == 0));
 }
 
@@ -117,11 +132,26 @@ fn cb3_answers_stream_and_wraps() {
     };
     let zero = || ends_with(b"\0");
     use protocol::cb3::Frame;
-    assert_eq!(text(&ask(&mut *p, "ID?\n", zero())), vec![Frame::Text("CB-3,CB3-SIM-0042,1.7.0".into())]);
-    assert_eq!(text(&ask(&mut *p, "RATE 99\n", zero())), vec![Frame::Text("ERR rate out of range".into())]);
-    assert_eq!(text(&ask(&mut *p, "RATE 20001\n", zero())), vec![Frame::Text("ERR rate out of range".into())]);
-    assert_eq!(text(&ask(&mut *p, "FOO\n", zero())), vec![Frame::Text("ERR unknown command".into())]);
-    assert_eq!(text(&ask(&mut *p, "RATE 20000\n", zero())), vec![Frame::Text("OK".into())]);
+    assert_eq!(
+        text(&ask(&mut *p, "ID?\n", zero())),
+        vec![Frame::Text("CB-3,CB3-SIM-0042,1.7.0".into())]
+    );
+    assert_eq!(
+        text(&ask(&mut *p, "RATE 99\n", zero())),
+        vec![Frame::Text("ERR rate out of range".into())]
+    );
+    assert_eq!(
+        text(&ask(&mut *p, "RATE 20001\n", zero())),
+        vec![Frame::Text("ERR rate out of range".into())]
+    );
+    assert_eq!(
+        text(&ask(&mut *p, "FOO\n", zero())),
+        vec![Frame::Text("ERR unknown command".into())]
+    );
+    assert_eq!(
+        text(&ask(&mut *p, "RATE 20000\n", zero())),
+        vec![Frame::Text("OK".into())]
+    );
     // The exact bytes of an answer: COBS of [0x7F, 'O', 'K', crc lo, crc hi] + 0x00.
     let ok = ask(&mut *p, "STOP\n", zero());
     let crc = protocol::cb3::crc16(&[0x7F, b'O', b'K']);
@@ -141,7 +171,11 @@ fn cb3_answers_stream_and_wraps() {
         })
         .collect();
     // 20 kHz for about 1 s.
-    assert!((18_000..=21_000).contains(&samples.len()), "{} samples", samples.len());
+    assert!(
+        (18_000..=21_000).contains(&samples.len()),
+        "{} samples",
+        samples.len()
+    );
     assert_eq!(samples[0].seq, 65_530);
     let mut wrapped_seq = false;
     let mut wrapped_t = false;
@@ -164,15 +198,27 @@ fn psd_scpi_errors_and_stream() {
     let env = Env::start(quick());
     let mut p = env.open(Device::Psd);
     let nl = || ends_with(b"\n");
-    assert_eq!(ask(&mut *p, "*IDN?\n", nl()), b"PSD-2,PSD2-SIM-0007,3.1.2\n");
+    assert_eq!(
+        ask(&mut *p, "*IDN?\n", nl()),
+        b"PSD-2,PSD2-SIM-0007,3.1.2\n"
+    );
     assert_eq!(ask(&mut *p, "*OPC?\n", nl()), b"1\n");
     send(&mut *p, "CONF:RATE 1001\n");
     send(&mut *p, "CONF:RATE 0\n");
-    assert_eq!(ask(&mut *p, "SYST:ERR?\n", nl()), b"-222,\"Data out of range\"\n");
-    assert_eq!(ask(&mut *p, "SYST:ERR?\n", nl()), b"-222,\"Data out of range\"\n");
+    assert_eq!(
+        ask(&mut *p, "SYST:ERR?\n", nl()),
+        b"-222,\"Data out of range\"\n"
+    );
+    assert_eq!(
+        ask(&mut *p, "SYST:ERR?\n", nl()),
+        b"-222,\"Data out of range\"\n"
+    );
     assert_eq!(ask(&mut *p, "SYST:ERR?\n", nl()), b"0,\"No error\"\n");
     send(&mut *p, "BOGUS\n");
-    assert_eq!(ask(&mut *p, "SYST:ERR?\n", nl()), b"-113,\"Undefined header\"\n");
+    assert_eq!(
+        ask(&mut *p, "SYST:ERR?\n", nl()),
+        b"-113,\"Undefined header\"\n"
+    );
     send(&mut *p, "CONF:RATE 1000\n");
     send(&mut *p, "INIT:CONT ON\n");
     let bytes = read_for(&mut *p, Duration::from_millis(1000));
@@ -189,8 +235,16 @@ fn psd_scpi_errors_and_stream() {
     assert!((900..=1050).contains(&data.len()), "{} lines", data.len());
     // Spot at home (z = 0): the straightness polynomials' constants, 12 µm and −5 µm.
     let n = data.len() as f64;
-    let x = data.iter().map(|d| 5000.0 * (d.x2_pa as f64 - d.x1_pa as f64) / (d.x1_pa + d.x2_pa) as f64).sum::<f64>() / n;
-    let y = data.iter().map(|d| 5000.0 * (d.y2_pa as f64 - d.y1_pa as f64) / (d.y1_pa + d.y2_pa) as f64).sum::<f64>() / n;
+    let x = data
+        .iter()
+        .map(|d| 5000.0 * (d.x2_pa as f64 - d.x1_pa as f64) / (d.x1_pa + d.x2_pa) as f64)
+        .sum::<f64>()
+        / n;
+    let y = data
+        .iter()
+        .map(|d| 5000.0 * (d.y2_pa as f64 - d.y1_pa as f64) / (d.y1_pa + d.y2_pa) as f64)
+        .sum::<f64>()
+        / n;
     assert!((x - 12.0).abs() < 0.02, "x = {x}");
     assert!((y + 5.0).abs() < 0.02, "y = {y}");
     for d in &data {
@@ -202,7 +256,10 @@ fn psd_scpi_errors_and_stream() {
 #[test]
 fn slcan_commands_and_trigger_sequence() {
     let mut sc = quick();
-    sc.faults.missing_triggers = vec![sim::scenario::MissingTrigger { pose: 2, event: protocol::can::TriggerEvent::ExactStop }];
+    sc.faults.missing_triggers = vec![sim::scenario::MissingTrigger {
+        pose: 2,
+        event: protocol::can::TriggerEvent::ExactStop,
+    }];
     let env = Env::start(sc);
     let mut p = env.open(Device::Trigger);
     let cr = || ends_with(b"\r");
@@ -212,17 +269,27 @@ fn slcan_commands_and_trigger_sequence() {
     assert_eq!(ask(&mut *p, "X\r", ends_with(b"\x07")), b"\x07");
     assert_eq!(ask(&mut *p, "Z1\r", cr()), b"\r");
     assert_eq!(ask(&mut *p, "O\r", cr()), b"\r");
-    assert_eq!(ask(&mut *p, "S6\r", ends_with(b"\x07")), b"\x07", "bit rate while open");
+    assert_eq!(
+        ask(&mut *p, "S6\r", ends_with(b"\x07")),
+        b"\x07",
+        "bit rate while open"
+    );
     env.sim().start_program();
     let dur = env.sim().program_duration_s();
     let bytes = read_for(&mut *p, Duration::from_secs_f64(dur + 0.5));
-    env.rt.block_on(async { tokio::time::timeout(Duration::from_secs(2), env.sim().program_done()).await.unwrap() });
+    env.rt.block_on(async {
+        tokio::time::timeout(Duration::from_secs(2), env.sim().program_done())
+            .await
+            .unwrap()
+    });
     let (msgs, rejects) = decode(protocol::slcan::Decoder::new(), &bytes);
     assert!(rejects.is_empty(), "{rejects:?}");
     let mut got = Vec::new();
     let mut last_nc: Option<u32> = None;
     for m in msgs {
-        let protocol::slcan::Message::Frame(f) = m else { panic!("unexpected {m:?}") };
+        let protocol::slcan::Message::Frame(f) = m else {
+            panic!("unexpected {m:?}")
+        };
         assert_eq!((f.id, f.extended), (0x181, false));
         assert!(f.timestamp_ms.is_some_and(|t| t < 60_000));
         let t = protocol::can::TriggerFrame::decode(&f.data).unwrap();
@@ -233,9 +300,19 @@ fn slcan_commands_and_trigger_sequence() {
         got.push((t.event as u8, t.pose));
     }
     // Program start, pose 1 (motion, stop, dwell end), pose 2 without its exact stop, end.
-    assert_eq!(got, vec![(4, 0), (1, 1), (2, 1), (3, 1), (1, 2), (3, 2), (5, 0)]);
+    assert_eq!(
+        got,
+        vec![(4, 0), (1, 1), (2, 1), (3, 1), (1, 2), (3, 2), (5, 0)]
+    );
     let rec = env.sim().record();
-    assert_eq!(rec.trigger.events.iter().filter(|e| e.fate == sim::TriggerFate::Missing).count(), 1);
+    assert_eq!(
+        rec.trigger
+            .events
+            .iter()
+            .filter(|e| e.fate == sim::TriggerFate::Missing)
+            .count(),
+        1
+    );
     assert_eq!(rec.truth.len(), 2);
 }
 
@@ -248,7 +325,9 @@ fn unplug_ends_reads_and_replug_restores_power_up_state() {
     ask(&mut *p, "RATE 1000\n", ends_with(b"\r\n"));
     send(&mut *p, "STREAM ON\n");
     assert!(!read_for(&mut *p, Duration::from_millis(100)).is_empty());
-    env.rt.block_on(env.sim().unplug(Device::Interferometer)).unwrap();
+    env.rt
+        .block_on(env.sim().unplug(Device::Interferometer))
+        .unwrap();
     assert!(!link.exists(), "link must vanish on unplug");
     // The host's reads end: EOF or an error, never a timeout forever.
     let mut buf = [0u8; 4096];
@@ -270,7 +349,10 @@ fn unplug_ends_reads_and_replug_restores_power_up_state() {
     }
     assert!(ended, "read after unplug neither returned EOF nor failed");
     drop(p);
-    let pts2 = env.rt.block_on(env.sim().replug(Device::Interferometer)).unwrap();
+    let pts2 = env
+        .rt
+        .block_on(env.sim().replug(Device::Interferometer))
+        .unwrap();
     assert_eq!(std::fs::read_link(&link).unwrap(), pts2);
     let _ = pts1;
     let mut p = env.open(Device::Interferometer);
@@ -286,7 +368,11 @@ fn unplug_ends_reads_and_replug_restores_power_up_state() {
             _ => None,
         })
         .collect();
-    assert!((9..=12).contains(&pos.len()), "{} samples at 10 Hz", pos.len());
+    assert!(
+        (9..=12).contains(&pos.len()),
+        "{} samples at 10 Hz",
+        pos.len()
+    );
     assert_eq!(pos[0].seq, 0, "sequence restarts at power-up");
     assert!(pos[0].t_us < 1_000_000, "clock restarts at power-up");
     let rec = env.sim().record();
@@ -306,7 +392,41 @@ fn host_close_and_reopen_is_seen_without_stale_data() {
     let mut p = env.open(Device::Psd);
     let bytes = read_for(&mut *p, Duration::from_millis(300));
     let (frames, _) = decode(protocol::psd::Decoder::new(), &bytes);
-    assert!(frames.len() >= 20, "still streaming after the host reopened");
+    assert!(
+        frames.len() >= 20,
+        "still streaming after the host reopened"
+    );
     let rec = env.sim().record();
     assert!(rec.psd.faults.not_connected >= 20, "{:?}", rec.psd.faults);
+}
+
+/// CPU time of this process, s.
+fn cpu_s() -> f64 {
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes into the struct we own.
+    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) };
+    let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+    t(u.ru_utime) + t(u.ru_stime)
+}
+
+#[test]
+fn idle_devices_with_open_ports_do_not_spin() {
+    let env = Env::start(quick());
+    // Every port opened at once and answered at once: a device that spins on a stale
+    // readiness would starve the others (and burn a core).
+    let mut ports: Vec<_> = Device::ALL.into_iter().map(|d| env.open(d)).collect();
+    let mut li = ports.remove(0);
+    assert_eq!(
+        ask(&mut *li, "*IDN?\n", ends_with(b"\r\n")),
+        b"LI-80,LI80-SIM-0001,2.4.1\r\n"
+    );
+    let c0 = cpu_s();
+    std::thread::sleep(Duration::from_millis(1000));
+    let used = cpu_s() - c0;
+    // Four 2 ms timers cost a few per cent of a core; a spinning task costs 100 %.
+    assert!(used < 0.4, "{used} s of CPU in 1 s idle");
+    assert_eq!(
+        ask(&mut *li, "*IDN?\n", ends_with(b"\r\n")),
+        b"LI-80,LI80-SIM-0001,2.4.1\r\n"
+    );
 }

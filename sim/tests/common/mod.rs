@@ -2,7 +2,6 @@
 //! Helpers of the device tests: a runtime, a port opened as a driver would, reads with
 //! deadlines.
 
-use std::io::Read;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -17,13 +16,21 @@ pub struct Env {
 
 impl Env {
     pub fn start(scenario: Scenario) -> Env {
-        let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .unwrap();
         let dir = tempfile::tempdir().unwrap();
         let sim = {
             let _g = rt.enter();
             sim::Sim::start(scenario, dir.path()).unwrap()
         };
-        Env { rt, dir, sim: Some(sim) }
+        Env {
+            rt,
+            dir,
+            sim: Some(sim),
+        }
     }
     pub fn sim(&self) -> &sim::SimHandle {
         self.sim.as_ref().unwrap()
@@ -42,7 +49,10 @@ impl Drop for Env {
 }
 
 pub fn open(path: &Path) -> Box<dyn SerialPort> {
-    serialport::new(path.to_string_lossy(), 921_600).timeout(Duration::from_millis(20)).open().unwrap()
+    serialport::new(path.to_string_lossy(), 921_600)
+        .timeout(Duration::from_millis(20))
+        .open()
+        .unwrap()
 }
 
 /// Read everything arriving within `dur`.
@@ -62,7 +72,11 @@ pub fn read_for(p: &mut dyn SerialPort, dur: Duration) -> Vec<u8> {
 }
 
 /// Read until `done(bytes)` or the timeout.
-pub fn read_until(p: &mut dyn SerialPort, timeout: Duration, done: impl Fn(&[u8]) -> bool) -> Vec<u8> {
+pub fn read_until(
+    p: &mut dyn SerialPort,
+    timeout: Duration,
+    done: impl Fn(&[u8]) -> bool,
+) -> Vec<u8> {
     let end = Instant::now() + timeout;
     let mut out = Vec::new();
     let mut buf = [0u8; 8192];
@@ -119,7 +133,15 @@ pub fn quick() -> Scenario {
     s.program.lead_out_s = 0.1;
     s.program.move_s = 0.1;
     s.program.dwell_s = 0.3;
-    let row = |x: f64| PoseRow { x_mm: x, y_mm: 0.0, z_mm: 0.0, a_deg: 0.0, c_deg: 0.0, move_s: None, dwell_s: None };
+    let row = |x: f64| PoseRow {
+        x_mm: x,
+        y_mm: 0.0,
+        z_mm: 0.0,
+        a_deg: 0.0,
+        c_deg: 0.0,
+        move_s: None,
+        dwell_s: None,
+    };
     s.program.poses = vec![row(101.871), row(198.544)];
     s
 }

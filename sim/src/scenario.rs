@@ -743,3 +743,74 @@ impl Scenario {
         crate::physics::Schedule::new(&self.program).end_s
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn demo_parses_and_round_trips() {
+        let d = Scenario::demo();
+        assert_eq!(d.program.poses.len(), 65);
+        let text = d.to_toml().expect("serialise");
+        assert_eq!(Scenario::from_toml(&text).expect("parse back"), d);
+    }
+
+    #[test]
+    fn demo_fits_the_time_budget_and_dwells_hold_150_samples_at_1_khz() {
+        let d = Scenario::demo();
+        let total = d.program_duration_s();
+        assert!(total < 45.0, "demo program takes {total} s");
+        let settle = d.ringing.settle_s();
+        // Ringing 2 µm decaying with τ = 20 ms is below 1 nm after τ·ln(2000) = 0.152 s.
+        assert!((settle - 0.02 * 2000f64.ln()).abs() < 1e-12);
+        for (i, p) in d.program.poses.iter().enumerate() {
+            let dwell = p.dwell_s.unwrap_or(d.program.dwell_s);
+            // Reversal points are not measured (dwell 0); every other pose holds 150 samples.
+            assert!(dwell == 0.0 || dwell >= settle + 0.150, "pose {}: dwell {dwell}", i + 1);
+        }
+    }
+
+    #[test]
+    fn unknown_keys_are_errors() {
+        let text = DEMO_TOML.replace("batch_ms = 2.0", "batch_ms = 2.0\nbatchms = 3.0");
+        let e = Scenario::from_toml(&text).expect_err("unknown key");
+        assert!(e.to_string().contains("batchms"), "{e}");
+        let text = DEMO_TOML.replace("sample_noise_nm = 15.0", "sample_noise_nm = 15.0\nnoise = 1.0");
+        assert!(Scenario::from_toml(&text).is_err());
+    }
+
+    #[test]
+    fn out_of_range_values_are_explained() {
+        let mut s = Scenario::demo();
+        s.environment.material_c.clear();
+        let e = s.validate().expect_err("no material sensor");
+        assert!(e.to_string().contains("material_c"), "{e}");
+        let mut s = Scenario::demo();
+        s.faults.psd.drop_rate = 1.5;
+        assert!(s.validate().is_err());
+        let mut s = Scenario::demo();
+        s.axis.systematic_up_um.pop();
+        assert!(s.validate().is_err());
+        let mut s = Scenario::demo();
+        s.program.poses.clear();
+        assert!(s.validate().unwrap_err().to_string().contains("poses"));
+    }
+
+    #[test]
+    fn trajectory_csv_has_one_row_per_pose() {
+        let d = Scenario::demo();
+        let csv = d.trajectory_csv();
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines[0], "pose,x_mm,y_mm,z_mm,a_deg,c_deg");
+        assert_eq!(lines.len(), 66);
+        assert_eq!(lines[1], "1,2.312,0,0,0,0");
+        assert!(lines[65].starts_with("65,200,0,400,"));
+    }
+
+    #[test]
+    fn slow_quantity() {
+        let s = Slow { mean: 20.0, amplitude: 0.5, period_s: 100.0, phase_rad: 0.0, drift_per_h: 3.6 };
+        assert!((s.at(25.0) - (20.0 + 0.025 + 0.5)).abs() < 1e-12);
+    }
+}

@@ -358,11 +358,9 @@ impl<M: Model> Runner<M> {
     }
 
     fn rearm(&mut self) {
-        if let Some(p) = &mut self.pty {
-            if let Err(e) = p.rearm() {
-                tracing::warn!(device = M::DEVICE.name(), error = %e, "cannot re-register the pty; polling only");
-                self.readable_ok = false;
-            }
+        if let Some(Err(e)) = self.pty.as_mut().map(|p| p.rearm()) {
+            tracing::warn!(device = M::DEVICE.name(), error = %e, "cannot re-register the pty; polling only");
+            self.readable_ok = false;
         }
     }
 

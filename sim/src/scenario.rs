@@ -767,7 +767,11 @@ mod tests {
         for (i, p) in d.program.poses.iter().enumerate() {
             let dwell = p.dwell_s.unwrap_or(d.program.dwell_s);
             // Reversal points are not measured (dwell 0); every other pose holds 150 samples.
-            assert!(dwell == 0.0 || dwell >= settle + 0.150, "pose {}: dwell {dwell}", i + 1);
+            assert!(
+                dwell == 0.0 || dwell >= settle + 0.150,
+                "pose {}: dwell {dwell}",
+                i + 1
+            );
         }
     }
 
@@ -776,7 +780,10 @@ mod tests {
         let text = DEMO_TOML.replace("batch_ms = 2.0", "batch_ms = 2.0\nbatchms = 3.0");
         let e = Scenario::from_toml(&text).expect_err("unknown key");
         assert!(e.to_string().contains("batchms"), "{e}");
-        let text = DEMO_TOML.replace("sample_noise_nm = 15.0", "sample_noise_nm = 15.0\nnoise = 1.0");
+        let text = DEMO_TOML.replace(
+            "sample_noise_nm = 15.0",
+            "sample_noise_nm = 15.0\nnoise = 1.0",
+        );
         assert!(Scenario::from_toml(&text).is_err());
     }
 
@@ -810,7 +817,13 @@ mod tests {
 
     #[test]
     fn slow_quantity() {
-        let s = Slow { mean: 20.0, amplitude: 0.5, period_s: 100.0, phase_rad: 0.0, drift_per_h: 3.6 };
+        let s = Slow {
+            mean: 20.0,
+            amplitude: 0.5,
+            period_s: 100.0,
+            phase_rad: 0.0,
+            drift_per_h: 3.6,
+        };
         assert!((s.at(25.0) - (20.0 + 0.025 + 0.5)).abs() < 1e-12);
     }
 }

@@ -17,6 +17,7 @@ use crate::{Device, Shared, SimError};
 /// Default rate of every streaming device after power-up (instruments.md, common rules).
 pub(crate) const POWER_UP_RATE_HZ: f64 = 10.0;
 
+#[allow(clippy::too_many_arguments)] // one call site per device, all arguments distinct
 fn start<M: Model>(
     model: M,
     shared: Arc<Shared>,

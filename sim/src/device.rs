@@ -149,6 +149,7 @@ pub(crate) struct Ctx<'a> {
     pub power_up: u32,
     /// Counters to add to the record after the step.
     pub faults: &'a mut FaultCounts,
+    pub device: Device,
 }
 
 impl Ctx<'_> {
@@ -162,6 +163,18 @@ impl Ctx<'_> {
             None
         }
     }
+    /// Append generated samples to this device's record, up to the scenario's cap.
+    pub fn record_samples(&mut self, samples: Vec<crate::record::SentSample>) {
+        let cap = self.shared.world.scenario.record_max_samples;
+        let dev = self.device;
+        let mut rec = self.shared.lock_record();
+        let r = rec.device_mut(dev);
+        let room = cap.saturating_sub(r.samples.len());
+        let n = samples.len();
+        r.samples.extend(samples.into_iter().take(room));
+        r.unrecorded += n.saturating_sub(room) as u64;
+    }
+
     /// Real seconds since simulation start of a true instant.
     pub fn sim_s(&self, at: Instant) -> f64 {
         at.saturating_duration_since(self.shared.t0).as_secs_f64()
@@ -281,6 +294,7 @@ impl<M: Model> Runner<M> {
                 connected: false,
                 power_up: self.power_up,
                 faults: &mut faults,
+                device: M::DEVICE,
             };
             self.model.power_up(&mut ctx);
         }
@@ -387,6 +401,7 @@ impl<M: Model> Runner<M> {
                 connected: self.connected,
                 power_up: self.power_up,
                 faults: &mut faults,
+                device: M::DEVICE,
             };
             if plugged {
                 for l in &lines {

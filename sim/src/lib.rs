@@ -267,8 +267,8 @@ impl Sim {
     }
 }
 
-/// A running simulation. Dropping it without [`SimHandle::shutdown`] leaves the tasks running
-/// until the runtime ends.
+/// A running simulation. Dropping it aborts the devices; [`SimHandle::shutdown`] stops them in
+/// order.
 pub struct SimHandle {
     shared: Arc<Shared>,
     ports: Vec<PathBuf>,
@@ -347,12 +347,27 @@ impl SimHandle {
     }
 
     /// Stop every device: ptys closed, links removed.
-    pub async fn shutdown(self) {
+    pub async fn shutdown(mut self) {
         for d in Device::ALL {
             let _ = self.shared.control(d, Control::Shutdown).await;
         }
-        for t in self.tasks {
+        for t in std::mem::take(&mut self.tasks) {
             let _ = t.await;
+        }
+    }
+}
+
+impl Drop for SimHandle {
+    /// Without [`SimHandle::shutdown`]: abort the device tasks (closing their ptys) and remove
+    /// the links.
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+        if !self.tasks.is_empty() {
+            for p in &self.ports {
+                let _ = std::fs::remove_file(p);
+            }
         }
     }
 }

@@ -28,6 +28,10 @@ pub struct Scenario {
     /// clock says are due.
     #[serde(default = "two")]
     pub batch_ms: f64,
+    /// At most this many samples per device are kept in the record (a long `metrolog sim`
+    /// session at 20 kHz would otherwise grow it without bound); the rest are only counted.
+    #[serde(default = "record_cap")]
+    pub record_max_samples: usize,
     pub program: Program,
     #[serde(default)]
     pub ringing: Ringing,
@@ -47,6 +51,9 @@ pub struct Scenario {
     pub faults: Faults,
 }
 
+fn record_cap() -> usize {
+    1_000_000
+}
 fn one() -> f64 {
     1.0
 }

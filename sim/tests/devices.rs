@@ -430,3 +430,63 @@ fn idle_devices_with_open_ports_do_not_spin() {
         b"LI-80,LI80-SIM-0001,2.4.1\r\n"
     );
 }
+
+#[test]
+fn program_starts_when_the_can_channel_opens() {
+    let mut sc = quick();
+    sc.program.start = sim::ProgramStart::OnCanOpen;
+    sc.program.start_delay_s = 0.2;
+    let env = Env::start(sc);
+    let mut p = env.open(Device::Trigger);
+    ask(&mut *p, "S6\r", ends_with(b"\r"));
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(!env.sim().program_started());
+    assert_eq!(ask(&mut *p, "O\r", ends_with(b"\r")), b"\r");
+    assert!(env.sim().program_started());
+    let t = Instant::now();
+    let bytes = read_until(&mut *p, Duration::from_secs(2), |b| !b.is_empty());
+    // The program-start frame comes after the configured delay.
+    assert!(
+        t.elapsed() >= Duration::from_millis(180),
+        "{:?}",
+        t.elapsed()
+    );
+    assert!(
+        bytes.starts_with(b"t1818040000"),
+        "{:?}",
+        String::from_utf8_lossy(&bytes)
+    );
+    let done = env.rt.block_on(async {
+        tokio::time::timeout(Duration::from_secs(5), env.sim().program_done()).await
+    });
+    assert!(done.is_ok());
+}
+
+#[test]
+fn program_starts_after_a_delay_without_any_host() {
+    let mut sc = quick();
+    sc.program.start = sim::ProgramStart::AfterDelay;
+    sc.program.start_delay_s = 0.1;
+    let env = Env::start(sc);
+    let dur = env.sim().program_duration_s();
+    let t = Instant::now();
+    env.rt
+        .block_on(async {
+            tokio::time::timeout(Duration::from_secs(5), env.sim().program_done()).await
+        })
+        .unwrap();
+    let took = t.elapsed().as_secs_f64();
+    assert!(
+        took >= dur + 0.1 - 0.01 && took < dur + 0.1 + 0.2,
+        "{took} s for a {dur} s program"
+    );
+    let rec = env.sim().record();
+    // No host had the adapter open: every event is accounted for as not delivered.
+    assert_eq!(rec.trigger.events.len(), 2 + 3 * 2);
+    assert!(
+        rec.trigger
+            .events
+            .iter()
+            .all(|e| e.fate == sim::TriggerFate::ChannelClosed)
+    );
+}

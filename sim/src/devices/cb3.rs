@@ -207,7 +207,7 @@ impl Model for Cb3 {
         }
         self.stream = Some(cad);
         if !samples.is_empty() {
-            ctx.shared.lock_record().capball.samples.extend(samples);
+            ctx.record_samples(samples);
         }
     }
 }

@@ -372,11 +372,7 @@ impl Model for Li80 {
         }
         self.stream = Some(cad);
         if !samples.is_empty() {
-            ctx.shared
-                .lock_record()
-                .interferometer
-                .samples
-                .extend(samples);
+            ctx.record_samples(samples);
         }
     }
 

@@ -237,7 +237,7 @@ impl Model for Psd2 {
         }
         self.stream = Some(cad);
         if !samples.is_empty() {
-            ctx.shared.lock_record().psd.samples.extend(samples);
+            ctx.record_samples(samples);
         }
     }
 }

@@ -255,7 +255,11 @@ fn parse_err(body: &[u8]) -> Result<ErrFrame, RejectKind> {
     };
     Ok(ErrFrame {
         code: parse_u32(code).ok_or(RejectKind::Malformed)?,
-        text: printable_string(text).ok_or(RejectKind::Malformed)?,
+        text: if text.is_empty() {
+            String::new()
+        } else {
+            printable_string(text).ok_or(RejectKind::Malformed)?
+        },
     })
 }
 

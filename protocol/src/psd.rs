@@ -39,8 +39,9 @@ pub enum Line {
     Answer(String),
 }
 
-/// Longest valid line, bytes, terminator excluded.
-pub const MAX_LINE: usize = 128;
+/// Longest valid line, bytes, terminator excluded. A data line with every field at its type's
+/// maximum is 129 bytes; the cap leaves room for that and for long answers.
+pub const MAX_LINE: usize = 160;
 
 /// Range of `CONF:RATE <hz>` the device accepts; outside it sets error −222.
 pub const RATE_MIN_HZ: u32 = 1;

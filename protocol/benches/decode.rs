@@ -25,7 +25,7 @@ impl Rng {
 fn with_garbage(clean: &[u8], rng: &mut Rng) -> Vec<u8> {
     let mut out = Vec::with_capacity(clean.len() * 102 / 100);
     for &b in clean {
-        if rng.next() % 100 == 0 {
+        if rng.next() % 100 < 1 {
             out.push(rng.next() as u8);
         }
         out.push(b);

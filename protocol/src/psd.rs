@@ -59,11 +59,8 @@ impl Decoder {
 impl crate::StreamDecoder for Decoder {
     type Frame = Line;
     fn feed<S: FnMut(Decoded<Line>)>(&mut self, bytes: &[u8], mut sink: S) {
-        self.split.feed(
-            bytes,
-            MAX_LINE + 1,
-            |b| b == b'\n',
-            |p| match p {
+        self.split
+            .feed(bytes, MAX_LINE + 1, (b'\n', b'\n'), |p| match p {
                 Piece::Line(raw, _) => {
                     let line = strip_cr(raw);
                     let n = raw.len() + 1;
@@ -77,8 +74,7 @@ impl crate::StreamDecoder for Decoder {
                     });
                 }
                 Piece::Overlong(n, _) => sink(reject(RejectKind::OverlongLine, n + 1)),
-            },
-        );
+            });
     }
     fn reset(&mut self) {
         self.split.reset();

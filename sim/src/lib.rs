@@ -11,13 +11,40 @@
 //! | `Psd` | `<dir>/psd2` | PSD-2 SCPI and `D,` lines |
 //! | `Trigger` | `<dir>/slcan` | SLCAN adapter carrying the CNC's trigger frames |
 //!
-//! The host opens the link like a serial port. Each device comes up in its power-up state
-//! (not streaming, 10 Hz) and must be configured by the host.
+//! The host opens a link like a serial port (the baud rate is ignored). Each device comes up
+//! in its power-up state: not streaming, 10 Hz (the data sheet's common default, also for the
+//! CB-3, whose `RATE` accepts only 100–20000), clock and sequence at the scenario's start
+//! values; the host must configure it. Every byte is written by the `protocol` crate's
+//! encoders; commands are parsed by its command parsers.
 //!
-//! The CNC program (moves, dwells, trigger frames) starts as the scenario says
-//! ([`ProgramStart`]): by default only when [`SimHandle::start_program`] is called, so a
-//! caller can first wait until its drivers stream; [`SimHandle::program_done`] resolves after
-//! the program-end frame.
+//! # Timing
+//! Each streaming device has its own clock running `clock_ppm` fast against true time. Every
+//! `batch_ms` (2 ms) a device writes, in one write, all samples its clock says are due, each
+//! evaluated at its own instant, so rates up to LI-80 10 kHz, CB-3 20 kHz and PSD-2 1 kHz hold
+//! at once. While no host has a port open the device writes nothing (the samples are recorded
+//! as [`Fate::NotConnected`]); a host that stops reading loses samples beyond 256 KiB
+//! ([`Fate::Overflow`]).
+//!
+//! # The program
+//! The CNC program (moves, dwells, trigger frames `4`, then per pose `1`, `2`, `3`, then `5`)
+//! starts as the scenario says ([`ProgramStart`]): by default only when
+//! [`SimHandle::start_program`] is called, so a caller can first wait until its drivers
+//! stream; `on_can_open` starts it when the host opens the SLCAN channel (`O`), `after_delay`
+//! on its own. [`SimHandle::program_done`] resolves after the program-end frame.
+//! Timed faults (beam interruptions, unplugs) count from the program start.
+//!
+//! # The physics
+//! See [`physics`]: machine position along an S-shaped move profile, damped ringing after each
+//! exact stop, the X axis deviation from `metrology::axis_model::AxisModel` (one random draw
+//! per visit, since repeatability belongs to the positioning), the LI-80's reading in air
+//! (`raw = n·L20/(1 − α(T_mat − 20))`, so the host's `raw/n` and material compensation give
+//! the 20 °C length back), the CapBall error from a [`CapballTruth`] through the sensors'
+//! directions, offsets and inverse polynomials to 24-bit codes, and the PSD spot from
+//! straightness polynomials to photocurrents. Slow effects run `time_scale` times faster.
+//! The true values per pose are in [`Record::truth`].
+//!
+//! Not modelled: the LI-80 over-speed flag (bit 2 is never set). `$ENV` lines have their own
+//! sequence counter, independent of `$POS`.
 //!
 //! ```no_run
 //! # async fn demo() -> Result<(), sim::SimError> {
@@ -35,7 +62,7 @@
 
 mod device;
 mod devices;
-mod physics;
+pub mod physics;
 mod pty;
 pub mod record;
 pub mod scenario;

@@ -103,7 +103,7 @@ fn li80_streams_at_rate_with_env_and_configured_drift() {
         });
     }
     // 1.5 s at 2 kHz.
-    assert!((2800..=3100).contains(&pos.len()), "{} samples", pos.len());
+    assert!((2700..=3100).contains(&pos.len()), "{} samples", pos.len());
     for w in pos.windows(2) {
         assert_eq!(w[1].seq, w[0].seq + 1);
         // 500 µs apart on the device clock (± rounding).
@@ -232,7 +232,7 @@ fn psd_scpi_errors_and_stream() {
             _ => None,
         })
         .collect();
-    assert!((900..=1050).contains(&data.len()), "{} lines", data.len());
+    assert!((850..=1050).contains(&data.len()), "{} lines", data.len());
     // Spot at home (z = 0): the straightness polynomials' constants, 12 µm and −5 µm.
     let n = data.len() as f64;
     let x = data
@@ -477,7 +477,7 @@ fn program_starts_after_a_delay_without_any_host() {
         .unwrap();
     let took = t.elapsed().as_secs_f64();
     assert!(
-        took >= dur + 0.1 - 0.01 && took < dur + 0.1 + 0.2,
+        took >= dur + 0.1 - 0.01 && took < dur + 0.1 + 0.6,
         "{took} s for a {dur} s program"
     );
     let rec = env.sim().record();

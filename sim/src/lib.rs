@@ -157,6 +157,21 @@ pub enum SimError {
     Stopped(&'static str),
 }
 
+/// What a device is doing, as seen from the device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct DeviceState {
+    /// The device is plugged in (its link exists).
+    pub plugged: bool,
+    /// A host has its port open.
+    pub host_connected: bool,
+    /// Streaming samples (the SLCAN adapter: CAN channel open with `O`).
+    pub active: bool,
+    /// The configured sample rate, Hz (0 for the SLCAN adapter).
+    pub rate_hz: u32,
+    /// Power-ups so far (1 after start, +1 per replug).
+    pub power_ups: u32,
+}
+
 /// Program state shared by the tasks.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct ProgramState {
@@ -169,6 +184,7 @@ pub(crate) struct Shared {
     pub world: World,
     pub t0: Instant,
     pub program: watch::Sender<ProgramState>,
+    pub states: watch::Sender<[DeviceState; 4]>,
     record: Mutex<Record>,
     controls: Vec<mpsc::Sender<Control>>,
     runtime: tokio::runtime::Handle,
@@ -265,6 +281,7 @@ impl Sim {
             world,
             t0: Instant::now(),
             program,
+            states: watch::channel([DeviceState::default(); 4]).0,
             record: Mutex::new(Record::default()),
             controls: senders,
             runtime: runtime.clone(),
@@ -343,6 +360,21 @@ impl SimHandle {
     /// Returns the new `/dev/pts/N`.
     pub async fn replug(&self, d: Device) -> Result<PathBuf, SimError> {
         self.shared.control(d, Control::Replug).await?
+    }
+
+    /// What a device is doing now.
+    pub fn state(&self, d: Device) -> DeviceState {
+        self.shared.states.borrow()[d.index()]
+    }
+
+    /// Resolves once every device in `devices` is active: streaming, or for
+    /// [`Device::Trigger`] its CAN channel open. What `metrolog demo` waits for before
+    /// [`SimHandle::start_program`].
+    pub async fn wait_active(&self, devices: &[Device]) {
+        let mut rx = self.shared.states.subscribe();
+        let _ = rx
+            .wait_for(|s| devices.iter().all(|d| s[d.index()].active))
+            .await;
     }
 
     /// Start the CNC program now (no effect if it already started).

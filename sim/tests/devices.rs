@@ -490,3 +490,46 @@ fn program_starts_after_a_delay_without_any_host() {
             .all(|e| e.fate == sim::TriggerFate::ChannelClosed)
     );
 }
+
+#[test]
+fn device_states_and_waiting_until_all_stream() {
+    let env = Env::start(quick());
+    let all = [
+        Device::Interferometer,
+        Device::Capball,
+        Device::Psd,
+        Device::Trigger,
+    ];
+    for d in all {
+        let st = env.sim().state(d);
+        assert!(
+            st.plugged && !st.active && st.power_ups == 1,
+            "{d:?}: {st:?}"
+        );
+        assert_eq!(st.rate_hz, if d == Device::Trigger { 0 } else { 10 });
+    }
+    let mut li = env.open(Device::Interferometer);
+    let mut cb = env.open(Device::Capball);
+    let mut psd = env.open(Device::Psd);
+    let mut tr = env.open(Device::Trigger);
+    ask(&mut *li, "RATE 500\n", ends_with(b"\r\n"));
+    send(&mut *li, "STREAM ON\n");
+    send(&mut *cb, "START\n");
+    send(&mut *psd, "INIT:CONT ON\n");
+    let waited = env.rt.block_on(async {
+        tokio::time::timeout(Duration::from_millis(300), env.sim().wait_active(&all)).await
+    });
+    assert!(waited.is_err(), "the CAN channel is still closed");
+    send(&mut *tr, "O\r");
+    let waited = env.rt.block_on(async {
+        tokio::time::timeout(Duration::from_secs(2), env.sim().wait_active(&all)).await
+    });
+    assert!(waited.is_ok());
+    let st = env.sim().state(Device::Interferometer);
+    assert!(
+        st.host_connected && st.active && st.rate_hz == 500,
+        "{st:?}"
+    );
+    env.rt.block_on(env.sim().unplug(Device::Psd)).unwrap();
+    assert!(!env.sim().state(Device::Psd).plugged);
+}

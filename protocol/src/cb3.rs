@@ -439,6 +439,24 @@ mod tests {
     }
 
     #[test]
+    fn reset_forgets_partial_frame() {
+        let s = SampleFrame {
+            seq: 1,
+            t_us: 2,
+            ch: [3, 4, 5],
+            flags: 0,
+        };
+        let mut enc = Vec::new();
+        encode(&Frame::Sample(s), &mut enc);
+        let mut d = Decoder::new();
+        let mut out = Vec::new();
+        d.feed(&enc[..10], |x| out.push(x));
+        d.reset();
+        d.feed(&enc, |x| out.push(x));
+        assert_eq!(out, vec![Decoded::Frame(Frame::Sample(s))]);
+    }
+
+    #[test]
     fn commands_and_answers() {
         for c in [
             Command::Id,

@@ -596,6 +596,22 @@ mod tests {
     }
 
     #[test]
+    fn reset_forgets_partial_line() {
+        let mut d = Decoder::new();
+        let mut out = Vec::new();
+        d.feed(b"$POS,1,2", |x| out.push(x));
+        d.reset();
+        d.feed(POS_LINE, |x| out.push(x));
+        assert_eq!(out, decode_all(POS_LINE));
+        // Also while discarding an over-long line.
+        let mut out = Vec::new();
+        d.feed(&[b'x'; 500], |x| out.push(x));
+        d.reset();
+        d.feed(POS_LINE, |x| out.push(x));
+        assert_eq!(out, decode_all(POS_LINE));
+    }
+
+    #[test]
     fn split_anywhere() {
         let mut d = Decoder::new();
         let mut out = Vec::new();

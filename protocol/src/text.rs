@@ -296,15 +296,10 @@ mod tests {
         let mut s = Splitter::default();
         let mut out = Vec::new();
         for c in chunks {
-            s.feed(
-                c,
-                limit,
-                (b'\n', b'\n'),
-                |p| match p {
-                    Piece::Line(l, t) => out.push((l.to_vec(), 0, t)),
-                    Piece::Overlong(n, t) => out.push((Vec::new(), n, t)),
-                },
-            );
+            s.feed(c, limit, (b'\n', b'\n'), |p| match p {
+                Piece::Line(l, t) => out.push((l.to_vec(), 0, t)),
+                Piece::Overlong(n, t) => out.push((Vec::new(), n, t)),
+            });
         }
         out
     }

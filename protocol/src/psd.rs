@@ -16,7 +16,7 @@
 use std::io::Write as _;
 
 use crate::text::{
-    Piece, Splitter, parse_i32, parse_u32, parse_u64, printable_string, split_fields, strip_cr,
+    Fields, Piece, Splitter, field_count, parse_i32, parse_u32, printable_string, strip_cr,
 };
 use crate::{Decoded, RejectKind, Rejection};
 
@@ -104,19 +104,27 @@ fn decode_line(line: &[u8]) -> Result<Line, RejectKind> {
 
 #[inline]
 fn parse_data(line: &[u8]) -> Result<DataLine, RejectKind> {
-    let mut f: [&[u8]; 8] = [&[]; 8];
-    if split_fields(line, &mut f) != 8 {
+    if field_count(line) != 8 {
         return Err(RejectKind::FieldCount);
     }
+    let mut f = Fields::new(line);
+    f.skip();
     let m = RejectKind::Malformed;
+    let seq = f.u32().ok_or(m)?;
+    let t_us = f.u64().ok_or(m)?;
+    let x1_pa = f.u64().ok_or(m)?;
+    let x2_pa = f.u64().ok_or(m)?;
+    let y1_pa = f.u64().ok_or(m)?;
+    let y2_pa = f.u64().ok_or(m)?;
+    let head_mc = f.i32().ok_or(m)?;
     Ok(DataLine {
-        seq: parse_u32(f[1]).ok_or(m)?,
-        t_us: parse_u64(f[2]).ok_or(m)?,
-        x1_pa: parse_u64(f[3]).ok_or(m)?,
-        x2_pa: parse_u64(f[4]).ok_or(m)?,
-        y1_pa: parse_u64(f[5]).ok_or(m)?,
-        y2_pa: parse_u64(f[6]).ok_or(m)?,
-        head_mc: parse_i32(f[7]).ok_or(m)?,
+        seq,
+        t_us,
+        x1_pa,
+        x2_pa,
+        y1_pa,
+        y2_pa,
+        head_mc,
     })
 }
 

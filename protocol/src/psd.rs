@@ -189,6 +189,31 @@ impl Command {
     }
 }
 
+/// `*IDN?` answer: `PSD-2,<serial>,<firmware>`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Idn {
+    pub serial: String,
+    pub firmware: String,
+}
+impl Idn {
+    pub fn parse(line: &str) -> Option<Idn> {
+        let l = line.strip_suffix('\n').unwrap_or(line);
+        let l = l.strip_suffix('\r').unwrap_or(l);
+        let (serial, firmware) = l.strip_prefix("PSD-2,")?.split_once(',')?;
+        Some(Idn {
+            serial: serial.to_owned(),
+            firmware: firmware.to_owned(),
+        })
+    }
+    /// The answer line with its `\n`.
+    pub fn to_line(&self) -> String {
+        format!("PSD-2,{},{}\n", self.serial, self.firmware)
+    }
+}
+
+/// `*OPC?` answer line.
+pub const OPC_ANSWER: &str = "1\n";
+
 /// `SYST:ERR?` answer: `<code>,"<text>"`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SystErr {
@@ -339,6 +364,13 @@ mod tests {
         assert_eq!(q.to_line(), "-100,\"say \"\"hi\"\"\"\n");
         assert_eq!(SystErr::parse(&q.to_line()), Some(q));
         assert_eq!(SystErr::parse("0,No error"), None);
+        let idn = Idn {
+            serial: "4711".into(),
+            firmware: "0.9".into(),
+        };
+        assert_eq!(idn.to_line(), "PSD-2,4711,0.9\n");
+        assert_eq!(Idn::parse(&idn.to_line()), Some(idn));
+        assert_eq!(Idn::parse("LI-80,1,2"), None);
         assert_eq!(SystErr::parse("0,\"a\"b\""), None);
     }
 }

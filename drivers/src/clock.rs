@@ -112,8 +112,11 @@ impl ClockFit {
             return;
         };
         // Trim minima lying far above the line: windows in which every sample was delayed.
-        let mut res: Vec<f64> =
-            self.minima.iter().map(|&(x, r)| r - (first.0 + first.1 * x)).collect();
+        let mut res: Vec<f64> = self
+            .minima
+            .iter()
+            .map(|&(x, r)| r - (first.0 + first.1 * x))
+            .collect();
         res.sort_by(f64::total_cmp);
         let med = res[res.len() / 2];
         let mut dev: Vec<f64> = res.iter().map(|e| (e - med).abs()).collect();
@@ -122,7 +125,11 @@ impl ClockFit {
         // not trim honest points.
         let sigma = (1.4826 * dev[dev.len() / 2]).max(2_000.0);
         let limit = med + 4.0 * sigma;
-        let kept = self.minima.iter().copied().filter(|&(x, r)| r - (first.0 + first.1 * x) <= limit);
+        let kept = self
+            .minima
+            .iter()
+            .copied()
+            .filter(|&(x, r)| r - (first.0 + first.1 * x) <= limit);
         self.line = least_squares(kept).or(Some(first));
     }
 
@@ -182,11 +189,19 @@ pub struct Unwrap {
 
 impl Unwrap {
     pub fn new(bits: u32) -> Self {
-        Unwrap { bits: bits.clamp(1, 64), last_raw: 0, last: None }
+        Unwrap {
+            bits: bits.clamp(1, 64),
+            last_raw: 0,
+            last: None,
+        }
     }
 
     fn mask(&self) -> u64 {
-        if self.bits == 64 { u64::MAX } else { (1u64 << self.bits) - 1 }
+        if self.bits == 64 {
+            u64::MAX
+        } else {
+            (1u64 << self.bits) - 1
+        }
     }
 
     /// Forget the history; the next value starts a new unwrapped run at its raw value.
@@ -277,7 +292,10 @@ mod tests {
         for (drift, seed) in [(37.0, 1), (-85.0, 2), (0.0, 3), (100.0, 4)] {
             let (fit, _) = simulate(drift, 1000.0, 30.0, seed);
             let est = fit.drift_ppm().unwrap();
-            assert!((est - drift).abs() < 1.0, "drift {drift} ppm, estimated {est} ppm");
+            assert!(
+                (est - drift).abs() < 1.0,
+                "drift {drift} ppm, estimated {est} ppm"
+            );
         }
     }
 
@@ -291,7 +309,10 @@ mod tests {
             let m = fit.map(d).unwrap() as f64;
             worst = worst.max((m - t as f64).abs());
         }
-        assert!(worst < 60_000.0, "mapped time off the send time by {worst} ns");
+        assert!(
+            worst < 60_000.0,
+            "mapped time off the send time by {worst} ns"
+        );
     }
 
     #[test]

@@ -317,3 +317,62 @@ async fn silent_device_gets_a_clear_error() {
     let e = &c.errors[0];
     assert!(e.contains(&link.display().to_string()) && e.contains("no answer to `STOP`"), "{e}");
 }
+
+/// CB-3 script of `n` samples with seq and clock from 0 (a fresh power-up).
+fn cb3_script(n: u64) -> Vec<Vec<u8>> {
+    let mut chunks = Vec::new();
+    let mut chunk = Vec::new();
+    for i in 0..n {
+        let f = protocol::cb3::SampleFrame { seq: i as u16, t_us: (i * 1000) as u32, ch: cb3_codes(i), flags: 0 };
+        protocol::cb3::encode(&protocol::cb3::Frame::Sample(f), &mut chunk);
+        if i % 10 == 9 {
+            chunks.push(std::mem::take(&mut chunk));
+        }
+    }
+    chunks.push(chunk);
+    chunks
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn replugged_device_is_reconfigured_and_its_restart_is_not_a_gap() {
+    hil::init_tracing();
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("cb3");
+    let dev = FakeDevice::start(&link, b'\n', cb3_device(), cb3_script(400), Duration::from_millis(2)).unwrap();
+    let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
+    let cancel = CancellationToken::new();
+    let cfg = drivers::cb3::Config {
+        port: link.display().to_string(),
+        rate_hz: 1000,
+        poly: [[10.0, 0.0, 0.0]; 3],
+        transform: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+    };
+    let task = drivers::cb3::spawn(cfg, HostClock::new(), tx, cancel.clone());
+    let mut c = Collected::default();
+    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(20), |c| c.samples.len() >= 400).await);
+    // Unplug: pty closed, link gone.
+    dev.unplug();
+    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c.disconnected.is_empty()).await);
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Plugged in again: a new pty behind the same link, sequence restarted at 0.
+    let dev2 = FakeDevice::start(&link, b'\n', cb3_device(), cb3_script(300), Duration::from_millis(2)).unwrap();
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(20), |c| c.samples.len() >= 700).await,
+        "{} samples after replug; {:?}",
+        c.samples.len(),
+        c.errors
+    );
+    finish(cancel, task, &mut rx, &mut c).await;
+    drop(dev2);
+    assert_eq!(c.connected.len(), 2);
+    assert_eq!(c.disconnected.len(), 1);
+    assert_eq!(c.samples.len(), 700);
+    for (k, s) in c.samples.iter().enumerate() {
+        let i = if k < 400 { k } else { k - 400 } as u64;
+        let SampleValues::Capball { volts, .. } = s.values else { panic!() };
+        assert!((volts[0] - cb3_codes(i)[0] as f64 * 10.0 / 8_388_608.0).abs() < 1e-12);
+    }
+    let k = c.counters.unwrap();
+    assert_eq!((k.reconnects, k.disconnects, k.gaps, k.gap_samples, k.resyncs), (1, 1, 0, 0, 0), "{k:?}");
+    assert_eq!(k.samples, 700);
+}

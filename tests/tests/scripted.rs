@@ -6,6 +6,7 @@ use std::collections::BTreeSet;
 use std::time::Duration;
 
 use drivers::{HostClock, SampleValues};
+use hil::fake::{cb3_device, psd_device};
 use hil::{Collected, FakeDevice, collect_until, finish};
 use protocol::RejectKind;
 use tokio_util::sync::CancellationToken;
@@ -28,35 +29,6 @@ fn total_rejections(c: &drivers::Counters) -> u64 {
 }
 
 // ---------------------------------------------------------------- CB-3
-
-fn cb3_text(t: &str, out: &mut Vec<u8>) {
-    protocol::cb3::encode(&protocol::cb3::Frame::Text(t.into()), out);
-}
-
-fn cb3_device() -> hil::Respond {
-    Box::new(|cmd, out| match cmd {
-        "STOP" => {
-            cb3_text("OK", out);
-            Some(false)
-        }
-        "ID?" => {
-            cb3_text("CB-3,0042,1.3", out);
-            None
-        }
-        c if c.starts_with("RATE ") => {
-            cb3_text("OK", out);
-            None
-        }
-        "START" => {
-            cb3_text("OK", out);
-            Some(true)
-        }
-        _ => {
-            cb3_text("ERR unknown command", out);
-            None
-        }
-    })
-}
 
 /// ch values of sample `i`: 24-bit codes, some negative.
 fn cb3_codes(i: u64) -> [i32; 3] {
@@ -163,30 +135,6 @@ async fn cb3_values_wraps_and_fault_counts() {
 }
 
 // ---------------------------------------------------------------- PSD-2
-
-fn psd_device() -> hil::Respond {
-    let mut err: Vec<(i32, &'static str)> = Vec::new();
-    Box::new(move |cmd, out| {
-        match cmd {
-            "*IDN?" => out.extend_from_slice(b"PSD-2,777,2.1\n"),
-            "*OPC?" => out.extend_from_slice(b"1\n"),
-            "SYST:ERR?" => {
-                let (code, text) = if err.is_empty() { (0, "No error") } else { err.remove(0) };
-                out.extend_from_slice(format!("{code},\"{text}\"\n").as_bytes());
-            }
-            "INIT:CONT ON" => return Some(true),
-            "INIT:CONT OFF" => return Some(false),
-            c if c.starts_with("CONF:RATE ") => {
-                let hz: u32 = c[10..].trim().parse().unwrap_or(0);
-                if !(1..=1000).contains(&hz) {
-                    err.push((-222, "Data out of range"));
-                }
-            }
-            _ => err.push((-100, "Command error")),
-        }
-        None
-    })
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn psd_values_gating_and_bad_lines() {

@@ -24,7 +24,7 @@ const READ_BUF: usize = 64 * 1024;
 /// While streaming, a read that returned less than this lets the next read wait a little so
 /// that bytes accumulate: at 20 kHz the CB-3 otherwise wakes the driver for every frame.
 const BATCH_BYTES: usize = 2048;
-const BATCH_WAIT: Duration = Duration::from_millis(2);
+const BATCH_WAIT: Duration = Duration::from_millis(10);
 
 /// Why a session ended.
 #[derive(Debug)]

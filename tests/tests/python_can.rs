@@ -96,30 +96,59 @@ async fn python_can_slcan_frames_are_read_by_our_trigger_driver() {
 
     let (tx, mut rx) = tokio::sync::mpsc::channel(1000);
     let cancel = CancellationToken::new();
-    let cfg = drivers::trigger::SlcanConfig { port: link.display().to_string(), can_id: 0x181 };
+    let cfg = drivers::trigger::SlcanConfig {
+        port: link.display().to_string(),
+        can_id: 0x181,
+    };
     let task = drivers::trigger::spawn_slcan(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
-    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c.connected.is_empty()).await, "{:?}", c.errors);
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c
+            .connected
+            .is_empty())
+        .await,
+        "{:?}",
+        c.errors
+    );
 
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/python/slcan_peer.py");
     let py_path = py_side.path.clone();
-    let out = tokio::task::spawn_blocking(move || std::process::Command::new("python3").arg(script).arg(&py_path).output())
-        .await
-        .unwrap()
-        .expect("python3 must be installed (with python-can: pip install python-can)");
-    assert!(out.status.success(), "python-can peer failed: {}", String::from_utf8_lossy(&out.stderr));
+    let out = tokio::task::spawn_blocking(move || {
+        std::process::Command::new("python3")
+            .arg(script)
+            .arg(&py_path)
+            .output()
+    })
+    .await
+    .unwrap()
+    .expect("python3 must be installed (with python-can: pip install python-can)");
+    assert!(
+        out.status.success(),
+        "python-can peer failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let sent = report["sent"].as_array().unwrap().clone();
     assert_eq!(sent.len(), 18);
 
-    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| c.triggers.len() >= sent.len()).await);
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| c
+            .triggers
+            .len()
+            >= sent.len())
+        .await
+    );
     tokio::time::sleep(Duration::from_millis(200)).await;
     finish(cancel, task, &mut rx, &mut c).await;
     stop.store(true, Ordering::Relaxed);
     let ours = relay.join().unwrap();
     assert_eq!(&ours[..3], ["C", "S6", "O"]);
 
-    assert_eq!(c.triggers.len(), sent.len(), "frames of other ids or extended frames must be ignored");
+    assert_eq!(
+        c.triggers.len(),
+        sent.len(),
+        "frames of other ids or extended frames must be ignored"
+    );
     for (t, s) in c.triggers.iter().zip(&sent) {
         let event = serde_json::to_value(t.event).unwrap();
         let code = match event.as_str().unwrap() {

@@ -423,8 +423,9 @@ pub(crate) trait Device: Handler + Send {
     fn new_decoder(&self) -> Self::Dec;
     /// Longest silence while streaming before the port is taken for lost.
     fn idle_timeout(&self) -> Duration;
-    /// The line that stops streaming, sent best-effort on cancellation.
-    fn stop_line(&self) -> &'static str;
+    /// Stop streaming and wait for the device's answer, handling every data line before it,
+    /// so a run that ends on purpose loses nothing the device sent.
+    fn stop(&mut self, link: &mut Link<Self::Dec>) -> impl Future<Output = Result<(), SessionError>> + Send;
     /// Stop, identify, configure and start streaming; returns the identity string.
     fn setup(
         &mut self,
@@ -491,8 +492,9 @@ pub(crate) async fn run<D: Device>(mut dev: D, cancel: CancellationToken) {
         };
         match result {
             Ok(()) | Err(SessionError::Cancelled) => {
-                let stop = dev.stop_line();
-                let _ = tokio::time::timeout(Duration::from_millis(200), link.send(stop)).await;
+                if let Err(SessionError::Device(m) | SessionError::Lost(m)) = dev.stop(&mut link).await {
+                    tracing::warn!(port = %path, "stopping the stream: {m}");
+                }
                 break;
             }
             Err(SessionError::Lost(reason)) => {

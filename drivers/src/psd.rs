@@ -136,8 +136,9 @@ impl Device for Psd {
     fn idle_timeout(&self) -> Duration {
         crate::li80::idle_timeout(self.cfg.rate_hz)
     }
-    fn stop_line(&self) -> &'static str {
-        "INIT:CONT OFF\n"
+    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
+        link.send("INIT:CONT OFF\n").await?;
+        link.expect(self, "*OPC?\n", |a| a.trim() == "1").await.map(drop)
     }
 
     async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {

@@ -256,7 +256,8 @@ async fn psd_values_gating_and_bad_lines() {
             "SYST:ERR?",
             "INIT:CONT ON",
             "*OPC?",
-            "INIT:CONT OFF"
+            "INIT:CONT OFF",
+            "*OPC?"
         ]
     );
     let sent: Vec<u64> = (0..N).filter(|i| !lost.contains(i)).collect();

@@ -117,5 +117,13 @@ pub fn spawn(
     let acq = Acq::new(Instrument::Capball, &cfg.port, 16, 32, clock, tx);
     let poly = cfg.poly.map(|c| CapBallPoly { c });
     let transform = CapBallTransform { t: cfg.transform };
-    tokio::spawn(crate::link::run(Cb3 { cfg, acq, poly, transform }, cancel))
+    tokio::spawn(crate::link::run(
+        Cb3 {
+            cfg,
+            acq,
+            poly,
+            transform,
+        },
+        cancel,
+    ))
 }

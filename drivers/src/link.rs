@@ -25,6 +25,11 @@ const READ_BUF: usize = 64 * 1024;
 /// that bytes accumulate: at 20 kHz the CB-3 otherwise wakes the driver for every frame.
 const BATCH_BYTES: usize = 2048;
 const BATCH_WAIT: Duration = Duration::from_millis(10);
+/// Every this many batched reads, one read waits for the next bytes without the batching
+/// pause: its arrival time is then the write time plus the wake-up latency only, which gives
+/// the clock fit ([`crate::clock`]) the least-delayed points it needs (a batched read dates
+/// everything in it by the read, up to `BATCH_WAIT` late).
+const PROBE_EVERY: u32 = 4;
 
 /// Why a session ended.
 #[derive(Debug)]
@@ -425,7 +430,10 @@ pub(crate) trait Device: Handler + Send {
     fn idle_timeout(&self) -> Duration;
     /// Stop streaming and wait for the device's answer, handling every data line before it,
     /// so a run that ends on purpose loses nothing the device sent.
-    fn stop(&mut self, link: &mut Link<Self::Dec>) -> impl Future<Output = Result<(), SessionError>> + Send;
+    fn stop(
+        &mut self,
+        link: &mut Link<Self::Dec>,
+    ) -> impl Future<Output = Result<(), SessionError>> + Send;
     /// Stop, identify, configure and start streaming; returns the identity string.
     fn setup(
         &mut self,
@@ -435,10 +443,12 @@ pub(crate) trait Device: Handler + Send {
 
 async fn stream<D: Device>(dev: &mut D, link: &mut Link<D::Dec>) -> Result<(), SessionError> {
     let idle = dev.idle_timeout();
+    let mut cycle = 0u32;
     loop {
         match tokio::time::timeout(idle, link.read_once(dev)).await {
             Ok(Ok(n)) => {
-                if n < BATCH_BYTES {
+                cycle = cycle.wrapping_add(1);
+                if n < BATCH_BYTES && cycle % PROBE_EVERY != 0 {
                     tokio::time::sleep(BATCH_WAIT).await;
                 }
                 dev.acq().tick(false);
@@ -492,7 +502,9 @@ pub(crate) async fn run<D: Device>(mut dev: D, cancel: CancellationToken) {
         };
         match result {
             Ok(()) | Err(SessionError::Cancelled) => {
-                if let Err(SessionError::Device(m) | SessionError::Lost(m)) = dev.stop(&mut link).await {
+                if let Err(SessionError::Device(m) | SessionError::Lost(m)) =
+                    dev.stop(&mut link).await
+                {
                     tracing::warn!(port = %path, "stopping the stream: {m}");
                 }
                 break;

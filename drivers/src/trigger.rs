@@ -118,7 +118,9 @@ impl Device for Slcan {
         Duration::from_secs(24 * 3600)
     }
     async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
-        link.expect(self, "C\r", |a| a == ACK || a == NACK).await.map(drop)
+        link.expect(self, "C\r", |a| a == ACK || a == NACK)
+            .await
+            .map(drop)
     }
 
     async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {

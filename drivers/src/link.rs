@@ -255,7 +255,7 @@ impl Acq {
     }
 
     pub(crate) fn set_rate(&mut self, rate_hz: u32) {
-        self.rate_per_us = (rate_hz > 0).then(|| rate_hz as f64 * 1e-6);
+        self.rate_per_us = (rate_hz > 0).then_some(rate_hz as f64 * 1e-6);
     }
 
     /// A new connection: the device may have restarted its sequence and clock.
@@ -448,7 +448,7 @@ async fn stream<D: Device>(dev: &mut D, link: &mut Link<D::Dec>) -> Result<(), S
         match tokio::time::timeout(idle, link.read_once(dev)).await {
             Ok(Ok(n)) => {
                 cycle = cycle.wrapping_add(1);
-                if n < BATCH_BYTES && cycle % PROBE_EVERY != 0 {
+                if n < BATCH_BYTES && !cycle.is_multiple_of(PROBE_EVERY) {
                     tokio::time::sleep(BATCH_WAIT).await;
                 }
                 dev.acq().tick(false);

@@ -19,6 +19,7 @@
 
 pub mod poses;
 pub mod reader;
+pub mod synthetic;
 pub mod topics;
 pub mod writer;
 

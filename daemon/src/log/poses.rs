@@ -226,12 +226,13 @@ impl Recorder {
         Ok(())
     }
 
-    /// Ends the run: closes open dwells, writes a last `/status`, closes the file cleanly.
-    pub fn finish(mut self, now_ns: u64) -> Result<std::path::PathBuf, LogError> {
+    /// Ends the run: closes open dwells (their pose values are returned), writes a last
+    /// `/status`, closes the file cleanly and returns its path.
+    pub fn finish(mut self, now_ns: u64) -> Result<(std::path::PathBuf, Vec<PoseMsg>), LogError> {
         let p = self.engine.finish(now_ns);
         self.write_poses(now_ns, &p)?;
         let st = self.status();
         self.writer.write_status(now_ns, &st)?;
-        self.writer.finish()
+        Ok((self.writer.finish()?, p))
     }
 }

@@ -80,6 +80,17 @@ pub struct LogWriter {
     failed: Option<(String, &'static str)>,
 }
 
+/// The error with its causes (the mcap crate's message alone hides the OS error).
+fn describe(e: &McapError) -> String {
+    let mut s = e.to_string();
+    let mut src = std::error::Error::source(e);
+    while let Some(c) = src {
+        s.push_str(&format!(": {c}"));
+        src = c.source();
+    }
+    s
+}
+
 fn hint_for(e: &McapError) -> &'static str {
     let io = match e {
         McapError::Io(io) => Some(io),
@@ -128,7 +139,7 @@ impl LogWriter {
         let werr = |e: McapError| LogError::Write {
             path: path.to_path_buf(),
             hint: hint_for(&e),
-            reason: e.to_string(),
+            reason: describe(&e),
         };
         let mut mcap = wopts.create(sink).map_err(werr)?;
         let mut channels = BTreeMap::new();
@@ -220,7 +231,7 @@ impl LogWriter {
     fn fail(&mut self, e: McapError) -> LogError {
         let hint = hint_for(&e);
         if self.failed.is_none() {
-            self.failed = Some((e.to_string(), hint));
+            self.failed = Some((describe(&e), hint));
         }
         self.failed_error()
     }

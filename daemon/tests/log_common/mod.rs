@@ -34,9 +34,13 @@ pub fn meta(run: &SyntheticRun) -> RunMetadata {
 
 /// Writes `run` to `dir/name` through a [`Recorder`], closing it cleanly.
 pub fn write_run(dir: &Path, name: &str, run: &SyntheticRun) -> Written {
+    write_run_with(dir, name, run, LogOptions::default())
+}
+
+pub fn write_run_with(dir: &Path, name: &str, run: &SyntheticRun, opts: LogOptions) -> Written {
     let path = dir.join(name);
     let meta = meta(run);
-    let mut w = LogWriter::create(&path, &meta, LogOptions::default()).unwrap();
+    let mut w = LogWriter::create(&path, &meta, opts).unwrap();
     w.attach(
         "config.toml",
         "application/toml",

@@ -284,3 +284,70 @@ fn trigger_free_run_finds_the_plateaus() {
         assert!((p.mean["position_um"] - run.targets_mm[k] * 1000.0).abs() < 0.01);
     }
 }
+
+#[test]
+fn info_and_replay_commands() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = SyntheticRun {
+        targets_mm: vec![0.0, 10.0],
+        ..SyntheticRun::default()
+    };
+    let w = log_common::write_run(dir.path(), "run.mcap", &run);
+    let bin = env!("CARGO_BIN_EXE_metrolog");
+    let out = std::process::Command::new(bin)
+        .arg("info")
+        .arg(&w.path)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("closed     cleanly"), "{text}");
+    assert!(text.contains("/interferometer/position"), "{text}");
+    assert!(text.contains("interferometer   ok 2"), "{text}");
+    assert!(text.contains("config.toml"), "{text}");
+
+    let out = std::process::Command::new(bin)
+        .args(["info", "--json"])
+        .arg(&w.path)
+        .output()
+        .unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["read"]["clean_close"], true);
+    assert_eq!(j["poses"]["capball"]["ok"], 2);
+    assert_eq!(
+        j["last_status"]["instruments"]["psd"]["clock_drift_ppm"],
+        1.5
+    );
+    let rate = j["topics"]["/interferometer/position"]["rate_hz"]
+        .as_f64()
+        .unwrap();
+    assert!((rate - 1000.0).abs() < 1.0, "{rate}");
+
+    let out = std::process::Command::new(bin)
+        .arg("replay")
+        .arg(&w.path)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("all 6 logged pose values reproduced exactly"),
+        "{text}"
+    );
+
+    let out = std::process::Command::new(bin)
+        .arg("info")
+        .arg(dir.path().join("nope.mcap"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("nope.mcap") && err.contains("No such file"),
+        "{err}"
+    );
+}

@@ -165,7 +165,8 @@ pub struct SteadyConfig {
     pub std_floor: f64,
     /// Trigger-free mode: smallest move of the mean that ends a plateau (channel units).
     pub min_step: f64,
-    /// Most samples kept for late triggers and missing-trigger recovery.
+    /// Most samples kept for late triggers and missing-trigger recovery (2¹⁸: 13 s at
+    /// 20 kHz, 260 s at 1 kHz — longer than a motion plus dwell).
     pub max_history: usize,
 }
 
@@ -178,7 +179,7 @@ impl Default for SteadyConfig {
             outlier_k: 5.0,
             std_floor: 0.0,
             min_step: 0.0,
-            max_history: 1 << 20,
+            max_history: 1 << 18,
         }
     }
 }
@@ -227,6 +228,10 @@ impl SteadyConfig {
         Ok(())
     }
 }
+
+/// Samples (in windows) kept while standing between dwells, so that an exact stop processed
+/// after later samples (a longer queue) still finds the samples from its time on.
+const LATE_MARGIN_WINDOWS: u64 = 4;
 
 /// Statistics of one window.
 struct Window {
@@ -668,7 +673,14 @@ impl SteadyDetector {
         let recent = end.saturating_sub(n);
         let keep_from = match &self.state {
             State::Searching { .. } | State::Plateau { .. } => recent,
-            State::Idle { since, .. } => (*since).min(recent),
+            // Moving: everything since the motion start (missing-exact-stop recovery).
+            State::Idle {
+                since,
+                moving: true,
+                ..
+            } => (*since).min(recent),
+            // Standing between dwells: a margin for an exact stop processed late.
+            State::Idle { .. } => end.saturating_sub(LATE_MARGIN_WINDOWS * n),
             State::Dwell(d) if !d.done => d.first.min(recent),
             State::Dwell(_) => recent,
         };

@@ -255,7 +255,7 @@ impl Iterator for SyntheticEvents<'_> {
                     },
                 )
             }
-            3 if r.psd_dark_every > 0 && seq % r.psd_dark_every == 0 => {
+            3 if r.psd_dark_every > 0 && seq.is_multiple_of(r.psd_dark_every) => {
                 return Some(DriverEvent::Sample(Sample {
                     instrument: Instrument::Psd,
                     seq,

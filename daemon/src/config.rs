@@ -36,8 +36,8 @@ pub const PSD_BAUDS: [u32; 8] = [
 ];
 /// CAN 2.0A identifiers are 11 bits.
 pub const CAN_ID_MAX: u32 = 0x7FF;
-/// Enough samples for a standard deviation, few enough to fit in any dwell.
-pub const DETECTOR_SAMPLES: (usize, usize) = (2, 1_000_000);
+/// The steady test needs a variance of successive differences (metrology::steady): 3 at least.
+pub const DETECTOR_SAMPLES: (usize, usize) = (3, 1_000_000);
 
 /// A configuration error. Each message says which file and line and what to fix.
 #[derive(Debug, thiserror::Error)]

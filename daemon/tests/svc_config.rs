@@ -158,7 +158,7 @@ fn rates_outside_the_data_sheet_are_rejected() {
 #[test]
 fn impossible_values_are_rejected() {
     for (from, to, needle) in [
-        ("samples = 150", "samples = 1", "samples = 1"),
+        ("samples = 150", "samples = 2", "samples = 2"),
         ("can_id = 0x181", "can_id = 0x800", "can_id = 0x800"),
         (
             "alpha_um_per_m_k = 11.7",

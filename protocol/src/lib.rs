@@ -18,6 +18,7 @@ pub mod li80;
 pub mod psd;
 pub mod reject;
 pub mod slcan;
+mod text;
 
 pub use reject::{RejectKind, Rejection};
 

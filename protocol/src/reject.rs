@@ -1,7 +1,9 @@
 //! Why a decoder discarded bytes. Every rejection is counted per instrument by the drivers.
 
 /// The kind of a rejection; the counters of the drivers are keyed by it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum RejectKind {
     /// The XOR checksum of an NMEA-style line did not match.

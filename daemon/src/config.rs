@@ -397,6 +397,9 @@ impl Ctx<'_> {
                     baud,
                     rate_hz,
                     min_sum_pa,
+                    // Not part of the config file (yet): no error map, no head correction.
+                    error_map: None,
+                    head: None,
                 })
             }
         };

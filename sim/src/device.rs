@@ -41,7 +41,8 @@ impl DeviceClock {
     }
     /// Device time (µs, fractional) at a true instant.
     pub fn dev_us(&self, at: Instant) -> f64 {
-        self.start_us as f64 + at.saturating_duration_since(self.power_up).as_secs_f64() * self.rate() * 1e6
+        self.start_us as f64
+            + at.saturating_duration_since(self.power_up).as_secs_f64() * self.rate() * 1e6
     }
     /// True instant of a device time.
     pub fn instant(&self, dev_us: f64) -> Instant {
@@ -60,7 +61,11 @@ pub(crate) struct Cadence {
 
 impl Cadence {
     pub fn new(rate_hz: f64, anchor_us: f64) -> Cadence {
-        Cadence { rate_hz, anchor_us, k: 0 }
+        Cadence {
+            rate_hz,
+            anchor_us,
+            k: 0,
+        }
     }
     /// Device time of the next sample.
     pub fn next_us(&self) -> f64 {
@@ -212,28 +217,48 @@ pub(crate) struct Runner<M: Model> {
     line: Vec<u8>,
     discarding: bool,
     power_up: u32,
+    /// Wait for the host's bytes through the reactor (else: only on the batch timer).
+    readable_ok: bool,
+    /// Consecutive reactor wake-ups that brought no data.
+    spurious: u32,
 }
 
 impl<M: Model> Runner<M> {
-    pub fn new(model: M, shared: Arc<Shared>, link: PathBuf, rng: ChaCha8Rng, ppm: f64, start_us: u64) -> Self {
+    pub fn new(
+        model: M,
+        shared: Arc<Shared>,
+        link: PathBuf,
+        rng: ChaCha8Rng,
+        ppm: f64,
+        start_us: u64,
+    ) -> Self {
         Runner {
             model,
             shared,
             link,
             rng,
             pty: None,
-            clock: DeviceClock { power_up: Instant::now(), ppm, start_us },
+            clock: DeviceClock {
+                power_up: Instant::now(),
+                ppm,
+                start_us,
+            },
             connected: false,
             pending: Vec::new(),
             line: Vec::new(),
             discarding: false,
             power_up: 0,
+            readable_ok: true,
+            spurious: 0,
         }
     }
 
     /// Plug in: a fresh pty at the stable path, power-up state.
     pub fn plug(&mut self) -> Result<PathBuf, SimError> {
-        let pty = Pty::open(&self.link).map_err(|e| SimError::Pty { path: self.link.display().to_string(), source: e })?;
+        let pty = Pty::open(&self.link).map_err(|e| SimError::Pty {
+            path: self.link.display().to_string(),
+            source: e,
+        })?;
         let pts = pty.pts().to_path_buf();
         tracing::debug!(device = M::DEVICE.name(), link = %self.link.display(), pts = %pts.display(), "plugged in");
         self.pty = Some(pty);
@@ -270,21 +295,30 @@ impl<M: Model> Runner<M> {
         if let Some(p) = self.pty.take() {
             tracing::debug!(device = M::DEVICE.name(), "unplugged");
             p.unplug();
-            self.shared.lock_record().device_mut(M::DEVICE).faults.unplugs += 1;
+            self.shared
+                .lock_record()
+                .device_mut(M::DEVICE)
+                .faults
+                .unplugs += 1;
         }
         self.connected = false;
         self.pending.clear();
     }
 
-    /// Read what the host wrote; returns the complete command lines.
-    fn read_host(&mut self) -> Vec<String> {
+    /// Read what the host wrote; returns the complete command lines and whether any byte came.
+    fn read_host(&mut self) -> (Vec<String>, bool) {
         let mut lines = Vec::new();
-        let Some(pty) = &self.pty else { return lines };
+        let mut got = false;
+        let was_connected = self.connected;
+        let Some(pty) = &self.pty else {
+            return (lines, got);
+        };
         let mut buf = [0u8; 1024];
         loop {
             match pty.try_read(&mut buf) {
                 ReadOutcome::Data(n) => {
                     self.connected = true;
+                    got = true;
                     for &b in &buf[..n] {
                         if M::is_terminator(b) {
                             if !self.discarding {
@@ -315,14 +349,33 @@ impl<M: Model> Runner<M> {
                 }
             }
         }
-        lines
+        if self.connected && !was_connected {
+            self.readable_ok = true;
+            self.spurious = 0;
+            self.rearm();
+        }
+        (lines, got)
     }
 
-    /// One step: read commands, answer, generate what is due, write.
-    fn step(&mut self) {
+    fn rearm(&mut self) {
+        if let Some(p) = &mut self.pty {
+            if let Err(e) = p.rearm() {
+                tracing::warn!(device = M::DEVICE.name(), error = %e, "cannot re-register the pty; polling only");
+                self.readable_ok = false;
+            }
+        }
+    }
+
+    /// One step: read commands, answer, generate what is due, write. Returns whether the host
+    /// sent anything.
+    fn step(&mut self) -> bool {
         let now = Instant::now();
         let plugged = self.pty.is_some();
-        let lines = if plugged { self.read_host() } else { Vec::new() };
+        let (lines, got) = if plugged {
+            self.read_host()
+        } else {
+            (Vec::new(), false)
+        };
         let mut out = Vec::new();
         let mut faults = FaultCounts::default();
         {
@@ -348,12 +401,16 @@ impl<M: Model> Runner<M> {
             }
         }
         if faults != FaultCounts::default() {
-            add_counts(&mut self.shared.lock_record().device_mut(M::DEVICE).faults, &faults);
+            add_counts(
+                &mut self.shared.lock_record().device_mut(M::DEVICE).faults,
+                &faults,
+            );
         }
         if self.connected {
             self.pending.extend_from_slice(&out);
             self.flush();
         }
+        got
     }
 
     fn flush(&mut self) {
@@ -378,7 +435,7 @@ impl<M: Model> Runner<M> {
         let mut tick = tokio::time::interval(period);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         loop {
-            let want_read = self.pty.is_some() && self.connected;
+            let want_read = self.pty.is_some() && self.connected && self.readable_ok;
             let pty = &self.pty;
             let readable = async move {
                 match pty {
@@ -409,7 +466,25 @@ impl<M: Model> Runner<M> {
                     self.unplug_silently();
                     return;
                 }
-                Ev::Tick | Ev::Readable(true) => self.step(),
+                Ev::Tick => {
+                    self.step();
+                }
+                Ev::Readable(true) => {
+                    // A wake-up without data while the host is connected: re-register, so a
+                    // stale readiness can never turn this loop into a busy one.
+                    if self.step() || !self.connected {
+                        self.spurious = 0;
+                    } else {
+                        self.spurious += 1;
+                        if self.spurious > 3 {
+                            // Still no data: leave reading to the batch timer until the next
+                            // (re)connect.
+                            self.readable_ok = false;
+                        } else {
+                            self.rearm();
+                        }
+                    }
+                }
                 Ev::Readable(false) => tokio::time::sleep(period).await,
             }
         }

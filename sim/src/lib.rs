@@ -71,7 +71,12 @@ pub enum Device {
 }
 
 impl Device {
-    pub const ALL: [Device; 4] = [Device::Interferometer, Device::Capball, Device::Psd, Device::Trigger];
+    pub const ALL: [Device; 4] = [
+        Device::Interferometer,
+        Device::Capball,
+        Device::Psd,
+        Device::Trigger,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -105,12 +110,20 @@ pub enum SimError {
     Scenario(#[from] ScenarioError),
     /// cannot create the simulation directory {path}: {source}
     #[error("cannot create the simulation directory {path}: {source}")]
-    Dir { path: String, source: std::io::Error },
+    Dir {
+        path: String,
+        source: std::io::Error,
+    },
     /// cannot create the pseudo-terminal for {path}: {source}
     #[error("cannot create the pseudo-terminal for {path}: {source}")]
-    Pty { path: String, source: std::io::Error },
+    Pty {
+        path: String,
+        source: std::io::Error,
+    },
     /// the simulation is not running inside a tokio runtime
-    #[error("the simulation is not running inside a tokio runtime: call Sim::start from async code")]
+    #[error(
+        "the simulation is not running inside a tokio runtime: call Sim::start from async code"
+    )]
     NoRuntime,
     /// the device task of {0} has ended (the simulation was shut down)
     #[error("the device task of {0} has ended (the simulation was shut down)")]
@@ -173,9 +186,16 @@ impl Shared {
         }
     }
 
-    async fn control<T>(&self, d: Device, make: impl FnOnce(oneshot::Sender<T>) -> Control) -> Result<T, SimError> {
+    async fn control<T>(
+        &self,
+        d: Device,
+        make: impl FnOnce(oneshot::Sender<T>) -> Control,
+    ) -> Result<T, SimError> {
         let (tx, rx) = oneshot::channel();
-        self.controls[d.index()].send(make(tx)).await.map_err(|_| SimError::Stopped(d.name()))?;
+        self.controls[d.index()]
+            .send(make(tx))
+            .await
+            .map_err(|_| SimError::Stopped(d.name()))?;
         rx.await.map_err(|_| SimError::Stopped(d.name()))
     }
 }
@@ -192,10 +212,17 @@ impl Sim {
     }
 
     /// As [`Sim::start`], with another model of the CapBall's true volumetric error.
-    pub fn start_with(scenario: Scenario, dir: &Path, capball_truth: Arc<dyn CapballTruth>) -> Result<SimHandle, SimError> {
+    pub fn start_with(
+        scenario: Scenario,
+        dir: &Path,
+        capball_truth: Arc<dyn CapballTruth>,
+    ) -> Result<SimHandle, SimError> {
         scenario.validate()?;
         let runtime = tokio::runtime::Handle::try_current().map_err(|_| SimError::NoRuntime)?;
-        std::fs::create_dir_all(dir).map_err(|source| SimError::Dir { path: dir.display().to_string(), source })?;
+        std::fs::create_dir_all(dir).map_err(|source| SimError::Dir {
+            path: dir.display().to_string(),
+            source,
+        })?;
         let seed = scenario.seed;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let world = World::new(scenario, capball_truth, &mut rng);
@@ -219,7 +246,9 @@ impl Sim {
         let mut tasks = Vec::new();
         for (d, rx) in Device::ALL.into_iter().zip(receivers) {
             let link = dir.join(d.link_name());
-            let dev_rng = ChaCha8Rng::seed_from_u64(seed ^ (0x9E37_79B9_7F4A_7C15u64.wrapping_mul(d.index() as u64 + 1)));
+            let dev_rng = ChaCha8Rng::seed_from_u64(
+                seed ^ (0x9E37_79B9_7F4A_7C15u64.wrapping_mul(d.index() as u64 + 1)),
+            );
             let task = devices::spawn(d, shared.clone(), link.clone(), dev_rng, rx, &runtime)?;
             ports.push(link);
             tasks.push(task);
@@ -229,7 +258,12 @@ impl Sim {
             let at = shared.t0 + Duration::from_secs_f64(sc.start_delay_s);
             shared.start_program_at(at);
         }
-        Ok(SimHandle { shared, ports, tasks, dir: dir.to_path_buf() })
+        Ok(SimHandle {
+            shared,
+            ports,
+            tasks,
+            dir: dir.to_path_buf(),
+        })
     }
 }
 

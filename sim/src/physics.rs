@@ -33,10 +33,17 @@ impl Schedule {
         for r in &p.poses {
             let m = r.move_s.unwrap_or(p.move_s);
             let d = r.dwell_s.unwrap_or(p.dwell_s);
-            poses.push(PoseTiming { motion_start_s: t, exact_stop_s: t + m, dwell_end_s: t + m + d });
+            poses.push(PoseTiming {
+                motion_start_s: t,
+                exact_stop_s: t + m,
+                dwell_end_s: t + m + d,
+            });
             t += m + d;
         }
-        Schedule { poses, end_s: t + p.lead_out_s }
+        Schedule {
+            poses,
+            end_s: t + p.lead_out_s,
+        }
     }
 }
 
@@ -88,11 +95,19 @@ impl CapballTruth for LinkErrors {
         let ec = mul(&ra, sub(dc, mul(&rc, dc)));
         // A tilt θ of the C axis rotates the ball position p by θ × p (small angles).
         let th = [self.c_tilt_urad[0] * 1e-6, self.c_tilt_urad[1] * 1e-6, 0.0];
-        let p_um = [self.ball_mm[0] * 1e3, self.ball_mm[1] * 1e3, self.ball_mm[2] * 1e3];
+        let p_um = [
+            self.ball_mm[0] * 1e3,
+            self.ball_mm[1] * 1e3,
+            self.ball_mm[2] * 1e3,
+        ];
         let et = mul(&ra, mul(&rc, cross(th, p_um)));
         let mut e = [0.0; 3];
         for i in 0..3 {
-            e[i] = self.setup_offset_um[i] + self.drift_um_per_h[i] * t_s / 3600.0 + ea[i] + ec[i] + et[i];
+            e[i] = self.setup_offset_um[i]
+                + self.drift_um_per_h[i] * t_s / 3600.0
+                + ea[i]
+                + ec[i]
+                + et[i];
         }
         e
     }
@@ -119,7 +134,11 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 fn normalised_directions(c: &Capball) -> M3 {
@@ -156,7 +175,12 @@ fn invert3(m: &M3) -> Option<M3> {
 pub fn capball_host_transform(c: &Capball) -> [[f64; 4]; 4] {
     let n = normalised_directions(c);
     let Some(ni) = invert3(&n) else {
-        return [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+        return [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
     };
     let t = mul(&ni, c.zero_offset_um);
     [
@@ -196,11 +220,21 @@ pub struct World {
 }
 
 impl World {
-    pub fn new(scenario: Scenario, capball_truth: std::sync::Arc<dyn CapballTruth>, rng: &mut ChaCha8Rng) -> World {
+    pub fn new(
+        scenario: Scenario,
+        capball_truth: std::sync::Arc<dyn CapballTruth>,
+        rng: &mut ChaCha8Rng,
+    ) -> World {
         let schedule = Schedule::new(&scenario.program);
         let visits = draw_visits(&scenario, rng);
         let sensor_n = normalised_directions(&scenario.capball);
-        World { scenario, schedule, visits, capball_truth, sensor_n }
+        World {
+            scenario,
+            schedule,
+            visits,
+            capball_truth,
+            sensor_n,
+        }
     }
 
     /// The machine's phase at `s` real seconds after the program start (`None`: not started).
@@ -215,10 +249,17 @@ impl World {
         let p = poses[i];
         if s < p.exact_stop_s {
             let dur = p.exact_stop_s - p.motion_start_s;
-            let frac = if dur > 0.0 { (s - p.motion_start_s) / dur } else { 1.0 };
+            let frac = if dur > 0.0 {
+                (s - p.motion_start_s) / dur
+            } else {
+                1.0
+            };
             Phase::Moving { to: i, frac }
         } else {
-            Phase::Standing { at: i, since_s: s - p.exact_stop_s }
+            Phase::Standing {
+                at: i,
+                since_s: s - p.exact_stop_s,
+            }
         }
     }
 
@@ -227,7 +268,11 @@ impl World {
     }
 
     fn previous(&self, i: usize) -> Coords {
-        if i == 0 { self.scenario.program.home } else { self.pose(i - 1) }
+        if i == 0 {
+            self.scenario.program.home
+        } else {
+            self.pose(i - 1)
+        }
     }
 
     /// Axis positions at a phase (smooth S-shaped motion profile between poses).
@@ -256,7 +301,9 @@ impl World {
         match ph {
             Phase::Standing { since_s, .. } => {
                 let r = &self.scenario.ringing;
-                r.amplitude_um * (-since_s / r.decay_s).exp() * (std::f64::consts::TAU * r.frequency_hz * since_s).sin()
+                r.amplitude_um
+                    * (-since_s / r.decay_s).exp()
+                    * (std::f64::consts::TAU * r.frequency_hz * since_s).sin()
             }
             _ => 0.0,
         }
@@ -265,7 +312,10 @@ impl World {
     /// True deviation of the X axis at visit `i` (0-based pose), scaled time `t_s`, µm.
     pub fn axis_deviation_at_visit_um(&self, i: usize, t_s: f64) -> f64 {
         let v = self.visits[i];
-        self.scenario.axis.deterministic_um(v.target_index, v.direction, t_s) + v.random_um
+        self.scenario
+            .axis
+            .deterministic_um(v.target_index, v.direction, t_s)
+            + v.random_um
     }
 
     /// True deviation of the X axis (indicated minus programmed, at 20 °C), µm. Zero at home:
@@ -275,7 +325,11 @@ impl World {
             Phase::Idle => 0.0,
             Phase::Standing { at, .. } => self.axis_deviation_at_visit_um(at, t_s),
             Phase::Moving { to, frac } => {
-                let a = if to == 0 { 0.0 } else { self.axis_deviation_at_visit_um(to - 1, t_s) };
+                let a = if to == 0 {
+                    0.0
+                } else {
+                    self.axis_deviation_at_visit_um(to - 1, t_s)
+                };
                 let b = self.axis_deviation_at_visit_um(to, t_s);
                 a + (b - a) * frac.clamp(0.0, 1.0)
             }
@@ -291,7 +345,12 @@ impl World {
     /// Air temperature, pressure, humidity and material temperatures at scaled time `t_s`.
     pub fn environment(&self, t_s: f64) -> (f64, f64, f64, Vec<f64>) {
         let e = &self.scenario.environment;
-        (e.air_c.at(t_s), e.air_pa.at(t_s), e.rh_pct.at(t_s), e.material_c.iter().map(|m| m.at(t_s)).collect())
+        (
+            e.air_c.at(t_s),
+            e.air_pa.at(t_s),
+            e.rh_pct.at(t_s),
+            e.material_c.iter().map(|m| m.at(t_s)).collect(),
+        )
     }
 
     /// Sensor distance changes (µm, noise-free) for a machine-frame error `e_um`.
@@ -341,7 +400,8 @@ impl World {
             let c = self.pose(i);
             let v = self.visits[i];
             let dev = self.axis_deviation_at_visit_um(i, t);
-            let rate = (self.axis_deviation_at_visit_um(i, t + scale) - self.axis_deviation_at_visit_um(i, (t - scale).max(0.0)))
+            let rate = (self.axis_deviation_at_visit_um(i, t + scale)
+                - self.axis_deviation_at_visit_um(i, (t - scale).max(0.0)))
                 / if t >= scale { 2.0 } else { 1.0 + t / scale };
             let (air_c, _, _, mat) = self.environment(t);
             let (px, py) = self.psd_spot_um(&c);
@@ -408,7 +468,11 @@ fn draw_visits(s: &Scenario, rng: &mut ChaCha8Rng) -> Vec<AxisVisit> {
                 random_um += if rng.random_bool(0.5) { mag } else { -mag };
             }
         }
-        out.push(AxisVisit { target_index: idx, direction: dir, random_um });
+        out.push(AxisVisit {
+            target_index: idx,
+            direction: dir,
+            random_um,
+        });
         prev_x = r.x_mm;
         prev_dir = dir;
     }
@@ -435,7 +499,11 @@ mod tests {
         let e = [3.0, -7.0, 11.0];
         let n = normalised_directions(&c);
         let d = mul(&n, e);
-        let d = [d[0] + c.zero_offset_um[0], d[1] + c.zero_offset_um[1], d[2] + c.zero_offset_um[2]];
+        let d = [
+            d[0] + c.zero_offset_um[0],
+            d[1] + c.zero_offset_um[1],
+            d[2] + c.zero_offset_um[2],
+        ];
         for i in 0..3 {
             let v = t[i][0] * d[0] + t[i][1] * d[1] + t[i][2] * d[2] + t[i][3];
             assert!((v - e[i]).abs() < 1e-9, "{i}: {v} vs {}", e[i]);
@@ -444,11 +512,22 @@ mod tests {
 
     #[test]
     fn link_errors_vanish_at_zero_rotation_without_setup() {
-        let l = LinkErrors { setup_offset_um: [0.0; 3], drift_um_per_h: [0.0; 3], c_tilt_urad: [0.0; 2], ..LinkErrors::default() };
+        let l = LinkErrors {
+            setup_offset_um: [0.0; 3],
+            drift_um_per_h: [0.0; 3],
+            c_tilt_urad: [0.0; 2],
+            ..LinkErrors::default()
+        };
         let e = l.error_um(&Coords::default(), 0.0);
         assert!(e.iter().all(|v| v.abs() < 1e-12));
         // C by 180°: (I − R)·δC = 2·δC.
-        let e = l.error_um(&Coords { c_deg: 180.0, ..Coords::default() }, 0.0);
+        let e = l.error_um(
+            &Coords {
+                c_deg: 180.0,
+                ..Coords::default()
+            },
+            0.0,
+        );
         assert!((e[0] - 2.0 * l.c_offset_um[0]).abs() < 1e-9);
         assert!((e[1] - 2.0 * l.c_offset_um[1]).abs() < 1e-9);
     }

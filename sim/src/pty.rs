@@ -30,7 +30,8 @@ pub(crate) enum ReadOutcome {
 
 /// The master side of one pseudo-terminal, published under a stable symlink.
 pub(crate) struct Pty {
-    master: AsyncFd<OwnedFd>,
+    /// `None` only transiently inside [`Pty::rearm`].
+    master: Option<AsyncFd<OwnedFd>>,
     pts: PathBuf,
     link: PathBuf,
 }
@@ -55,7 +56,11 @@ impl Pty {
         // refers to the same pty master until the AsyncFd is dropped.
         let master = unsafe { AsyncFd::register(pair.master) }.map_err(io::Error::from)?;
         publish_link(link, &pts)?;
-        Ok(Pty { master, pts, link: link.to_path_buf() })
+        Ok(Pty {
+            master: Some(master),
+            pts,
+            link: link.to_path_buf(),
+        })
     }
 
     /// The `/dev/pts/N` path behind the symlink.
@@ -64,15 +69,22 @@ impl Pty {
     }
 
     /// Read what the host sent, without blocking.
+    fn fd(&self) -> Option<&OwnedFd> {
+        self.master.as_ref().map(|m| m.get_ref())
+    }
+
     pub(crate) fn try_read(&self, buf: &mut [u8]) -> ReadOutcome {
-        let fd = self.master.get_ref().as_raw_fd();
-        match nix::unistd::read(self.master.get_ref(), buf) {
+        let Some(fd) = self.fd() else {
+            return ReadOutcome::NoHost;
+        };
+        let raw = fd.as_raw_fd();
+        match nix::unistd::read(fd, buf) {
             Ok(0) => ReadOutcome::NoHost,
             Ok(n) => ReadOutcome::Data(n),
             Err(nix::errno::Errno::EAGAIN) => ReadOutcome::Idle,
             Err(nix::errno::Errno::EINTR) => ReadOutcome::Idle,
             Err(e) => {
-                tracing::trace!(fd, error = %e, "pty master read: no host");
+                tracing::trace!(fd = raw, error = %e, "pty master read: no host");
                 ReadOutcome::NoHost
             }
         }
@@ -84,7 +96,8 @@ impl Pty {
         if bytes.is_empty() {
             return Ok(0);
         }
-        match nix::unistd::write(self.master.get_ref(), bytes) {
+        let Some(fd) = self.fd() else { return Ok(0) };
+        match nix::unistd::write(fd, bytes) {
             Ok(n) => Ok(n),
             Err(nix::errno::Errno::EAGAIN) | Err(nix::errno::Errno::EINTR) => Ok(0),
             Err(e) => Err(io::Error::from(e)),
@@ -94,8 +107,24 @@ impl Pty {
     /// Wait until the host may have written something (only meaningful while a host has the
     /// slave open; without one the master is permanently readable with `EIO`).
     pub(crate) async fn readable(&self) -> io::Result<()> {
-        let mut guard = self.master.readable().await?;
+        let Some(m) = &self.master else {
+            return std::future::pending().await;
+        };
+        let mut guard = m.readable().await?;
         guard.clear_ready();
+        Ok(())
+    }
+
+    /// Register the master with the reactor afresh. Tokio keeps a hang-up (`EPOLLHUP`, seen
+    /// while no host has the slave open) as a readiness that `clear_ready` cannot clear, so
+    /// after the host (re)opens the port the old registration would report "readable" forever;
+    /// a new registration starts from the pty's present state.
+    pub(crate) fn rearm(&mut self) -> io::Result<()> {
+        if let Some(m) = self.master.take() {
+            let fd = m.into_inner();
+            // SAFETY: as in `open`: the AsyncFd owns the descriptor.
+            self.master = Some(unsafe { AsyncFd::register(fd) }.map_err(io::Error::from)?);
+        }
         Ok(())
     }
 

@@ -122,9 +122,22 @@ pub struct SentSample {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum SentValues {
-    Pos { raw_nm: i64, sig: u8, flags: u32 },
-    Capball { ch: [i32; 3], flags: u8 },
-    Psd { x1_pa: u64, x2_pa: u64, y1_pa: u64, y2_pa: u64, head_mc: i32 },
+    Pos {
+        raw_nm: i64,
+        sig: u8,
+        flags: u32,
+    },
+    Capball {
+        ch: [i32; 3],
+        flags: u8,
+    },
+    Psd {
+        x1_pa: u64,
+        x2_pa: u64,
+        y1_pa: u64,
+        y2_pa: u64,
+        head_mc: i32,
+    },
 }
 
 /// One `$ENV` line as sent.

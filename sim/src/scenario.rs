@@ -140,7 +140,13 @@ pub struct PoseRow {
 
 impl PoseRow {
     pub fn coords(&self) -> Coords {
-        Coords { x_mm: self.x_mm, y_mm: self.y_mm, z_mm: self.z_mm, a_deg: self.a_deg, c_deg: self.c_deg }
+        Coords {
+            x_mm: self.x_mm,
+            y_mm: self.y_mm,
+            z_mm: self.z_mm,
+            a_deg: self.a_deg,
+            c_deg: self.c_deg,
+        }
     }
 }
 
@@ -156,7 +162,11 @@ pub struct Ringing {
 
 impl Default for Ringing {
     fn default() -> Self {
-        Ringing { amplitude_um: 2.0, frequency_hz: 35.0, decay_s: 0.02 }
+        Ringing {
+            amplitude_um: 2.0,
+            frequency_hz: 35.0,
+            decay_s: 0.02,
+        }
     }
 }
 
@@ -194,7 +204,13 @@ fn hour() -> f64 {
 
 impl Slow {
     pub const fn constant(mean: f64) -> Slow {
-        Slow { mean, amplitude: 0.0, period_s: 3600.0, phase_rad: 0.0, drift_per_h: 0.0 }
+        Slow {
+            mean,
+            amplitude: 0.0,
+            period_s: 3600.0,
+            phase_rad: 0.0,
+            drift_per_h: 0.0,
+        }
     }
     pub fn at(&self, t_s: f64) -> f64 {
         let cyc = if self.period_s > 0.0 {
@@ -319,7 +335,11 @@ impl Default for Capball {
             identity: Identity::new("CB3-SIM-0042", "1.7.0", -42.0),
             sensor_directions: dirs,
             zero_offset_um: [3.0, -2.0, 1.5],
-            poly: [[10.0, 0.02, -0.001], [10.0, -0.015, 0.0], [10.0, 0.01, 0.0005]],
+            poly: [
+                [10.0, 0.02, -0.001],
+                [10.0, -0.015, 0.0],
+                [10.0, 0.01, 0.0005],
+            ],
             noise_um: 0.02,
             ringing_gain: 0.5,
             truth: LinkErrors::default(),
@@ -390,7 +410,13 @@ impl Default for Psd {
             straightness_y_um: vec![-5.0, -0.6, 0.4],
             noise_um: 0.05,
             sum_pa: 1.2e6,
-            head_c: Slow { mean: 21.5, amplitude: 0.2, period_s: 1800.0, phase_rad: 0.0, drift_per_h: 0.1 },
+            head_c: Slow {
+                mean: 21.5,
+                amplitude: 0.2,
+                period_s: 1800.0,
+                phase_rad: 0.0,
+                drift_per_h: 0.1,
+            },
             ringing_gain: 0.7,
         }
     }
@@ -505,7 +531,10 @@ pub struct MissingTrigger {
 pub enum ScenarioError {
     /// cannot read scenario file {path}: {source}
     #[error("cannot read scenario file {path}: {source}")]
-    Read { path: String, source: std::io::Error },
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
     /// scenario is not valid TOML for metrolog-sim: {0}
     #[error("scenario is not valid TOML for metrolog-sim: {0}")]
     Parse(#[from] toml::de::Error),
@@ -535,8 +564,10 @@ impl Scenario {
 
     /// Read, parse and validate a scenario file.
     pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ScenarioError::Read { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
         Scenario::from_toml(&text)
     }
 
@@ -553,14 +584,20 @@ impl Scenario {
             return bad(format!("time_scale must be > 0, got {}", self.time_scale));
         }
         if !(0.2..=100.0).contains(&self.batch_ms) {
-            return bad(format!("batch_ms must be within 0.2..=100, got {}", self.batch_ms));
+            return bad(format!(
+                "batch_ms must be within 0.2..=100, got {}",
+                self.batch_ms
+            ));
         }
         let p = &self.program;
         if p.poses.is_empty() {
             return bad("program.poses is empty: give at least one pose".into());
         }
         if p.poses.len() > u16::MAX as usize {
-            return bad(format!("program.poses has {} rows, at most 65535 fit a trigger frame", p.poses.len()));
+            return bad(format!(
+                "program.poses has {} rows, at most 65535 fit a trigger frame",
+                p.poses.len()
+            ));
         }
         for (what, v) in [
             ("program.move_s", p.move_s),
@@ -576,7 +613,10 @@ impl Scenario {
         for (i, r) in p.poses.iter().enumerate() {
             for v in [r.move_s, r.dwell_s].into_iter().flatten() {
                 if !(v.is_finite() && v >= 0.0) {
-                    return bad(format!("pose {}: move_s/dwell_s must be ≥ 0, got {v}", i + 1));
+                    return bad(format!(
+                        "pose {}: move_s/dwell_s must be ≥ 0, got {v}",
+                        i + 1
+                    ));
                 }
             }
             for v in [r.x_mm, r.y_mm, r.z_mm, r.a_deg, r.c_deg] {
@@ -590,7 +630,9 @@ impl Scenario {
         }
         let n_mat = self.environment.material_c.len();
         if !(1..=3).contains(&n_mat) {
-            return bad(format!("environment.material_c must have 1 to 3 sensors, got {n_mat}"));
+            return bad(format!(
+                "environment.material_c must have 1 to 3 sensors, got {n_mat}"
+            ));
         }
         let a = &self.axis;
         if a.targets_mm.is_empty()
@@ -608,21 +650,31 @@ impl Scenario {
             ("psd", &self.psd.identity),
         ] {
             if !(id.clock_ppm.is_finite() && id.clock_ppm.abs() < 10_000.0) {
-                return bad(format!("{name}.identity.clock_ppm must be within ±10000, got {}", id.clock_ppm));
+                return bad(format!(
+                    "{name}.identity.clock_ppm must be within ±10000, got {}",
+                    id.clock_ppm
+                ));
             }
             if id.serial.contains([',', '\n', '\r']) || id.firmware.contains([',', '\n', '\r']) {
-                return bad(format!("{name}.identity: serial and firmware must not contain commas or line ends"));
+                return bad(format!(
+                    "{name}.identity: serial and firmware must not contain commas or line ends"
+                ));
             }
         }
         for (i, dir) in self.capball.sensor_directions.iter().enumerate() {
             let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
             if !finite_pos(n) {
-                return bad(format!("capball.sensor_directions[{i}] must be a non-zero vector"));
+                return bad(format!(
+                    "capball.sensor_directions[{i}] must be a non-zero vector"
+                ));
             }
         }
         for (i, c) in self.capball.poly.iter().enumerate() {
             if !finite_pos(c[0]) {
-                return bad(format!("capball.poly[{i}]: c1 must be > 0 µm/V, got {}", c[0]));
+                return bad(format!(
+                    "capball.poly[{i}]: c1 must be > 0 µm/V, got {}",
+                    c[0]
+                ));
             }
         }
         if !finite_pos(self.psd.sum_pa) {
@@ -634,9 +686,16 @@ impl Scenario {
             ("psd", &self.faults.psd),
         ] {
             let total = f.garbage_rate + f.bad_checksum_rate + f.truncated_rate + f.drop_rate;
-            for v in [f.garbage_rate, f.bad_checksum_rate, f.truncated_rate, f.drop_rate] {
+            for v in [
+                f.garbage_rate,
+                f.bad_checksum_rate,
+                f.truncated_rate,
+                f.drop_rate,
+            ] {
                 if !(0.0..=1.0).contains(&v) {
-                    return bad(format!("faults.{name}: rates are probabilities in 0..=1, got {v}"));
+                    return bad(format!(
+                        "faults.{name}: rates are probabilities in 0..=1, got {v}"
+                    ));
                 }
             }
             if total > 1.0 {
@@ -682,5 +741,76 @@ impl Scenario {
     /// Real seconds from the program start to the program-end frame.
     pub fn program_duration_s(&self) -> f64 {
         crate::physics::Schedule::new(&self.program).end_s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn demo_parses_and_round_trips() {
+        let d = Scenario::demo();
+        assert_eq!(d.program.poses.len(), 65);
+        let text = d.to_toml().expect("serialise");
+        assert_eq!(Scenario::from_toml(&text).expect("parse back"), d);
+    }
+
+    #[test]
+    fn demo_fits_the_time_budget_and_dwells_hold_150_samples_at_1_khz() {
+        let d = Scenario::demo();
+        let total = d.program_duration_s();
+        assert!(total < 45.0, "demo program takes {total} s");
+        let settle = d.ringing.settle_s();
+        // Ringing 2 µm decaying with τ = 20 ms is below 1 nm after τ·ln(2000) = 0.152 s.
+        assert!((settle - 0.02 * 2000f64.ln()).abs() < 1e-12);
+        for (i, p) in d.program.poses.iter().enumerate() {
+            let dwell = p.dwell_s.unwrap_or(d.program.dwell_s);
+            // Reversal points are not measured (dwell 0); every other pose holds 150 samples.
+            assert!(dwell == 0.0 || dwell >= settle + 0.150, "pose {}: dwell {dwell}", i + 1);
+        }
+    }
+
+    #[test]
+    fn unknown_keys_are_errors() {
+        let text = DEMO_TOML.replace("batch_ms = 2.0", "batch_ms = 2.0\nbatchms = 3.0");
+        let e = Scenario::from_toml(&text).expect_err("unknown key");
+        assert!(e.to_string().contains("batchms"), "{e}");
+        let text = DEMO_TOML.replace("sample_noise_nm = 15.0", "sample_noise_nm = 15.0\nnoise = 1.0");
+        assert!(Scenario::from_toml(&text).is_err());
+    }
+
+    #[test]
+    fn out_of_range_values_are_explained() {
+        let mut s = Scenario::demo();
+        s.environment.material_c.clear();
+        let e = s.validate().expect_err("no material sensor");
+        assert!(e.to_string().contains("material_c"), "{e}");
+        let mut s = Scenario::demo();
+        s.faults.psd.drop_rate = 1.5;
+        assert!(s.validate().is_err());
+        let mut s = Scenario::demo();
+        s.axis.systematic_up_um.pop();
+        assert!(s.validate().is_err());
+        let mut s = Scenario::demo();
+        s.program.poses.clear();
+        assert!(s.validate().unwrap_err().to_string().contains("poses"));
+    }
+
+    #[test]
+    fn trajectory_csv_has_one_row_per_pose() {
+        let d = Scenario::demo();
+        let csv = d.trajectory_csv();
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines[0], "pose,x_mm,y_mm,z_mm,a_deg,c_deg");
+        assert_eq!(lines.len(), 66);
+        assert_eq!(lines[1], "1,2.312,0,0,0,0");
+        assert!(lines[65].starts_with("65,200,0,400,"));
+    }
+
+    #[test]
+    fn slow_quantity() {
+        let s = Slow { mean: 20.0, amplitude: 0.5, period_s: 100.0, phase_rad: 0.0, drift_per_h: 3.6 };
+        assert!((s.at(25.0) - (20.0 + 0.025 + 0.5)).abs() < 1e-12);
     }
 }

@@ -34,7 +34,8 @@ impl Cb3 {
     pub(crate) fn new(shared: &Arc<Shared>) -> Cb3 {
         let sc = &shared.world.scenario;
         Cb3 {
-            noise: Normal::new(0.0, sc.capball.noise_um.max(0.0)).unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero std")),
+            noise: Normal::new(0.0, sc.capball.noise_um.max(0.0))
+                .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero std")),
             cfg: sc.capball.clone(),
             dice: FaultDice::new(sc.faults.capball),
             rate_hz: POWER_UP_RATE_HZ as u32,
@@ -46,7 +47,11 @@ impl Cb3 {
     fn text(&self, ctx: &mut Ctx, line: &str, reply: Answer) {
         let reply = reply.to_text();
         protocol::cb3::encode(&Frame::Text(reply.clone()), ctx.out);
-        ctx.shared.lock_record().capball.commands.push((line.to_string(), reply));
+        ctx.shared
+            .lock_record()
+            .capball
+            .commands
+            .push((line.to_string(), reply));
     }
 
     /// ADC codes and over-range flags for the true error at `at`.
@@ -84,7 +89,12 @@ impl Cb3 {
         let seq = self.cfg.identity.seq_start.wrapping_add(self.seq);
         self.seq += 1;
         let (ch, flags) = self.codes(ctx, at);
-        let frame = Frame::Sample(SampleFrame { seq: seq as u16, t_us: t_us as u32, ch, flags });
+        let frame = Frame::Sample(SampleFrame {
+            seq: seq as u16,
+            t_us: t_us as u32,
+            ch,
+            flags,
+        });
         let mut garbage = false;
         let fate = match ctx.link_fate() {
             Some(f) => f,

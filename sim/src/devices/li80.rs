@@ -49,7 +49,8 @@ impl Li80 {
         let n = sc.faults.beam_interruptions.len();
         Li80 {
             alpha: cfg.alpha_um_per_m_k * 1e-6,
-            noise: Normal::new(0.0, cfg.sample_noise_nm.max(0.0)).unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero std")),
+            noise: Normal::new(0.0, cfg.sample_noise_nm.max(0.0))
+                .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero std")),
             cfg,
             interruptions: sc.faults.beam_interruptions.clone(),
             dice: FaultDice::new(sc.faults.interferometer),
@@ -78,7 +79,12 @@ impl Li80 {
     fn env(&self, ctx: &Ctx, at: Instant) -> (f64, f64, f64, Vec<f64>) {
         let (t, p, h, m) = ctx.shared.world.environment(ctx.slow_t(at));
         let r = |v: f64, k: f64| (v * k).round() / k;
-        (r(t, 1e3), r(p, 10.0), r(h, 100.0), m.iter().map(|&v| r(v, 1e3)).collect())
+        (
+            r(t, 1e3),
+            r(p, 10.0),
+            r(h, 100.0),
+            m.iter().map(|&v| r(v, 1e3)).collect(),
+        )
     }
 
     /// The displacement the device measures in air: the true length, expanded from 20 °C to
@@ -88,7 +94,13 @@ impl Li80 {
         let t = ctx.slow_t(at);
         let (air_c, air_pa, rh, mat) = ctx.shared.world.environment(t);
         let tm = mat.iter().sum::<f64>() / mat.len().max(1) as f64;
-        let n = protocol::edlen::refractive_index(protocol::edlen::LI80_VACUUM_WAVELENGTH_NM, air_c, air_pa, rh, CO2_PPM);
+        let n = protocol::edlen::refractive_index(
+            protocol::edlen::LI80_VACUUM_WAVELENGTH_NM,
+            air_c,
+            air_pa,
+            rh,
+            CO2_PPM,
+        );
         let l20 = self.l20_um(ctx, at) - self.datum_l20_um + self.lost_um;
         let l = l20 / (1.0 - self.alpha * (tm - 20.0));
         let noise = self.noise.sample(ctx.rng);
@@ -97,14 +109,20 @@ impl Li80 {
 
     fn in_gap(&self, sp: Option<f64>) -> Option<usize> {
         let sp = sp?;
-        self.interruptions.iter().position(|b| sp >= b.at_s && sp < b.at_s + b.duration_s)
+        self.interruptions
+            .iter()
+            .position(|b| sp >= b.at_s && sp < b.at_s + b.duration_s)
     }
 
     fn answer(&self, ctx: &mut Ctx, line: &str, a: Answer) {
         let text = a.to_line();
         ctx.out.extend_from_slice(text.as_bytes());
         let text = text.trim_end().to_string();
-        ctx.shared.lock_record().interferometer.commands.push((line.to_string(), text));
+        ctx.shared
+            .lock_record()
+            .interferometer
+            .commands
+            .push((line.to_string(), text));
     }
 
     fn send_env(&mut self, ctx: &mut Ctx, at: Instant, t_us: u64) {
@@ -158,7 +176,13 @@ impl Li80 {
         if matches!((self.datum_lost_from, sp), (Some(from), Some(s)) if s >= from) {
             flags |= PosFlags::DATUM_LOST;
         }
-        let frame = PosFrame { seq: seq as u32, t_us, raw_nm, sig, flags: PosFlags(flags) };
+        let frame = PosFrame {
+            seq: seq as u32,
+            t_us,
+            raw_nm,
+            sig,
+            flags: PosFlags(flags),
+        };
         let mut garbage = false;
         let fate = match ctx.link_fate() {
             Some(f) => f,
@@ -211,7 +235,9 @@ impl Li80 {
 
     /// Beam interruptions begin and end with true time, streaming or not.
     fn beam(&mut self, ctx: &mut Ctx) {
-        let Some(sp) = ctx.program_s(ctx.now) else { return };
+        let Some(sp) = ctx.program_s(ctx.now) else {
+            return;
+        };
         for i in 0..self.interruptions.len() {
             let b = self.interruptions[i];
             if !self.begun[i] && sp >= b.at_s {
@@ -221,7 +247,10 @@ impl Li80 {
                     self.datum_lost_from = Some(b.at_s);
                 }
                 if ctx.link_fate().is_none() {
-                    let f = ErrFrame { code: 3, text: "beam lost".into() };
+                    let f = ErrFrame {
+                        code: 3,
+                        text: "beam lost".into(),
+                    };
                     protocol::li80::encode_err(&f, ctx.out);
                 }
             }
@@ -237,7 +266,11 @@ impl Li80 {
 /// Replace the first digit of the sequence field by another digit: the XOR checksum then
 /// cannot match.
 fn corrupt_digit(line: &mut [u8], ctx: &mut Ctx) {
-    let start = line.iter().position(|&b| b == b',').map(|i| i + 1).unwrap_or(0);
+    let start = line
+        .iter()
+        .position(|&b| b == b',')
+        .map(|i| i + 1)
+        .unwrap_or(0);
     if let Some(i) = line[start..].iter().position(|b| b.is_ascii_digit()) {
         let b = &mut line[start + i];
         let shift: u8 = ctx.rng.random_range(1..10);
@@ -274,7 +307,10 @@ impl Model for Li80 {
                     }
                     Answer::Ok
                 } else {
-                    Answer::Err { code: 2, text: "rate out of range".into() }
+                    Answer::Err {
+                        code: 2,
+                        text: "rate out of range".into(),
+                    }
                 }
             }
             Ok(Command::Stream(on)) => {
@@ -291,16 +327,27 @@ impl Model for Li80 {
                 self.datum_l20_um = self.l20_um(ctx, ctx.now);
                 self.lost_um = 0.0;
                 self.datum_lost_from = None;
-                ctx.shared.lock_record().interferometer.datums_s.push(ctx.sim_s(ctx.now));
+                ctx.shared
+                    .lock_record()
+                    .interferometer
+                    .datums_s
+                    .push(ctx.sim_s(ctx.now));
                 Answer::Ok
             }
             Ok(Command::EnvQuery) => {
                 let t_us = ctx.clock.dev_us(ctx.now).round() as u64;
                 self.send_env(ctx, ctx.now, t_us);
-                ctx.shared.lock_record().interferometer.commands.push((line.to_string(), "$ENV".into()));
+                ctx.shared
+                    .lock_record()
+                    .interferometer
+                    .commands
+                    .push((line.to_string(), "$ENV".into()));
                 return;
             }
-            Err(_) => Answer::Err { code: 1, text: "unknown command".into() },
+            Err(_) => Answer::Err {
+                code: 1,
+                text: "unknown command".into(),
+            },
         };
         self.answer(ctx, line, reply);
     }
@@ -325,7 +372,11 @@ impl Model for Li80 {
         }
         self.stream = Some(cad);
         if !samples.is_empty() {
-            ctx.shared.lock_record().interferometer.samples.extend(samples);
+            ctx.shared
+                .lock_record()
+                .interferometer
+                .samples
+                .extend(samples);
         }
     }
 

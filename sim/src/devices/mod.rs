@@ -45,17 +45,44 @@ pub(crate) fn spawn(
         Device::Interferometer => {
             let id = sc.interferometer.identity.clone();
             let m = li80::Li80::new(&shared);
-            start(m, shared, link, rng, ctl, rt, id.clock_ppm, id.clock_start_us)
+            start(
+                m,
+                shared,
+                link,
+                rng,
+                ctl,
+                rt,
+                id.clock_ppm,
+                id.clock_start_us,
+            )
         }
         Device::Capball => {
             let id = sc.capball.identity.clone();
             let m = cb3::Cb3::new(&shared);
-            start(m, shared, link, rng, ctl, rt, id.clock_ppm, id.clock_start_us)
+            start(
+                m,
+                shared,
+                link,
+                rng,
+                ctl,
+                rt,
+                id.clock_ppm,
+                id.clock_start_us,
+            )
         }
         Device::Psd => {
             let id = sc.psd.identity.clone();
             let m = psd::Psd2::new(&shared);
-            start(m, shared, link, rng, ctl, rt, id.clock_ppm, id.clock_start_us)
+            start(
+                m,
+                shared,
+                link,
+                rng,
+                ctl,
+                rt,
+                id.clock_ppm,
+                id.clock_start_us,
+            )
         }
         Device::Trigger => {
             let ppm = sc.trigger.clock_ppm;

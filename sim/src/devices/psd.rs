@@ -34,7 +34,8 @@ impl Psd2 {
     pub(crate) fn new(shared: &Arc<Shared>) -> Psd2 {
         let sc = &shared.world.scenario;
         Psd2 {
-            noise: Normal::new(0.0, sc.psd.noise_um.max(0.0)).unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero std")),
+            noise: Normal::new(0.0, sc.psd.noise_um.max(0.0))
+                .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero std")),
             cfg: sc.psd.clone(),
             dice: FaultDice::new(sc.faults.psd),
             rate_hz: POWER_UP_RATE_HZ as u32,
@@ -47,16 +48,26 @@ impl Psd2 {
     fn push_error(&mut self, code: i32, text: &str) {
         if self.errors.len() >= ERR_QUEUE {
             self.errors.pop_back();
-            self.errors.push_back(SystErr { code: -350, text: "Queue overflow".into() });
+            self.errors.push_back(SystErr {
+                code: -350,
+                text: "Queue overflow".into(),
+            });
         } else {
-            self.errors.push_back(SystErr { code, text: text.into() });
+            self.errors.push_back(SystErr {
+                code,
+                text: text.into(),
+            });
         }
     }
 
     fn answer(&self, ctx: &mut Ctx, line: &str, reply: String) {
         let reply = reply.trim_end_matches(['\r', '\n']).to_string();
         protocol::psd::encode_line(&Line::Answer(reply.clone()), ctx.out);
-        ctx.shared.lock_record().psd.commands.push((line.to_string(), reply));
+        ctx.shared
+            .lock_record()
+            .psd
+            .commands
+            .push((line.to_string(), reply));
     }
 
     /// Photocurrents and head temperature at `at`.
@@ -80,7 +91,15 @@ impl Psd2 {
         let (x1, x2) = split(x);
         let (y1, y2) = split(y);
         let head_mc = (self.cfg.head_c.at(t) * 1e3).round() as i32;
-        DataLine { seq: 0, t_us: 0, x1_pa: x1, x2_pa: x2, y1_pa: y1, y2_pa: y2, head_mc }
+        DataLine {
+            seq: 0,
+            t_us: 0,
+            x1_pa: x1,
+            x2_pa: x2,
+            y1_pa: y1,
+            y2_pa: y2,
+            head_mc,
+        }
     }
 
     fn send_sample(&mut self, ctx: &mut Ctx, dev_us: f64, samples: &mut Vec<SentSample>) {
@@ -130,7 +149,13 @@ impl Psd2 {
             seq,
             t_us,
             true_s: ctx.sim_s(at),
-            values: SentValues::Psd { x1_pa: d.x1_pa, x2_pa: d.x2_pa, y1_pa: d.y1_pa, y2_pa: d.y2_pa, head_mc: d.head_mc },
+            values: SentValues::Psd {
+                x1_pa: d.x1_pa,
+                x2_pa: d.x2_pa,
+                y1_pa: d.y1_pa,
+                y2_pa: d.y2_pa,
+                head_mc: d.head_mc,
+            },
             fate,
             garbage_before: garbage,
         });
@@ -153,7 +178,10 @@ impl Model for Psd2 {
         }
         match Command::parse(line) {
             Some(Command::Idn) => {
-                let s = format!("PSD-2,{},{}", self.cfg.identity.serial, self.cfg.identity.firmware);
+                let s = format!(
+                    "PSD-2,{},{}",
+                    self.cfg.identity.serial, self.cfg.identity.firmware
+                );
                 self.answer(ctx, line, s);
             }
             Some(Command::Opc) => self.answer(ctx, line, "1".into()),
@@ -170,7 +198,11 @@ impl Model for Psd2 {
                 } else {
                     self.push_error(-222, "Data out of range");
                 }
-                ctx.shared.lock_record().psd.commands.push((line.to_string(), String::new()));
+                ctx.shared
+                    .lock_record()
+                    .psd
+                    .commands
+                    .push((line.to_string(), String::new()));
             }
             Some(Command::InitCont(on)) => {
                 if on && self.stream.is_none() {
@@ -179,11 +211,19 @@ impl Model for Psd2 {
                 } else if !on {
                     self.stream = None;
                 }
-                ctx.shared.lock_record().psd.commands.push((line.to_string(), String::new()));
+                ctx.shared
+                    .lock_record()
+                    .psd
+                    .commands
+                    .push((line.to_string(), String::new()));
             }
             None => {
                 self.push_error(-113, "Undefined header");
-                ctx.shared.lock_record().psd.commands.push((line.to_string(), String::new()));
+                ctx.shared
+                    .lock_record()
+                    .psd
+                    .commands
+                    .push((line.to_string(), String::new()));
             }
         }
     }

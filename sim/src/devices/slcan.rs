@@ -44,8 +44,12 @@ impl Slcan {
 
     /// Deliver (or not) every trigger event that is due.
     fn events(&mut self, ctx: &mut Ctx, plugged: bool) {
-        let Some(sp) = ctx.program_s(ctx.now) else { return };
-        let Some(started) = ctx.shared.program.borrow().started else { return };
+        let Some(sp) = ctx.program_s(ctx.now) else {
+            return;
+        };
+        let Some(started) = ctx.shared.program.borrow().started else {
+            return;
+        };
         let mut sent = Vec::new();
         let mut done = false;
         while let Some(&(at_s, event, pose)) = self.events.get(self.next_event) {
@@ -56,8 +60,14 @@ impl Slcan {
             let at = started + Duration::from_secs_f64(at_s);
             let true_s = ctx.sim_s(at);
             // The NC clock runs from the simulation start, ms, wrapping.
-            let nc_ms = self.nc_start_ms.wrapping_add((true_s * 1e3).round() as u64 as u32);
-            let fate = if self.missing.iter().any(|m| m.pose == pose && m.event == event) {
+            let nc_ms = self
+                .nc_start_ms
+                .wrapping_add((true_s * 1e3).round() as u64 as u32);
+            let fate = if self
+                .missing
+                .iter()
+                .any(|m| m.pose == pose && m.event == event)
+            {
                 TriggerFate::Missing
             } else if !plugged || !self.open || ctx.link_fate().is_some() {
                 TriggerFate::ChannelClosed
@@ -67,11 +77,22 @@ impl Slcan {
                     let ms = (ctx.clock.dev_us(at) / 1e3).floor() as u64;
                     (ms % 60_000) as u16
                 });
-                let f = CanFrame { id: self.cfg.can_id, extended: false, data, timestamp_ms };
+                let f = CanFrame {
+                    id: self.cfg.can_id,
+                    extended: false,
+                    data,
+                    timestamp_ms,
+                };
                 protocol::slcan::encode_frame(&f, ctx.out);
                 TriggerFate::Sent
             };
-            sent.push(SentTrigger { event, pose, nc_ms, true_s, fate });
+            sent.push(SentTrigger {
+                event,
+                pose,
+                nc_ms,
+                true_s,
+                fate,
+            });
             if event == TriggerEvent::ProgramEnd {
                 done = true;
             }
@@ -136,7 +157,12 @@ impl Model for Slcan {
             Message::Other(s) => s.clone(),
             Message::Frame(_) => String::new(),
         };
-        ctx.shared.lock_record().trigger.device.commands.push((line.to_string(), text));
+        ctx.shared
+            .lock_record()
+            .trigger
+            .device
+            .commands
+            .push((line.to_string(), text));
     }
 
     fn tick(&mut self, ctx: &mut Ctx) {

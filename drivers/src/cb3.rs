@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use protocol::Decoded;
 use protocol::cb3::{Decoder, Frame};
+use protocol::convert::{CapBallPoly, CapBallTransform};
 
 use crate::link::{Acq, Device, Handler, Link, SessionError};
 use crate::{Instrument, Sample, SampleValues};
@@ -25,28 +26,11 @@ pub struct Config {
     pub transform: [[f64; 4]; 4],
 }
 
-impl Config {
-    /// Distance changes (µm) from volts, per channel polynomial (instruments.md §2 step 1).
-    pub fn distances_um(&self, volts: [f64; 3]) -> [f64; 3] {
-        std::array::from_fn(|i| {
-            let [c1, c2, c3] = self.poly[i];
-            let v = volts[i];
-            v * (c1 + v * (c2 + v * c3))
-        })
-    }
-
-    /// Machine-frame error (µm): `v = T · [d; 1]` (instruments.md §2 step 2).
-    pub fn machine_um(&self, d: [f64; 3]) -> [f64; 3] {
-        std::array::from_fn(|r| {
-            let t = self.transform[r];
-            t[0] * d[0] + t[1] * d[1] + t[2] * d[2] + t[3]
-        })
-    }
-}
-
 struct Cb3 {
     cfg: Config,
     acq: Acq,
+    poly: [CapBallPoly; 3],
+    transform: CapBallTransform,
 }
 
 impl Handler for Cb3 {
@@ -66,8 +50,8 @@ impl Handler for Cb3 {
                 let (seq, device_t_us, fitted_ns) =
                     self.acq.stamp(f.seq as u64, f.t_us as u64, host_ns);
                 let volts = f.volts();
-                let d_um = self.cfg.distances_um(volts);
-                let e_um = self.cfg.machine_um(d_um);
+                let d_um: [f64; 3] = std::array::from_fn(|i| self.poly[i].distance_um(volts[i]));
+                let e_um = self.transform.apply(d_um);
                 self.acq.emit_sample(Sample {
                     instrument: Instrument::Capball,
                     seq,
@@ -131,30 +115,7 @@ pub fn spawn(
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
     let acq = Acq::new(Instrument::Capball, &cfg.port, 16, 32, clock, tx);
-    tokio::spawn(crate::link::run(Cb3 { cfg, acq }, cancel))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn polynomial_and_transform_by_hand() {
-        let cfg = Config {
-            port: String::new(),
-            rate_hz: 1000,
-            poly: [[10.0, 0.0, 0.0], [10.0, 1.0, 0.0], [10.0, 0.0, 0.5]],
-            // Swap x and y, offset z by 2 µm.
-            transform: [
-                [0.0, 1.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0, 0.0],
-                [0.0, 0.0, 1.0, 2.0],
-                [0.0, 0.0, 0.0, 1.0],
-            ],
-        };
-        // ch0: 10·1.5 = 15; ch1: 10·2 + 4 = 24; ch2: 10·(−1) + 0.5·(−1) = −10.5.
-        let d = cfg.distances_um([1.5, 2.0, -1.0]);
-        assert_eq!(d, [15.0, 24.0, -10.5]);
-        assert_eq!(cfg.machine_um(d), [24.0, 15.0, -8.5]);
-    }
+    let poly = cfg.poly.map(|c| CapBallPoly { c });
+    let transform = CapBallTransform { t: cfg.transform };
+    tokio::spawn(crate::link::run(Cb3 { cfg, acq, poly, transform }, cancel))
 }

@@ -9,6 +9,7 @@
 use std::time::Duration;
 
 use protocol::Decoded;
+use protocol::convert::Li80Compensation;
 use protocol::li80::{Decoder, Line};
 
 use crate::link::{Acq, Device, Handler, Link, SessionError};
@@ -24,47 +25,10 @@ pub struct Config {
     pub alpha_um_per_m_k: f64,
 }
 
-/// CO2 content assumed for the refractive index (instruments.md §1).
-pub const CO2_PPM: f64 = 450.0;
-
-/// The air and material state the compensation uses, from the latest `$ENV`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Compensation {
-    pub n_air: f64,
-    /// Mean of the material sensors, °C.
-    pub material_c: f64,
-}
-
-impl Compensation {
-    /// From an `$ENV` record: Edlén (Birch & Downs) index at 632.991 nm, mean material
-    /// temperature. `None` when the record has no material sensor or a nonsensical index.
-    pub fn from_env(air_c: f64, air_pa: f64, rh_pct: f64, material_c: &[f64]) -> Option<Self> {
-        if material_c.is_empty() {
-            return None;
-        }
-        let n_air = protocol::edlen::refractive_index(
-            protocol::edlen::LI80_VACUUM_WAVELENGTH_NM,
-            air_c,
-            air_pa,
-            rh_pct,
-            CO2_PPM,
-        );
-        let material_c = material_c.iter().sum::<f64>() / material_c.len() as f64;
-        (n_air.is_finite() && n_air > 0.9 && n_air < 1.1)
-            .then_some(Compensation { n_air, material_c })
-    }
-
-    /// Length at 20 °C, µm: `L = raw / n`, `L20 = L·(1 − α·(T_mat − 20 °C))`.
-    pub fn position_um(&self, raw_nm: i64, alpha_um_per_m_k: f64) -> f64 {
-        let l_um = raw_nm as f64 / self.n_air * 1e-3;
-        l_um * (1.0 - alpha_um_per_m_k * 1e-6 * (self.material_c - 20.0))
-    }
-}
-
 struct Li80 {
     cfg: Config,
     acq: Acq,
-    comp: Option<Compensation>,
+    comp: Option<Li80Compensation>,
     env_seq: crate::clock::Unwrap,
     env_seen: bool,
 }
@@ -85,7 +49,7 @@ impl Handler for Li80 {
                 }
                 let (seq, device_t_us, fitted_ns) = self.acq.stamp(p.seq as u64, p.t_us, host_ns);
                 let (position_um, comp_ok) = match self.comp {
-                    Some(c) => (c.position_um(p.raw_nm, self.cfg.alpha_um_per_m_k), true),
+                    Some(c) => (c.length_at_20c_nm(p.raw_nm) * 1e-3, true),
                     None => (f64::NAN, false),
                 };
                 self.acq.emit_sample(Sample {
@@ -105,10 +69,18 @@ impl Handler for Li80 {
             }
             Decoded::Frame(Line::Env(e)) => {
                 self.env_seen = true;
-                let comp = Compensation::from_env(e.air_c, e.air_pa, e.rh_pct, &e.material_c);
-                if comp.is_some() {
-                    self.comp = comp;
-                }
+                let comp = match Li80Compensation::from_env(&e, self.cfg.alpha_um_per_m_k) {
+                    Ok(c) => {
+                        self.comp = Some(c);
+                        Some(c)
+                    }
+                    Err(err) => {
+                        // Keep compensating with the last good record; the operator must know.
+                        let msg = format!("port {}: `$ENV` record unusable: {err}", self.acq.port);
+                        self.acq.error(msg);
+                        None
+                    }
+                };
                 let seq = self
                     .env_seq
                     .push(e.seq as u64)
@@ -207,31 +179,4 @@ pub fn spawn(
         env_seen: false,
     };
     tokio::spawn(crate::link::run(dev, cancel))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn material_compensation_by_hand() {
-        // n = 1 so only the material term acts: 100 mm of steel at 25 °C, α = 11.7 µm/(m·K),
-        // reads 100 mm · (1 − 11.7e-6·5) = 99.99415 mm at 20 °C.
-        let c = Compensation {
-            n_air: 1.0,
-            material_c: 25.0,
-        };
-        let l = c.position_um(100_000_000, 11.7);
-        assert!((l - 99_994.15).abs() < 1e-6, "{l}");
-        // Air only: n = 1.00027 shortens 1 m by 269.93 µm.
-        let c = Compensation {
-            n_air: 1.00027,
-            material_c: 20.0,
-        };
-        let l = c.position_um(1_000_000_000, 11.7);
-        assert!(
-            (l - 1e6 / 1.00027).abs() < 1e-6 && (1e6 - l - 269.927).abs() < 1e-3,
-            "{l}"
-        );
-    }
 }

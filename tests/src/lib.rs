@@ -232,3 +232,159 @@ pub fn init_tracing() {
         .with_test_writer()
         .try_init();
 }
+
+/// Command behaviour of the scripted devices, per the data sheets (instruments.md).
+pub mod fake {
+    use super::Respond;
+
+    fn cb3_text(t: &str, out: &mut Vec<u8>) {
+        protocol::cb3::encode(&protocol::cb3::Frame::Text(t.into()), out);
+    }
+
+    /// CB-3: `STOP`, `ID?`, `RATE`, `START`, each answered by a text frame.
+    pub fn cb3_device() -> Respond {
+        Box::new(|cmd, out| match cmd {
+            "STOP" => {
+                cb3_text("OK", out);
+                Some(false)
+            }
+            "ID?" => {
+                cb3_text("CB-3,0042,1.3", out);
+                None
+            }
+            c if c.starts_with("RATE ") => {
+                cb3_text("OK", out);
+                None
+            }
+            "START" => {
+                cb3_text("OK", out);
+                Some(true)
+            }
+            _ => {
+                cb3_text("ERR unknown command", out);
+                None
+            }
+        })
+    }
+
+    /// PSD-2: SCPI, no answer to commands without `?`, errors queued for `SYST:ERR?`.
+    pub fn psd_device() -> Respond {
+        let mut err: Vec<(i32, &'static str)> = Vec::new();
+        Box::new(move |cmd, out| {
+            match cmd {
+                "*IDN?" => out.extend_from_slice(b"PSD-2,777,2.1\n"),
+                "*OPC?" => out.extend_from_slice(b"1\n"),
+                "SYST:ERR?" => {
+                    let (code, text) = if err.is_empty() { (0, "No error") } else { err.remove(0) };
+                    out.extend_from_slice(format!("{code},\"{text}\"\n").as_bytes());
+                }
+                "INIT:CONT ON" => return Some(true),
+                "INIT:CONT OFF" => return Some(false),
+                c if c.starts_with("CONF:RATE ") => {
+                    let hz: u32 = c[10..].trim().parse().unwrap_or(0);
+                    if !(1..=1000).contains(&hz) {
+                        err.push((-222, "Data out of range"));
+                    }
+                }
+                _ => err.push((-100, "Command error")),
+            }
+            None
+        })
+    }
+
+    /// The `$ENV` record the scripted LI-80 reports.
+    pub fn li80_env(seq: u32) -> protocol::li80::EnvFrame {
+        protocol::li80::EnvFrame {
+            seq,
+            t_us: 0,
+            air_c: 21.5,
+            air_pa: 98_500.0,
+            rh_pct: 45.0,
+            material_c: vec![22.0, 23.0],
+        }
+    }
+
+    /// LI-80: `*IDN?`, `RATE`, `STREAM ON/OFF`, `DATUM`, `ENV?`, one answer line each.
+    pub fn li80_device() -> Respond {
+        Box::new(|cmd, out| {
+            match cmd {
+                "*IDN?" => out.extend_from_slice(b"LI-80,80123,2.4.1\r\n"),
+                "STREAM ON" => {
+                    out.extend_from_slice(b"OK\r\n");
+                    return Some(true);
+                }
+                "STREAM OFF" => {
+                    out.extend_from_slice(b"OK\r\n");
+                    return Some(false);
+                }
+                "DATUM" => out.extend_from_slice(b"OK\r\n"),
+                "ENV?" => protocol::li80::encode_env(&li80_env(0), out),
+                c if c.starts_with("RATE ") => match c[5..].trim().parse::<u32>() {
+                    Ok(1..=10_000) => out.extend_from_slice(b"OK\r\n"),
+                    _ => out.extend_from_slice(b"ERR 2 rate out of range\r\n"),
+                },
+                _ => out.extend_from_slice(b"ERR 1 unknown command\r\n"),
+            }
+            None
+        })
+    }
+
+    /// `n` clean samples per device from a fresh power-up, in chunks of `per_chunk`.
+    pub fn li80_script(n: u64, rate_hz: u64, per_chunk: u64) -> Vec<Vec<u8>> {
+        chunked(n, per_chunk, |i, out| {
+            if i > 0 && i % rate_hz == 0 {
+                protocol::li80::encode_env(&li80_env((i / rate_hz) as u32), out);
+            }
+            let f = protocol::li80::PosFrame {
+                seq: i as u32,
+                t_us: i * 1_000_000 / rate_hz,
+                raw_nm: (i as i64 * 7919) % 1_000_000_000 - 250_000_000,
+                sig: 80,
+                flags: protocol::li80::PosFlags(0),
+            };
+            protocol::li80::encode_pos(&f, out);
+        })
+    }
+
+    pub fn cb3_script(n: u64, rate_hz: u64, per_chunk: u64) -> Vec<Vec<u8>> {
+        chunked(n, per_chunk, |i, out| {
+            let f = protocol::cb3::SampleFrame {
+                seq: i as u16,
+                t_us: (i * 1_000_000 / rate_hz) as u32,
+                ch: [(i % 1000) as i32 * 3000, -((i % 777) as i32) * 9000, 12345],
+                flags: 0,
+            };
+            protocol::cb3::encode(&protocol::cb3::Frame::Sample(f), out);
+        })
+    }
+
+    pub fn psd_script(n: u64, rate_hz: u64, per_chunk: u64) -> Vec<Vec<u8>> {
+        chunked(n, per_chunk, |i, out| {
+            let d = protocol::psd::DataLine {
+                seq: i as u32,
+                t_us: i * 1_000_000 / rate_hz,
+                x1_pa: 1_000_000 + i % 5000,
+                x2_pa: 1_200_000,
+                y1_pa: 900_000,
+                y2_pa: 1_100_000 + i % 3000,
+                head_mc: 21_000 + (i % 100) as i32,
+            };
+            protocol::psd::encode_data(&d, out);
+        })
+    }
+
+    fn chunked(n: u64, per_chunk: u64, mut one: impl FnMut(u64, &mut Vec<u8>)) -> Vec<Vec<u8>> {
+        let mut chunks = Vec::new();
+        let mut chunk = Vec::new();
+        for i in 0..n {
+            one(i, &mut chunk);
+            if (i + 1) % per_chunk.max(1) == 0 {
+                chunks.push(std::mem::take(&mut chunk));
+            }
+        }
+        if !chunk.is_empty() {
+            chunks.push(chunk);
+        }
+        chunks
+    }
+}

@@ -6,6 +6,7 @@ use std::collections::BTreeSet;
 use std::time::Duration;
 
 use drivers::{HostClock, SampleValues};
+use hil::fake::{cb3_device, psd_device};
 use hil::{Collected, FakeDevice, collect_until, finish};
 use protocol::RejectKind;
 use tokio_util::sync::CancellationToken;
@@ -28,35 +29,6 @@ fn total_rejections(c: &drivers::Counters) -> u64 {
 }
 
 // ---------------------------------------------------------------- CB-3
-
-fn cb3_text(t: &str, out: &mut Vec<u8>) {
-    protocol::cb3::encode(&protocol::cb3::Frame::Text(t.into()), out);
-}
-
-fn cb3_device() -> hil::Respond {
-    Box::new(|cmd, out| match cmd {
-        "STOP" => {
-            cb3_text("OK", out);
-            Some(false)
-        }
-        "ID?" => {
-            cb3_text("CB-3,0042,1.3", out);
-            None
-        }
-        c if c.starts_with("RATE ") => {
-            cb3_text("OK", out);
-            None
-        }
-        "START" => {
-            cb3_text("OK", out);
-            Some(true)
-        }
-        _ => {
-            cb3_text("ERR unknown command", out);
-            None
-        }
-    })
-}
 
 /// ch values of sample `i`: 24-bit codes, some negative.
 fn cb3_codes(i: u64) -> [i32; 3] {
@@ -163,30 +135,6 @@ async fn cb3_values_wraps_and_fault_counts() {
 }
 
 // ---------------------------------------------------------------- PSD-2
-
-fn psd_device() -> hil::Respond {
-    let mut err: Vec<(i32, &'static str)> = Vec::new();
-    Box::new(move |cmd, out| {
-        match cmd {
-            "*IDN?" => out.extend_from_slice(b"PSD-2,777,2.1\n"),
-            "*OPC?" => out.extend_from_slice(b"1\n"),
-            "SYST:ERR?" => {
-                let (code, text) = if err.is_empty() { (0, "No error") } else { err.remove(0) };
-                out.extend_from_slice(format!("{code},\"{text}\"\n").as_bytes());
-            }
-            "INIT:CONT ON" => return Some(true),
-            "INIT:CONT OFF" => return Some(false),
-            c if c.starts_with("CONF:RATE ") => {
-                let hz: u32 = c[10..].trim().parse().unwrap_or(0);
-                if !(1..=1000).contains(&hz) {
-                    err.push((-222, "Data out of range"));
-                }
-            }
-            _ => err.push((-100, "Command error")),
-        }
-        None
-    })
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn psd_values_gating_and_bad_lines() {
@@ -375,4 +323,120 @@ async fn replugged_device_is_reconfigured_and_its_restart_is_not_a_gap() {
     let k = c.counters.unwrap();
     assert_eq!((k.reconnects, k.disconnects, k.gaps, k.gap_samples, k.resyncs), (1, 1, 0, 0, 0), "{k:?}");
     assert_eq!(k.samples, 700);
+}
+
+// ---------------------------------------------------------------- LI-80
+
+/// Compensated length at 20 °C, µm, computed here from the data sheet formula.
+fn li80_expected_um(raw_nm: i64, env: &protocol::li80::EnvFrame, alpha: f64) -> f64 {
+    let n = protocol::edlen::refractive_index(632.991, env.air_c, env.air_pa, env.rh_pct, 450.0);
+    let t_mat = env.material_c.iter().sum::<f64>() / env.material_c.len() as f64;
+    raw_nm as f64 / n / 1000.0 * (1.0 - alpha * 1e-6 * (t_mat - 20.0))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn li80_values_compensation_validity_and_fault_counts() {
+    use protocol::li80::{ErrFrame, PosFlags, PosFrame, encode_err, encode_pos};
+    hil::init_tracing();
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("li80");
+    const N: u64 = 2000;
+    let dropped: BTreeSet<u64> = [100, 1500, 1501].into();
+    let bad_checksum: BTreeSet<u64> = [400].into();
+    let truncated: BTreeSet<u64> = [600].into();
+    let garbage_before: BTreeSet<u64> = [700, 1900].into();
+    let datum_lost: BTreeSet<u64> = (800..850).collect();
+    let beam_low: BTreeSet<u64> = (1200..1210).collect();
+    let env_at = 1000u64;
+    let env2 = protocol::li80::EnvFrame {
+        seq: 1,
+        t_us: 100_000,
+        air_c: 24.0,
+        air_pa: 101_000.0,
+        rh_pct: 60.0,
+        material_c: vec![25.0, 25.5, 26.0],
+    };
+    let raw = |i: u64| i as i64 * 123_457 - 50_000_000;
+    let mut chunks = Vec::new();
+    let mut chunk = Vec::new();
+    for i in 0..N {
+        if garbage_before.contains(&i) {
+            chunk.extend_from_slice(b"#~%garbage\r\n");
+        }
+        if i == env_at {
+            protocol::li80::encode_env(&env2, &mut chunk);
+        }
+        if i == 1300 {
+            encode_err(&ErrFrame { code: 3, text: "beam lost".into() }, &mut chunk);
+        }
+        let flags = if datum_lost.contains(&i) { PosFlags::DATUM_LOST | PosFlags::BEAM_LOW } else { 0 };
+        let sig = if datum_lost.contains(&i) { 5 } else if beam_low.contains(&i) { 20 } else { 90 };
+        let f = PosFrame { seq: i as u32, t_us: 7_000_000 + i * 100, raw_nm: raw(i), sig, flags: PosFlags(flags) };
+        let mut line = Vec::new();
+        encode_pos(&f, &mut line);
+        if dropped.contains(&i) {
+        } else if bad_checksum.contains(&i) {
+            let n = line.len();
+            // `*HH\r\n`: replace the checksum by a wrong one.
+            let wrong = format!("{:02X}", protocol::li80::checksum(&line[1..n - 5]) ^ 0x21);
+            line[n - 4..n - 2].copy_from_slice(wrong.as_bytes());
+            chunk.extend_from_slice(&line);
+        } else if truncated.contains(&i) {
+            chunk.extend_from_slice(&line[..15]);
+            chunk.extend_from_slice(b"\r\n");
+        } else {
+            chunk.extend_from_slice(&line);
+        }
+        if i % 20 == 19 {
+            chunks.push(std::mem::take(&mut chunk));
+        }
+    }
+    chunks.push(chunk);
+    let dev = FakeDevice::start(&link, b'\n', hil::fake::li80_device(), chunks, Duration::from_millis(2)).unwrap();
+    let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
+    let cancel = CancellationToken::new();
+    let alpha = 11.7;
+    let cfg = drivers::li80::Config { port: link.display().to_string(), rate_hz: 10_000, alpha_um_per_m_k: alpha };
+    let task = drivers::li80::spawn(cfg, HostClock::new(), tx, cancel.clone());
+    let lost: BTreeSet<u64> = dropped.iter().chain(&bad_checksum).chain(&truncated).copied().collect();
+    let expected = N - lost.len() as u64;
+    let mut c = Collected::default();
+    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| c.stream().count() as u64 >= expected).await;
+    assert!(ok, "got {} of {expected}; errors {:?}", c.stream().count(), c.errors);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    finish(cancel, task, &mut rx, &mut c).await;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let cmds = dev.commands.lock().unwrap().clone();
+    drop(dev);
+    assert_eq!(cmds, ["STREAM OFF", "*IDN?", "RATE 10000", "DATUM", "ENV?", "STREAM ON", "STREAM OFF"]);
+    assert_eq!(c.connected, ["LI-80,80123,2.4.1"]);
+    // The `$ERR` line: counted and reported.
+    assert_eq!(c.errors.len(), 1);
+    assert!(c.errors[0].contains("beam lost") && c.errors[0].contains(&link.display().to_string()));
+
+    let env1 = hil::fake::li80_env(0);
+    let sent: Vec<u64> = (0..N).filter(|i| !lost.contains(i)).collect();
+    let stream: Vec<_> = c.stream().collect();
+    assert_eq!(stream.len(), sent.len());
+    for (s, &i) in stream.iter().zip(&sent) {
+        assert_eq!(s.seq, i);
+        assert_eq!(s.device_t_us, 7_000_000 + i * 100);
+        let SampleValues::Position { raw_nm, position_um, .. } = s.values else { panic!() };
+        assert_eq!(raw_nm, raw(i));
+        let env = if i < env_at { &env1 } else { &env2 };
+        let want = li80_expected_um(raw(i), env, alpha);
+        assert!((position_um - want).abs() < 1e-9 * want.abs().max(1.0), "sample {i}: {position_um} vs {want}");
+        assert_eq!(s.valid, !datum_lost.contains(&i) && !beam_low.contains(&i), "sample {i}");
+    }
+    // Two `$ENV` samples: the answer to `ENV?` and the one in the stream.
+    let envs: Vec<_> = c.samples.iter().filter(|s| matches!(s.values, SampleValues::Environment { .. })).collect();
+    assert_eq!(envs.len(), 2);
+    let k = c.counters.unwrap();
+    assert_eq!(k.samples, sent.len() as u64 + 2);
+    assert_eq!((k.gaps, k.gap_samples), gaps_of(&lost), "{k:?}");
+    assert_eq!(k.invalid, (datum_lost.len() + beam_low.len()) as u64);
+    assert_eq!(k.device_errors, 1);
+    assert_eq!(k.rejections.get(&RejectKind::BadChecksum), Some(&1), "{k:?}");
+    assert_eq!(total_rejections(&k), (garbage_before.len() + bad_checksum.len() + truncated.len()) as u64, "{k:?}");
+    assert_eq!((k.dropped, k.resyncs, k.reconnects), (0, 0, 0));
 }

@@ -4,5 +4,6 @@
 pub mod cli;
 pub mod cmd;
 pub mod config;
+pub mod log;
 pub mod pipeline;
 pub mod service;

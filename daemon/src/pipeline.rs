@@ -1,25 +1,27 @@
 //! The acquisition pipeline: driver events in, steady values out, everything recorded.
 //!
 //! ```text
-//! drivers ──(one bounded queue)──▶ Pipeline ──▶ SteadyDetector per instrument ──▶ Recorder (MCAP)
-//!                                     └──── /status once a second, sd_notify STATUS + WATCHDOG
+//! drivers ──(one bounded queue)──▶ Pipeline ──▶ log::Recorder: raw topics, PoseEngine (a
+//!                                     │          SteadyDetector per instrument) ─▶ /pose, /status
+//!                                     └──── status for systemd (STATUS, WATCHDOG) and progress
 //! ```
 //!
 //! The pipeline runs on its own thread (see [`spawn`]) so that writing the log never delays the
 //! drivers' tasks; the drivers never wait on the queue (a full queue is counted by them as
-//! `dropped`). Samples are fed to the detectors on the fitted time axis (device clock mapped
-//! onto the host clock), the axis the triggers' host times live on.
+//! `dropped`). The pose values come from the log's `PoseEngine`, the very code `metrolog replay`
+//! runs, so a replay reproduces them.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use drivers::{DriverEvent, HostClock, Instrument, Sample, SampleValues, Trigger};
-use metrology::steady::{PoseStatus, PoseValue, SteadyConfig, SteadyDetector, TriggerKind};
+use drivers::{DriverEvent, HostClock, Instrument};
 use protocol::can::TriggerEvent;
 use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
+use crate::log::topics::{PoseMsg, PoseStatusName};
+use crate::log::{DetectorSettings, PoseEngine};
 use crate::service::{Notifier, Watchdog};
 
 /// Capacity of the queue from the drivers to the pipeline: one second of every instrument at
@@ -30,88 +32,47 @@ pub const QUEUE_CAPACITY: usize = 1 << 16;
 /// How often `/status` is written and systemd hears from us.
 pub const STATUS_PERIOD: Duration = Duration::from_secs(1);
 
-/// The channels the detector of an instrument averages, in order (the `mean`/`std` order of
-/// its pose values).
-pub fn channels(instrument: Instrument) -> &'static [&'static str] {
-    match instrument {
-        Instrument::Interferometer => &["position_um"],
-        Instrument::Capball => &["ex_um", "ey_um", "ez_um"],
-        Instrument::Psd => &["x_um", "y_um"],
-        Instrument::Trigger => &[],
+/// Where the pipeline puts the driver events: the MCAP log with its pose engine in a run
+/// ([`crate::log::Recorder`]), the pose engine alone in benchmarks and tests ([`DetectOnly`]).
+pub trait EventSink: Send {
+    /// Record one event; returns the pose values it completes.
+    fn record(&mut self, ev: &DriverEvent, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>>;
+    /// Called at least once a second (status record, flushing).
+    fn tick(&mut self, now_ns: u64) -> anyhow::Result<()>;
+    /// Close open dwells and the log; returns the last pose values.
+    fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>>;
+}
+
+impl EventSink for crate::log::Recorder {
+    fn record(&mut self, ev: &DriverEvent, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
+        Ok(crate::log::Recorder::record(self, ev, now_ns)?)
+    }
+    fn tick(&mut self, now_ns: u64) -> anyhow::Result<()> {
+        Ok(crate::log::Recorder::tick(self, now_ns)?)
+    }
+    fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
+        let (path, poses) = crate::log::Recorder::finish(*self, now_ns)?;
+        tracing::info!("log closed: {}", path.display());
+        Ok(poses)
     }
 }
 
-/// The detector input of a sample, if it is one the detector averages (`$ENV` lines are not).
-pub fn detector_values(s: &Sample, out: &mut [f64; 3]) -> Option<usize> {
-    match &s.values {
-        SampleValues::Position { position_um, .. } => {
-            out[0] = *position_um;
-            Some(1)
-        }
-        SampleValues::Capball { e_um, .. } => {
-            *out = *e_um;
-            Some(3)
-        }
-        SampleValues::Psd { x_um, y_um, .. } => {
-            out[0] = *x_um;
-            out[1] = *y_um;
-            Some(2)
-        }
-        SampleValues::Environment { .. } => None,
-    }
-}
+/// The pose engine without a log (benchmarks, tests).
+pub struct DetectOnly(pub PoseEngine);
 
-pub fn trigger_kind(e: TriggerEvent) -> TriggerKind {
-    match e {
-        TriggerEvent::MotionStart => TriggerKind::MotionStart,
-        TriggerEvent::ExactStop => TriggerKind::ExactStop,
-        TriggerEvent::DwellEnd => TriggerKind::DwellEnd,
-        TriggerEvent::ProgramStart => TriggerKind::ProgramStart,
-        TriggerEvent::ProgramEnd => TriggerKind::ProgramEnd,
-        TriggerEvent::FeedHold => TriggerKind::FeedHold,
+impl EventSink for DetectOnly {
+    fn record(&mut self, ev: &DriverEvent, _now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
+        Ok(match ev {
+            DriverEvent::Sample(s) => self.0.on_sample(s),
+            DriverEvent::Trigger(t) => self.0.on_trigger(t),
+            _ => Vec::new(),
+        })
     }
-}
-
-/// Where the pipeline puts what it sees: the MCAP writer in a run, memory in tests.
-pub trait Recorder: Send {
-    fn sample(&mut self, s: &Sample) -> anyhow::Result<()>;
-    fn trigger(&mut self, t: &Trigger) -> anyhow::Result<()>;
-    fn pose(&mut self, instrument: Instrument, value: &PoseValue) -> anyhow::Result<()>;
-    fn status(&mut self, status: &Status) -> anyhow::Result<()>;
-    /// Connect, disconnect and device errors, as text for the operator.
-    fn event(
-        &mut self,
-        t_ns: u64,
-        instrument: Instrument,
-        kind: &str,
-        text: &str,
-    ) -> anyhow::Result<()>;
-    /// Flush and close (the log is complete and readable afterwards).
-    fn finish(self: Box<Self>) -> anyhow::Result<()>;
-}
-
-/// A recorder that keeps nothing (benchmarks of the pipeline alone).
-#[derive(Debug, Default)]
-pub struct NullRecorder;
-
-impl Recorder for NullRecorder {
-    fn sample(&mut self, _: &Sample) -> anyhow::Result<()> {
+    fn tick(&mut self, _now_ns: u64) -> anyhow::Result<()> {
         Ok(())
     }
-    fn trigger(&mut self, _: &Trigger) -> anyhow::Result<()> {
-        Ok(())
-    }
-    fn pose(&mut self, _: Instrument, _: &PoseValue) -> anyhow::Result<()> {
-        Ok(())
-    }
-    fn status(&mut self, _: &Status) -> anyhow::Result<()> {
-        Ok(())
-    }
-    fn event(&mut self, _: u64, _: Instrument, _: &str, _: &str) -> anyhow::Result<()> {
-        Ok(())
-    }
-    fn finish(self: Box<Self>) -> anyhow::Result<()> {
-        Ok(())
+    fn finish(mut self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
+        Ok(self.0.finish(now_ns))
     }
 }
 
@@ -238,160 +199,124 @@ pub enum StopReason {
 pub struct Outcome {
     pub reason: StopReason,
     pub status: Status,
-    pub poses: Vec<(Instrument, PoseValue)>,
+    /// Every pose value (when `keep_poses`).
+    pub poses: Vec<PoseMsg>,
 }
 
 /// Settings of a pipeline.
 #[derive(Debug, Clone)]
 pub struct PipelineConfig {
     pub instruments: Vec<Instrument>,
-    pub detector: SteadyConfig,
     pub stop_at_program_end: bool,
     /// Keep every pose value in the outcome (demo, tests).
     pub keep_poses: bool,
-}
-
-struct Slot {
-    detector: Option<SteadyDetector>,
-    status: InstrumentStatus,
 }
 
 /// The pipeline's state (one per run).
 pub struct Pipeline {
     cfg: PipelineConfig,
     clock: HostClock,
-    slots: BTreeMap<Instrument, Slot>,
+    instruments: BTreeMap<Instrument, InstrumentStatus>,
     status: Status,
-    recorder: Box<dyn Recorder>,
+    sink: Box<dyn EventSink>,
     started: Instant,
     last_sample: Option<Instant>,
-    poses: Vec<(Instrument, PoseValue)>,
-    values: [f64; 3],
+    poses: Vec<PoseMsg>,
     stop: Option<StopReason>,
     log_error_reported: bool,
 }
 
 impl Pipeline {
-    pub fn new(
-        cfg: PipelineConfig,
-        clock: HostClock,
-        recorder: Box<dyn Recorder>,
-    ) -> anyhow::Result<Pipeline> {
-        let mut slots = BTreeMap::new();
-        for &i in &cfg.instruments {
-            let detector = match channels(i).len() {
-                0 => None,
-                n => Some(SteadyDetector::new(cfg.detector.clone(), n)?),
-            };
-            slots.insert(
-                i,
-                Slot {
-                    detector,
-                    status: InstrumentStatus::default(),
-                },
-            );
-        }
-        Ok(Pipeline {
+    pub fn new(cfg: PipelineConfig, clock: HostClock, sink: Box<dyn EventSink>) -> Pipeline {
+        let instruments = cfg
+            .instruments
+            .iter()
+            .map(|&i| (i, InstrumentStatus::default()))
+            .collect();
+        Pipeline {
             cfg,
             clock,
-            slots,
+            instruments,
             status: Status {
                 queue_capacity: QUEUE_CAPACITY,
                 ..Status::default()
             },
-            recorder,
+            sink,
             started: Instant::now(),
             last_sample: None,
             poses: Vec::new(),
-            values: [0.0; 3],
             stop: None,
             log_error_reported: false,
-        })
+        }
     }
 
-    fn log_result(&mut self, r: anyhow::Result<()>) {
-        if let Err(e) = r {
-            self.status.log_errors += 1;
-            if !self.log_error_reported {
-                self.log_error_reported = true;
-                tracing::error!("the log writer failed (further failures are only counted): {e:#}");
+    fn sink_result<T: Default>(&mut self, r: anyhow::Result<T>) -> T {
+        match r {
+            Ok(v) => v,
+            Err(e) => {
+                self.status.log_errors += 1;
+                if !self.log_error_reported {
+                    self.log_error_reported = true;
+                    tracing::error!(
+                        "the log writer failed (further failures are only counted): {e:#}"
+                    );
+                }
+                T::default()
             }
         }
     }
 
-    fn slot(&mut self, i: Instrument) -> &mut Slot {
-        self.slots.entry(i).or_insert_with(|| Slot {
-            detector: None,
-            status: InstrumentStatus::default(),
-        })
+    fn slot(&mut self, i: Instrument) -> &mut InstrumentStatus {
+        self.instruments.entry(i).or_default()
     }
 
-    fn emit(&mut self, instrument: Instrument, values: Vec<PoseValue>) {
-        if values.is_empty() {
+    fn count_poses(&mut self, poses: Vec<PoseMsg>) {
+        if poses.is_empty() {
             return;
         }
         let now = self.clock.now_ns();
-        for v in values {
+        for v in poses {
             if v.n > 0 {
                 let latency_ms = now.saturating_sub(v.t_last_ns) as f64 / 1e6;
                 if latency_ms > self.status.pose_latency_max_ms {
                     self.status.pose_latency_max_ms = latency_ms;
                 }
             }
-            let r = self.recorder.pose(instrument, &v);
-            self.log_result(r);
             self.status.poses += 1;
-            if v.status == PoseStatus::Ok {
+            if v.status == PoseStatusName::Ok {
                 self.status.poses_ok += 1;
             }
             self.status.last_pose = self.status.last_pose.max(v.pose);
             *self
-                .slot(instrument)
-                .status
+                .slot(v.instrument.instrument())
                 .poses
                 .entry(v.status.name())
                 .or_default() += 1;
             tracing::debug!(
-                instrument = instrument.name(),
+                instrument = v.instrument.name(),
                 pose = v.pose,
                 status = v.status.name(),
                 "pose value"
             );
             if self.cfg.keep_poses {
-                self.poses.push((instrument, v));
+                self.poses.push(v);
             }
         }
     }
 
     /// Handle one driver event.
     pub fn handle(&mut self, ev: DriverEvent) {
+        let now = self.clock.now_ns();
+        let r = self.sink.record(&ev, now);
+        let poses = self.sink_result(r);
         match ev {
             DriverEvent::Sample(s) => {
                 self.last_sample = Some(Instant::now());
-                let r = self.recorder.sample(&s);
-                self.log_result(r);
-                let mut values = self.values;
-                let n = detector_values(&s, &mut values);
-                let slot = self.slot(s.instrument);
-                slot.status.received += 1;
-                if let (Some(n), Some(det)) = (n, slot.detector.as_mut()) {
-                    let out = det.push_sample(s.fitted_ns, &values[..n], s.valid);
-                    self.emit(s.instrument, out);
-                }
+                self.slot(s.instrument).received += 1;
             }
             DriverEvent::Trigger(t) => {
-                let r = self.recorder.trigger(&t);
-                self.log_result(r);
-                self.slot(Instrument::Trigger).status.received += 1;
+                self.slot(Instrument::Trigger).received += 1;
                 self.status.last_pose = self.status.last_pose.max(t.pose as u32);
-                let kind = trigger_kind(t.event);
-                let instruments: Vec<Instrument> = self.slots.keys().copied().collect();
-                for i in instruments {
-                    if let Some(det) = self.slot(i).detector.as_mut() {
-                        let out = det.push_trigger(kind, t.pose as u32, t.host_ns);
-                        self.emit(i, out);
-                    }
-                }
                 match t.event {
                     TriggerEvent::ProgramStart => self.status.program = ProgramState::Running,
                     TriggerEvent::ProgramEnd => {
@@ -402,11 +327,7 @@ impl Pipeline {
                         }
                     }
                     TriggerEvent::FeedHold => self.status.program = ProgramState::Held,
-                    _ => {
-                        if self.status.program != ProgramState::Running {
-                            self.status.program = ProgramState::Running;
-                        }
-                    }
+                    _ => self.status.program = ProgramState::Running,
                 }
             }
             DriverEvent::Connected {
@@ -414,73 +335,51 @@ impl Pipeline {
                 port,
                 identity,
             } => {
-                let t = self.clock.now_ns();
-                let r =
-                    self.recorder
-                        .event(t, instrument, "connected", &format!("{port}: {identity}"));
-                self.log_result(r);
-                let st = &mut self.slot(instrument).status;
+                let st = self.slot(instrument);
                 st.connected = true;
                 st.port = port;
                 st.identity = identity;
             }
             DriverEvent::Disconnected {
-                instrument,
-                port,
-                reason,
+                instrument, port, ..
             } => {
-                let t = self.clock.now_ns();
-                let r = self.recorder.event(
-                    t,
-                    instrument,
-                    "disconnected",
-                    &format!("{port}: {reason}"),
-                );
-                self.log_result(r);
-                let st = &mut self.slot(instrument).status;
+                let st = self.slot(instrument);
                 st.connected = false;
                 st.port = port;
             }
             DriverEvent::Error {
                 instrument,
-                port,
                 message,
+                ..
             } => {
-                let t = self.clock.now_ns();
-                let r = self
-                    .recorder
-                    .event(t, instrument, "error", &format!("{port}: {message}"));
-                self.log_result(r);
-                self.slot(instrument).status.last_error = Some(message);
+                self.slot(instrument).last_error = Some(message);
             }
             DriverEvent::Counters {
                 instrument,
                 counters,
             } => {
-                self.slot(instrument).status.driver = counters;
+                self.slot(instrument).driver = counters;
             }
         }
+        self.count_poses(poses);
     }
 
-    /// Snapshot the status (also written to the log).
+    /// Snapshot the status.
     pub fn status(&mut self, queue_len: usize) -> Status {
         self.status.t_ns = self.clock.now_ns();
         self.status.uptime_s = self.started.elapsed().as_secs_f64();
         self.status.queue_len = queue_len;
         self.status.queue_max = self.status.queue_max.max(queue_len);
-        self.status.instruments = self
-            .slots
-            .iter()
-            .map(|(i, s)| (*i, s.status.clone()))
-            .collect();
+        self.status.instruments = self.instruments.clone();
         self.status.clone()
     }
 
-    fn write_status(&mut self, queue_len: usize) -> Status {
-        let st = self.status(queue_len);
-        let r = self.recorder.status(&st);
-        self.log_result(r);
-        st
+    /// The once-a-second work: the sink's status record and flush.
+    fn tick(&mut self, queue_len: usize) -> Status {
+        let now = self.clock.now_ns();
+        let r = self.sink.tick(now);
+        self.sink_result(r);
+        self.status(queue_len)
     }
 
     /// The watchdog facts now (see [`crate::service`]).
@@ -489,7 +388,7 @@ impl Pipeline {
             since_loop_s: 0.0,
             since_sample_s: self.last_sample.map(|t| t.elapsed().as_secs_f64()),
             uptime_s: self.started.elapsed().as_secs_f64(),
-            connected: self.slots.values().filter(|s| s.status.connected).count(),
+            connected: self.instruments.values().filter(|s| s.connected).count(),
             program_idle: self.status.program == ProgramState::Ended,
             interval_s: interval.as_secs_f64(),
         }
@@ -497,17 +396,14 @@ impl Pipeline {
 
     /// Close every open dwell, write the final status and close the log.
     pub fn finish(mut self, reason: StopReason, queue_len: usize) -> anyhow::Result<Outcome> {
-        let t = self.clock.now_ns();
-        let instruments: Vec<Instrument> = self.slots.keys().copied().collect();
-        for i in instruments {
-            if let Some(det) = self.slot(i).detector.as_mut() {
-                let out = det.finish(t);
-                self.emit(i, out);
-            }
-        }
-        let status = self.write_status(queue_len);
-        let recorder = std::mem::replace(&mut self.recorder, Box::new(NullRecorder));
-        recorder.finish()?;
+        let now = self.clock.now_ns();
+        let sink = std::mem::replace(
+            &mut self.sink,
+            Box::new(DetectOnly(PoseEngine::new(&DetectorSettings::default())?)),
+        );
+        let last = sink.finish(now)?;
+        self.count_poses(last);
+        let status = self.status(queue_len);
         Ok(Outcome {
             reason,
             status,
@@ -533,13 +429,16 @@ impl Pipeline {
                 biased;
                 _ = cancel.cancelled() => break StopReason::Cancelled,
                 _ = tick.tick() => {
-                    let st = self.write_status(rx.len());
+                    let st = self.tick(rx.len());
                     notifier.status(&st.summary());
                     if let Some(iv) = watchdog_interval {
                         if self.watchdog(iv).healthy() {
                             notifier.watchdog();
                         } else {
-                            tracing::warn!("no samples for {STALL:.0} s from connected instruments while a program runs; not petting the watchdog", STALL = crate::service::STALL_TIMEOUT_S);
+                            tracing::warn!(
+                                "no samples for {:.0} s from connected instruments while a program runs; not petting the watchdog",
+                                crate::service::STALL_TIMEOUT_S
+                            );
                         }
                     }
                     progress.send_replace(st);
@@ -567,7 +466,8 @@ impl Pipeline {
                 }
             }
         };
-        // Whatever is already queued belongs to the run.
+        // Whatever is already queued belongs to the run (not so after program end: the next
+        // program's samples belong to the next run).
         if reason != StopReason::ProgramEnd {
             while let Ok(ev) = rx.try_recv() {
                 self.handle(ev);
@@ -598,81 +498,57 @@ pub fn spawn(
         })
 }
 
-/// The detector settings of a config.
-pub fn steady_config(cfg: &crate::config::Config) -> SteadyConfig {
-    SteadyConfig {
-        samples: cfg.detector.samples,
-        ..SteadyConfig::default()
-    }
+/// The detector settings of a config (the same window length for every instrument).
+pub fn detector_settings(cfg: &crate::config::Config) -> DetectorSettings {
+    DetectorSettings::default().with_samples(cfg.detector.samples)
 }
 
-/// `<output_dir>/<machine>-<UTC start, YYYYMMDDTHHMMSSZ>.mcap`, never an existing file
-/// (a suffix `-2`, `-3`, … is added when two runs start within a second). Creates the directory.
-pub fn log_file_path(
-    output_dir: &std::path::Path,
-    machine: &str,
-) -> anyhow::Result<std::path::PathBuf> {
-    use anyhow::Context;
-    std::fs::create_dir_all(output_dir).with_context(|| {
-        format!(
-            "cannot create the output directory {}",
-            output_dir.display()
-        )
-    })?;
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    let stamp = utc_stamp(secs);
-    let mut path = output_dir.join(format!("{machine}-{stamp}.mcap"));
-    let mut k = 2;
-    while path.exists() {
-        path = output_dir.join(format!("{machine}-{stamp}-{k}.mcap"));
-        k += 1;
-    }
-    Ok(path)
-}
-
-/// `YYYYMMDDTHHMMSSZ` of Unix seconds (proleptic Gregorian calendar, days-from-civil inverse of
-/// H. Hinnant's `chrono`-compatible algorithms).
-pub fn utc_stamp(unix_s: u64) -> String {
-    let days = (unix_s / 86_400) as i64;
-    let sod = unix_s % 86_400;
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + if m <= 2 { 1 } else { 0 };
-    format!(
-        "{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z",
-        sod / 3600,
-        (sod / 60) % 60,
-        sod % 60
-    )
-}
-
-/// Open the run's MCAP log with the config, trajectory and transform stored in it.
+/// Open the run's MCAP log in `[run] output_dir` (created if missing) with the run metadata and
+/// the config, trajectory and CapBall transform attached, so the log replays on its own.
 pub fn open_log(
     cfg: &crate::config::Config,
-    path: &std::path::Path,
-) -> anyhow::Result<Box<dyn Recorder>> {
-    let _ = (cfg, path);
-    Ok(Box::new(NullRecorder))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn utc_stamp_matches_known_dates() {
-        // date -u -d @0 / @951782400 (leap day 2000) / @1700000000
-        assert_eq!(utc_stamp(0), "19700101T000000Z");
-        assert_eq!(utc_stamp(951_782_400), "20000229T000000Z");
-        assert_eq!(utc_stamp(1_700_000_000), "20231114T221320Z");
+    clock: &HostClock,
+) -> anyhow::Result<crate::log::Recorder> {
+    use anyhow::Context;
+    let dir = &cfg.run.output_dir;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
+    let settings = detector_settings(cfg);
+    let now = clock.now_ns();
+    let mut extra = BTreeMap::new();
+    extra.insert("config_path".to_string(), cfg.path.display().to_string());
+    extra.insert(
+        "stop_at_program_end".to_string(),
+        cfg.run.stop_at_program_end.to_string(),
+    );
+    extra.insert(
+        "instruments_configured".to_string(),
+        cfg.instruments()
+            .iter()
+            .map(|i| i.name())
+            .collect::<Vec<_>>()
+            .join(","),
+    );
+    let meta = crate::log::RunMetadata {
+        machine: cfg.run.machine.clone(),
+        started_ns: now,
+        detector: settings.clone(),
+        instruments: BTreeMap::new(),
+        extra,
+    };
+    let mut writer =
+        crate::log::LogWriter::create_in_dir(dir, &meta, crate::log::LogOptions::default())?;
+    writer.attach(
+        "metrolog.toml",
+        "application/toml",
+        cfg.text.as_bytes(),
+        now,
+    )?;
+    if let Some(t) = &cfg.run.trajectory {
+        writer.attach("trajectory.csv", "text/csv", t.text.as_bytes(), now)?;
     }
+    if let Some((_, text)) = cfg.capball.as_ref().and_then(|c| c.transform_file.as_ref()) {
+        writer.attach("capball-transform.csv", "text/csv", text.as_bytes(), now)?;
+    }
+    Ok(crate::log::Recorder::new(writer, &settings)?)
 }

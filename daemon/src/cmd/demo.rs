@@ -11,13 +11,13 @@ use std::time::Duration;
 
 use anyhow::Context;
 use drivers::Instrument;
-use metrology::steady::{PoseStatus, PoseValue};
 use sim::{PoseTruth, Scenario};
 use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 
 use crate::cmd::run::{Acquire, RunReport, acquire};
 use crate::config::Config;
+use crate::log::topics::{PoseInstrument, PoseMsg, PoseStatusName};
 use crate::pipeline::Status;
 use crate::service::Notifier;
 
@@ -43,7 +43,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .build()
         .context("cannot start the async runtime")?;
     let (report, truth, home_x_mm) = rt.block_on(demo(out.clone()))?;
-    print_report(&report, &truth, home_x_mm);
+    // Poses without a dwell (the reversal moves of the ISO 230-2 cycles) are not measured.
+    let reversals: Vec<u32> = Scenario::demo()
+        .program
+        .poses
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.dwell_s == Some(0.0))
+        .map(|(i, _)| i as u32 + 1)
+        .collect();
+    print_report(&report, &truth, home_x_mm, &reversals);
     print_analysis(&report);
     Ok(())
 }
@@ -150,7 +159,7 @@ async fn demo(out: PathBuf) -> anyhow::Result<(RunReport, Vec<PoseTruth>, f64)> 
 struct Comparison {
     instrument: Instrument,
     ok: usize,
-    other: Vec<(u32, PoseStatus)>,
+    other: Vec<(u32, &'static str)>,
     max_err_um: f64,
     rms_err_um: f64,
 }
@@ -159,31 +168,36 @@ fn compare(
     report: &RunReport,
     truth: &[PoseTruth],
     home_x_mm: f64,
-    instrument: Instrument,
+    reversals: &[u32],
+    instrument: PoseInstrument,
 ) -> Comparison {
     let mut c = Comparison {
-        instrument,
+        instrument: instrument.instrument(),
         ok: 0,
         other: Vec::new(),
         max_err_um: 0.0,
         rms_err_um: 0.0,
     };
     let mut sum2 = 0.0;
-    for (i, v) in report
+    for v in report
         .outcome
         .poses
         .iter()
-        .filter(|(i, _)| *i == instrument)
+        .filter(|v| v.instrument == instrument)
     {
-        let _ = i;
-        if v.status != PoseStatus::Ok {
-            c.other.push((v.pose, v.status));
+        if reversals.contains(&v.pose) {
             continue;
         }
-        let Some(t) = truth.iter().find(|t| t.pose as u32 == v.pose) else {
+        if v.status != PoseStatusName::Ok {
+            c.other.push((v.pose, v.status.name()));
+            continue;
+        }
+        let Some(t) = truth.iter().find(|t| u32::from(t.pose) == v.pose) else {
             continue;
         };
-        let err = error_um(instrument, v, t, home_x_mm);
+        let Some(err) = error_um(v, t, home_x_mm) else {
+            continue;
+        };
         c.ok += 1;
         sum2 += err * err;
         c.max_err_um = c.max_err_um.max(err);
@@ -195,26 +209,29 @@ fn compare(
 }
 
 /// Distance between a steady value and the true value, µm (vector norm for CapBall and PSD).
-fn error_um(instrument: Instrument, v: &PoseValue, t: &PoseTruth, home_x_mm: f64) -> f64 {
-    match instrument {
+fn error_um(v: &PoseMsg, t: &PoseTruth, home_x_mm: f64) -> Option<f64> {
+    let m = |k: &str| v.mean.get(k).copied();
+    Some(match v.instrument {
         // The interferometer reads the 20 °C length from the datum at home: programmed
         // displacement plus the axis deviation.
-        Instrument::Interferometer => {
+        PoseInstrument::Interferometer => {
             let expected = (t.x_mm - home_x_mm) * 1e3 + t.deviation_um;
-            (v.mean[0] - expected).abs()
+            (m("position_um")? - expected).abs()
         }
-        Instrument::Capball => (0..3)
-            .map(|k| (v.mean[k] - t.capball_e_um[k]).powi(2))
-            .sum::<f64>()
-            .sqrt(),
-        Instrument::Psd => {
-            ((v.mean[0] - t.psd_x_um).powi(2) + (v.mean[1] - t.psd_y_um).powi(2)).sqrt()
+        PoseInstrument::Capball => {
+            let e = [m("ex_um")?, m("ey_um")?, m("ez_um")?];
+            (0..3)
+                .map(|k| (e[k] - t.capball_e_um[k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
         }
-        Instrument::Trigger => 0.0,
-    }
+        PoseInstrument::Psd => {
+            ((m("x_um")? - t.psd_x_um).powi(2) + (m("y_um")? - t.psd_y_um).powi(2)).sqrt()
+        }
+    })
 }
 
-fn print_report(report: &RunReport, truth: &[PoseTruth], home_x_mm: f64) {
+fn print_report(report: &RunReport, truth: &[PoseTruth], home_x_mm: f64, reversals: &[u32]) {
     let st = &report.outcome.status;
     println!(
         "\nrun ended at {} after {:.1} s",
@@ -222,8 +239,9 @@ fn print_report(report: &RunReport, truth: &[PoseTruth], home_x_mm: f64) {
         st.uptime_s
     );
     println!(
-        "poses programmed: {}; pose values written: {} ({} ok)",
+        "poses programmed: {} ({} of them reversals without dwell, not measured); pose values written: {} ({} ok)",
         truth.len(),
+        reversals.len(),
         st.poses,
         st.poses_ok
     );
@@ -232,18 +250,14 @@ fn print_report(report: &RunReport, truth: &[PoseTruth], home_x_mm: f64) {
         "  {:<15} {:>9} {:>14} {:>14}  not measured",
         "instrument", "ok poses", "max |err| µm", "rms err µm"
     );
-    for i in [
-        Instrument::Interferometer,
-        Instrument::Capball,
-        Instrument::Psd,
-    ] {
-        let c = compare(report, truth, home_x_mm, i);
+    for i in PoseInstrument::ALL {
+        let c = compare(report, truth, home_x_mm, reversals, i);
         let other = if c.other.is_empty() {
             "-".to_string()
         } else {
             c.other
                 .iter()
-                .map(|(p, s)| format!("pose {p}: {}", s.name()))
+                .map(|(p, s)| format!("pose {p}: {s}"))
                 .collect::<Vec<_>>()
                 .join(", ")
         };

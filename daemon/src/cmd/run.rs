@@ -134,11 +134,11 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
-    let log_path = crate::pipeline::log_file_path(&cfg.run.output_dir, &cfg.run.machine)?;
-    let recorder = crate::pipeline::open_log(cfg, &log_path)?;
+    let clock = HostClock::new();
+    let mut recorder = crate::pipeline::open_log(cfg, &clock)?;
+    let log_path = recorder.writer().path().to_path_buf();
     tracing::info!("logging to {}", log_path.display());
 
-    let clock = HostClock::new();
     let (tx, rx) = mpsc::channel::<DriverEvent>(pipeline::QUEUE_CAPACITY);
     let drivers_cancel = CancellationToken::new();
     let pipeline_cancel = CancellationToken::new();
@@ -146,13 +146,12 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let pl = Pipeline::new(
         PipelineConfig {
             instruments: cfg.instruments(),
-            detector: crate::pipeline::steady_config(cfg),
             stop_at_program_end: cfg.run.stop_at_program_end,
             keep_poses: opts.keep_poses,
         },
         clock,
-        recorder,
-    )?;
+        Box::new(recorder),
+    );
     let progress = opts
         .progress
         .unwrap_or_else(|| watch::channel(Status::default()).0);

@@ -498,9 +498,17 @@ pub fn spawn(
         })
 }
 
-/// The detector settings of a config (the same window length for every instrument).
+/// The detector settings of a config: the same window length for every instrument; poses
+/// delimited by the CNC's triggers when a `[trigger]` is configured, found as standstill
+/// plateaus in the signal otherwise.
 pub fn detector_settings(cfg: &crate::config::Config) -> DetectorSettings {
-    DetectorSettings::default().with_samples(cfg.detector.samples)
+    let mut s = DetectorSettings::default().with_samples(cfg.detector.samples);
+    if cfg.trigger.is_none() {
+        for c in [&mut s.interferometer, &mut s.capball, &mut s.psd] {
+            c.mode = metrology::steady::DetectorMode::Plateaus;
+        }
+    }
+    s
 }
 
 /// Open the run's MCAP log in `[run] output_dir` (created if missing) with the run metadata and

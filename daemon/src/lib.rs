@@ -3,4 +3,7 @@
 
 pub mod cli;
 pub mod cmd;
+pub mod config;
 pub mod log;
+pub mod pipeline;
+pub mod service;

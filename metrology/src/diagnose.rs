@@ -113,6 +113,12 @@ pub struct Diagnosis {
     pub report: DiagnosisReport,
     /// Baseline fitted from the data plus the found effects.
     pub model: AxisModel,
+    /// Per reading (order of `data.readings`): residual from the baseline, µm.
+    pub baseline_residuals_um: Vec<f64>,
+    /// Per reading: residual from the extended model's mean, µm.
+    pub residuals_um: Vec<f64>,
+    /// Per reading: flagged as an outlier.
+    pub outlier: Vec<bool>,
 }
 
 /// Why a dataset cannot be diagnosed.
@@ -963,6 +969,9 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
             notes,
         },
         model,
+        baseline_residuals_um: r0,
+        residuals_um: resid,
+        outlier: out,
     })
 }
 

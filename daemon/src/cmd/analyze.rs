@@ -309,7 +309,7 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
         if let Some(r) = dd.mean_ratio {
             let _ = writeln!(
                 s,
-                "  mean classic s / mean drift-free s_diff = {r:.2} (≈ 1.41 = √2 when there is no drift)"
+                "  mean classic s / mean drift-free s_diff = {r:.2} (≈ 0.71 = 1/√2 without drift: a difference of two readings scatters √2 times more)"
             );
         }
     }

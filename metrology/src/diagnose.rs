@@ -792,7 +792,50 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                 }
                 (cause, Effect::ThermalExpansion { scale_ppm: beta[0], tau_s: th })
             }
-            Family::ThermalTemp => unreachable!("ThermalTemp is only compared, never selected"),
+            Family::ThermalTemp => {
+                // The measured material temperature explains the scale change better than a
+                // time constant: α is the coefficient of x·T.
+                let (alpha, ua) = (beta[0], ub[0]);
+                let tc = obs.temp_c.as_deref().unwrap_or(&[]);
+                let (mut j0, mut j1) = (0, 0);
+                for j in 0..tc.len() {
+                    if obs.t[j] < obs.t[j0] {
+                        j0 = j;
+                    }
+                    if obs.t[j] > obs.t[j1] {
+                        j1 = j;
+                    }
+                }
+                let dt_k = tc.get(j1).copied().unwrap_or(0.0) - tc.get(j0).copied().unwrap_or(0.0);
+                let end = alpha * dt_k;
+                params.insert("scale_ppm".into(), end);
+                params_u.insert("scale_ppm".into(), ua * dt_k.abs());
+                params.insert("alpha_um_per_m_k".into(), alpha);
+                params_u.insert("alpha_um_per_m_k".into(), ua);
+                // The simulator's form (scale with a time constant) fitted for the model.
+                let p = Projector::new(&obs, &w_final, &st.before_cols);
+                let y_perp = p.residualize(&obs, &obs.y);
+                let (scale, tau) = match search(&obs, &p, &y_perp, Family::Thermal) {
+                    Some(c) => {
+                        let mut cols = st.before_cols.clone();
+                        cols.extend(Family::Thermal.columns(&obs, c.theta));
+                        let f2 = fit_mean(&obs, &w_final, &cols);
+                        (f2.beta[cols.len() - 1], c.theta)
+                    }
+                    None => (end, obs.duration_s),
+                };
+                params.insert("tau_s".into(), tau);
+                let cause = format!(
+                    "uncompensated material temperature: the file says material_compensation: off \
+                     and the measured material temperature ({dt_k:+.2} K over the run) explains \
+                     the scale change ({end:.1} µm/m by the end) with an expansion coefficient of \
+                     {alpha:.1} ± {ua:.1} µm/(m·K){}; normalise the readings to 20 °C",
+                    data.alpha_um_per_m_k
+                        .map(|a| format!(" (the file states {a} µm/(m·K))"))
+                        .unwrap_or_default()
+                );
+                (cause, Effect::ThermalExpansion { scale_ppm: scale, tau_s: tau })
+            }
         };
         findings.push(Finding {
             effect: st.sel.family.name().into(),

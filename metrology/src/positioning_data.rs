@@ -125,11 +125,25 @@ impl PositioningData {
 
         let mut readings = Vec::new();
         for (row_no, rec) in rdr.records().enumerate() {
+            // Line numbers from byte offsets: the csv crate's own count skips comment lines.
+            let line_of = |byte: u64| {
+                let bytes = text.as_bytes();
+                let mut b = (byte as usize).min(bytes.len());
+                // A record's position is where the reader started, before skipped comments.
+                while b < bytes.len() && (bytes[b] == b'#' || bytes[b] == b'\n' || bytes[b] == b'\r') {
+                    if bytes[b] == b'#' {
+                        b += bytes[b..].iter().position(|c| *c == b'\n').unwrap_or(bytes.len() - b);
+                    }
+                    b += 1;
+                }
+                let b = b.min(bytes.len());
+                bytes[..b].iter().filter(|c| **c == b'\n').count() as u64 + 1
+            };
             let rec = rec.map_err(|e| DatasetError::BadRow {
-                line: e.position().map(|p| p.line()).unwrap_or(0),
+                line: e.position().map(|p| line_of(p.byte())).unwrap_or(0),
                 message: e.to_string(),
             })?;
-            let line = rec.position().map(|p| p.line()).unwrap_or(0);
+            let line = rec.position().map(|p| line_of(p.byte())).unwrap_or(0);
             let bad = |message: String| DatasetError::BadRow { line, message };
             let field = |c: usize, name: &str| -> Result<&str, DatasetError> {
                 rec.get(c)

@@ -24,6 +24,7 @@
 use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, Normal};
 
@@ -447,7 +448,7 @@ fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> Option<Candi
     if grid.is_empty() {
         return None;
     }
-    let rss: Vec<f64> = grid.iter().map(|&th| candidate_rss(obs, p, y_perp, fam, th)).collect();
+    let rss: Vec<f64> = grid.par_iter().map(|&th| candidate_rss(obs, p, y_perp, fam, th)).collect();
     let (mut best_k, mut best) = (0, f64::INFINITY);
     for (k, r) in rss.iter().enumerate() {
         if *r < best {

@@ -143,8 +143,12 @@ impl PositioningData {
                 line: e.position().map(|p| line_of(p.byte())).unwrap_or(0),
                 message: e.to_string(),
             })?;
-            let line = rec.position().map(|p| line_of(p.byte())).unwrap_or(0);
-            let bad = |message: String| DatasetError::BadRow { line, message };
+            // Counted only for an error: counting for every row would be quadratic.
+            let byte = rec.position().map(|p| p.byte());
+            let bad = |message: String| DatasetError::BadRow {
+                line: byte.map(line_of).unwrap_or(0),
+                message,
+            };
             let field = |c: usize, name: &str| -> Result<&str, DatasetError> {
                 rec.get(c)
                     .ok_or_else(|| bad(format!("missing field `{name}` (row has {} fields)", rec.len())))

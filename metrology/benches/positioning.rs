@@ -11,13 +11,28 @@ fn run() -> PositioningData {
         axis: "X".into(),
         targets_mm: (0..21).map(|i| 50.0 * i as f64 + (i % 5) as f64).collect(),
         systematic_up_um: (0..21).map(|i| (i as f64 * 0.6).sin() * 3.0).collect(),
-        systematic_down_um: (0..21).map(|i| (i as f64 * 0.6).sin() * 3.0 - 2.0).collect(),
+        systematic_down_um: (0..21)
+            .map(|i| (i as f64 * 0.6).sin() * 3.0 - 2.0)
+            .collect(),
         noise_um: 0.4,
         effects: vec![
-            Effect::ExponentialWarmup { amplitude_um: 4.0, tau_s: 5400.0 },
-            Effect::CyclicDrift { period_s: 1500.0, amplitude_um: 1.5, phase_rad: 0.0 },
-            Effect::LocalAnomaly { index: 7, std_ratio: 4.0 },
-            Effect::Outliers { rate: 0.001, magnitude_um: 6.0 },
+            Effect::ExponentialWarmup {
+                amplitude_um: 4.0,
+                tau_s: 5400.0,
+            },
+            Effect::CyclicDrift {
+                period_s: 1500.0,
+                amplitude_um: 1.5,
+                phase_rad: 0.0,
+            },
+            Effect::LocalAnomaly {
+                index: 7,
+                std_ratio: 4.0,
+            },
+            Effect::Outliers {
+                rate: 0.001,
+                magnitude_um: 6.0,
+            },
         ],
     };
     // 100 cycles × 21 targets × 2 directions, 6 s per reading: 7 h, as in the paper.
@@ -29,7 +44,9 @@ fn bench(c: &mut Criterion) {
     let csv = data.to_csv_string();
     let mut g = c.benchmark_group("positioning_100x21");
     g.sample_size(20);
-    g.bench_function("parse_csv", |b| b.iter(|| PositioningData::from_csv_str(&csv).unwrap()));
+    g.bench_function("parse_csv", |b| {
+        b.iter(|| PositioningData::from_csv_str(&csv).unwrap())
+    });
     g.bench_function("analyze", |b| {
         b.iter(|| {
             let r = iso230::evaluate(&data);
@@ -37,7 +54,9 @@ fn bench(c: &mut Criterion) {
             (r, d)
         })
     });
-    g.bench_function("diagnose", |b| b.iter(|| diagnose(&data, &Options::default()).unwrap()));
+    g.bench_function("diagnose", |b| {
+        b.iter(|| diagnose(&data, &Options::default()).unwrap())
+    });
     g.finish();
 }
 

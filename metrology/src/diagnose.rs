@@ -21,6 +21,9 @@
 //! - Without real times (no `time_s` column) row numbers stand in for seconds: the report says
 //!   so, and rates, periods and time constants are then per reading.
 
+// Row-indexed numerics over several parallel arrays read clearest with indices.
+#![allow(clippy::needless_range_loop)]
+
 use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
@@ -45,7 +48,11 @@ pub struct Options {
 
 impl Default for Options {
     fn default() -> Self {
-        Options { min_bic_gain: 10.0, max_folds: 5, outlier_alpha: 0.005 }
+        Options {
+            min_bic_gain: 10.0,
+            max_folds: 5,
+            outlier_alpha: 0.005,
+        }
     }
 }
 
@@ -154,7 +161,11 @@ impl Obs {
         let t1 = r.iter().map(|r| r.time_s).fold(f64::NEG_INFINITY, f64::max);
         let mut ts: Vec<f64> = r.iter().map(|r| r.time_s).collect();
         ts.sort_by(f64::total_cmp);
-        let mut gaps: Vec<f64> = ts.windows(2).map(|w| w[1] - w[0]).filter(|g| *g > 0.0).collect();
+        let mut gaps: Vec<f64> = ts
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .filter(|g| *g > 0.0)
+            .collect();
         gaps.sort_by(f64::total_cmp);
         let dt_s = gaps.get(gaps.len() / 2).copied().unwrap_or(1.0);
         let n_folds = data.n_cycles().clamp(2, max_folds.max(2));
@@ -167,7 +178,10 @@ impl Obs {
             t: r.iter().map(|r| r.time_s).collect(),
             x_mm: r.iter().map(|r| r.target_mm).collect(),
             temp_c,
-            group: r.iter().map(|r| 2 * (r.index - 1) + dir_slot(r.direction)).collect(),
+            group: r
+                .iter()
+                .map(|r| 2 * (r.index - 1) + dir_slot(r.direction))
+                .collect(),
             n_groups: 2 * data.n_targets(),
             target: r.iter().map(|r| r.index - 1).collect(),
             fold: r.iter().map(|r| (r.cycle - 1) % n_folds).collect(),
@@ -195,7 +209,12 @@ impl Projector {
         for (j, &g) in obs.group.iter().enumerate() {
             gsum[g] += w[j];
         }
-        let mut p = Projector { w: w.to_vec(), gsum, zc: Vec::new(), ginv: DMatrix::zeros(0, 0) };
+        let mut p = Projector {
+            w: w.to_vec(),
+            gsum,
+            zc: Vec::new(),
+            ginv: DMatrix::zeros(0, 0),
+        };
         let zc: Vec<Vec<f64>> = cols.iter().map(|c| p.center(obs, c)).collect();
         let k = zc.len();
         let mut g = DMatrix::zeros(k, k);
@@ -223,7 +242,10 @@ impl Projector {
         for (j, &g) in obs.group.iter().enumerate() {
             s[g] += self.w[j] * v[j];
         }
-        s.iter().zip(&self.gsum).map(|(s, n)| if *n > 0.0 { s / n } else { 0.0 }).collect()
+        s.iter()
+            .zip(&self.gsum)
+            .map(|(s, n)| if *n > 0.0 { s / n } else { 0.0 })
+            .collect()
     }
 
     fn center(&self, obs: &Obs, v: &[f64]) -> Vec<f64> {
@@ -273,7 +295,12 @@ fn fit_mean(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> MeanFit {
             *a -= beta[k] * g;
         }
     }
-    MeanFit { alpha, has_group: p.gsum.iter().map(|s| *s > 0.0).collect(), beta, cov_unscaled: p.ginv }
+    MeanFit {
+        alpha,
+        has_group: p.gsum.iter().map(|s| *s > 0.0).collect(),
+        beta,
+        cov_unscaled: p.ginv,
+    }
 }
 
 impl MeanFit {
@@ -282,7 +309,14 @@ impl MeanFit {
         if !self.has_group[g] {
             return None;
         }
-        Some(self.alpha[g] + cols.iter().enumerate().map(|(k, c)| self.beta[k] * c[j]).sum::<f64>())
+        Some(
+            self.alpha[g]
+                + cols
+                    .iter()
+                    .enumerate()
+                    .map(|(k, c)| self.beta[k] * c[j])
+                    .sum::<f64>(),
+        )
     }
 }
 
@@ -291,14 +325,18 @@ impl MeanFit {
 fn heldout_residuals(obs: &Obs, w: &[f64], cols: &[Vec<f64>], eval: &[bool]) -> Vec<(f64, usize)> {
     let mut out = Vec::new();
     for f in 0..obs.n_folds {
-        let wt: Vec<f64> =
-            w.iter().zip(&obs.fold).map(|(w, &k)| if k == f { 0.0 } else { *w }).collect();
+        let wt: Vec<f64> = w
+            .iter()
+            .zip(&obs.fold)
+            .map(|(w, &k)| if k == f { 0.0 } else { *w })
+            .collect();
         let fit = fit_mean(obs, &wt, cols);
         for j in 0..obs.len() {
-            if obs.fold[j] == f && eval[j] {
-                if let Some(p) = fit.predict(obs, cols, j) {
-                    out.push((obs.y[j] - p, j));
-                }
+            if obs.fold[j] == f
+                && eval[j]
+                && let Some(p) = fit.predict(obs, cols, j)
+            {
+                out.push((obs.y[j] - p, j));
             }
         }
     }
@@ -315,7 +353,9 @@ fn rms(v: impl Iterator<Item = f64>) -> f64 {
 }
 
 fn heldout_rms(obs: &Obs, w: &[f64], cols: &[Vec<f64>], eval: &[bool]) -> f64 {
-    rms(heldout_residuals(obs, w, cols, eval).into_iter().map(|r| r.0))
+    rms(heldout_residuals(obs, w, cols, eval)
+        .into_iter()
+        .map(|r| r.0))
 }
 
 // ---------------------------------------------------------------------------------------
@@ -370,11 +410,22 @@ impl Family {
             }
             // Shift in µm of a scale of 1 ppm at position x: x_mm · 1e-3.
             Family::Thermal => {
-                vec![obs.t.iter().zip(&obs.x_mm).map(|(&t, x)| x * 1e-3 * warm(t)).collect()]
+                vec![
+                    obs.t
+                        .iter()
+                        .zip(&obs.x_mm)
+                        .map(|(&t, x)| x * 1e-3 * warm(t))
+                        .collect(),
+                ]
             }
             // α [µm/(m·K)] · x [m] · T [°C]; the constant part falls into the baseline.
             Family::ThermalTemp => match &obs.temp_c {
-                Some(tc) => vec![tc.iter().zip(&obs.x_mm).map(|(c, x)| x * 1e-3 * c).collect()],
+                Some(tc) => vec![
+                    tc.iter()
+                        .zip(&obs.x_mm)
+                        .map(|(c, x)| x * 1e-3 * c)
+                        .collect(),
+                ],
                 None => vec![vec![0.0; obs.len()]],
             },
         }
@@ -387,7 +438,9 @@ impl Family {
             Family::Warmup | Family::Thermal => {
                 let (lo, hi) = ((d / 100.0).max(obs.dt_s), 3.0 * d);
                 let n = 48;
-                (0..n).map(|k| lo * (hi / lo).powf(k as f64 / (n - 1) as f64)).collect()
+                (0..n)
+                    .map(|k| lo * (hi / lo).powf(k as f64 / (n - 1) as f64))
+                    .collect()
             }
             Family::Cyclic => {
                 // Periods from three reading intervals (and at least 2 min: no thermal cycle of
@@ -400,7 +453,9 @@ impl Family {
                 let (f_lo, f_hi) = (1.0 / p_max, 1.0 / p_min);
                 let df = 1.0 / (3.0 * d);
                 let n = (((f_hi - f_lo) / df).ceil() as usize).clamp(2, 4000);
-                (0..=n).map(|k| 1.0 / (f_lo + (f_hi - f_lo) * k as f64 / n as f64)).collect()
+                (0..=n)
+                    .map(|k| 1.0 / (f_lo + (f_hi - f_lo) * k as f64 / n as f64))
+                    .collect()
             }
         }
     }
@@ -448,7 +503,10 @@ fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> Option<Candi
     if grid.is_empty() {
         return None;
     }
-    let rss: Vec<f64> = grid.par_iter().map(|&th| candidate_rss(obs, p, y_perp, fam, th)).collect();
+    let rss: Vec<f64> = grid
+        .par_iter()
+        .map(|&th| candidate_rss(obs, p, y_perp, fam, th))
+        .collect();
     let (mut best_k, mut best) = (0, f64::INFINITY);
     for (k, r) in rss.iter().enumerate() {
         if *r < best {
@@ -475,7 +533,14 @@ fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> Option<Candi
 
 /// Uncertainty of a grid-searched parameter from the curvature of the RSS profile:
 /// u² = 2σ² / RSS''(θ).
-fn theta_uncertainty(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family, c: &Candidate, s2: f64) -> Option<f64> {
+fn theta_uncertainty(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    fam: Family,
+    c: &Candidate,
+    s2: f64,
+) -> Option<f64> {
     if !c.theta.is_finite() {
         return None;
     }
@@ -510,7 +575,10 @@ fn flag_outliers(obs: &Obs, resid: &[f64], alpha: f64, n_targets: usize) -> Vec<
     for j in 0..n {
         per[obs.target[j]].push(resid[j]);
     }
-    let per_s: Vec<f64> = per.iter_mut().map(|v| if v.len() >= 5 { robust_scale(v) } else { 0.0 }).collect();
+    let per_s: Vec<f64> = per
+        .iter_mut()
+        .map(|v| if v.len() >= 5 { robust_scale(v) } else { 0.0 })
+        .collect();
     (0..n)
         .map(|j| global > 0.0 && resid[j].abs() > z * global.max(per_s[obs.target[j]]))
         .collect()
@@ -534,7 +602,9 @@ fn group_median_residuals(obs: &Obs) -> Vec<f64> {
             }
         })
         .collect();
-    (0..obs.len()).map(|j| obs.y[j] - med[obs.group[j]]).collect()
+    (0..obs.len())
+        .map(|j| obs.y[j] - med[obs.group[j]])
+        .collect()
 }
 
 fn all_cols(sel: &[Selected]) -> Vec<Vec<f64>> {
@@ -543,7 +613,9 @@ fn all_cols(sel: &[Selected]) -> Vec<Vec<f64>> {
 
 fn in_sample_residuals(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> (MeanFit, Vec<f64>) {
     let fit = fit_mean(obs, w, cols);
-    let r = (0..obs.len()).map(|j| obs.y[j] - fit.predict(obs, cols, j).unwrap_or(obs.y[j])).collect();
+    let r = (0..obs.len())
+        .map(|j| obs.y[j] - fit.predict(obs, cols, j).unwrap_or(obs.y[j]))
+        .collect();
     (fit, r)
 }
 
@@ -567,7 +639,10 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
             missing
                 .iter()
                 .take(10)
-                .map(|(c, d, i)| format!("cycle {c} {} target {i}", crate::positioning_data::dir_sign(*d)))
+                .map(|(c, d, i)| format!(
+                    "cycle {c} {} target {i}",
+                    crate::positioning_data::dir_sign(*d)
+                ))
                 .collect::<Vec<_>>()
                 .join(", ")
         ));
@@ -589,7 +664,15 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     // Outliers: a first screen around the group medians, refined after each step.
     let mut out = flag_outliers(&obs, &group_median_residuals(&obs), opt.outlier_alpha, m);
     let weights = |out: &[bool], var: &[f64]| -> Vec<f64> {
-        (0..n).map(|j| if out[j] { 0.0 } else { 1.0 / var[obs.target[j]] }).collect()
+        (0..n)
+            .map(|j| {
+                if out[j] {
+                    0.0
+                } else {
+                    1.0 / var[obs.target[j]]
+                }
+            })
+            .collect()
     };
     let var_factor = vec![1.0; m];
 
@@ -625,7 +708,9 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
             if selected.iter().any(|s| s.family.slot() == fam.slot()) {
                 continue;
             }
-            let Some(c) = search(&obs, &p, &y_perp, fam) else { continue };
+            let Some(c) = search(&obs, &p, &y_perp, fam) else {
+                continue;
+            };
             if fam == Family::ThermalTemp {
                 temp_rss = Some(c.rss);
             }
@@ -638,7 +723,11 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         if -dbic < opt.min_bic_gain {
             break;
         }
-        let new = Selected { family: fam, theta: cand.theta, cols: fam.columns(&obs, cand.theta) };
+        let new = Selected {
+            family: fam,
+            theta: cand.theta,
+            cols: fam.columns(&obs, cand.theta),
+        };
         let mut cols_after = cols.clone();
         cols_after.extend(new.cols.iter().cloned());
         let eval: Vec<bool> = out.iter().map(|o| !o).collect();
@@ -655,7 +744,13 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         // A temperature-driven scale change reported as such when the temperatures explain
         // it at least as well as the time-constant form.
         let alpha_temp = fam == Family::Thermal && temp_rss.is_some_and(|t| t <= cand.rss * 1.05);
-        steps.push(Step { sel: new.clone(), significance: -dbic, u, before_cols: cols, alpha_temp });
+        steps.push(Step {
+            sel: new.clone(),
+            significance: -dbic,
+            u,
+            before_cols: cols,
+            alpha_temp,
+        });
         selected.push(new);
         // Re-flag outliers against the richer model.
         let (_, r) = in_sample_residuals(&obs, &weights(&out, &var_factor), &all_cols(&selected));
@@ -672,7 +767,10 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     let (fit, resid) = in_sample_residuals(&obs, &w_final, &final_cols);
     let n_eff = eval.iter().filter(|e| **e).count() as f64;
     let dof = (n_eff - (obs.n_groups + final_cols.len()) as f64).max(1.0);
-    let rss: f64 = (0..n).filter(|&j| eval[j]).map(|j| resid[j] * resid[j]).sum();
+    let rss: f64 = (0..n)
+        .filter(|&j| eval[j])
+        .map(|j| resid[j] * resid[j])
+        .sum();
     let sigma2 = rss / dof;
 
     let ones_eval: Vec<bool> = vec![true; n];
@@ -686,8 +784,18 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     for st in &steps {
         let k = st.sel.cols.len();
         let beta: Vec<f64> = (0..k).map(|i| fit.beta[col0 + i]).collect();
-        let ub: Vec<f64> = (0..k).map(|i| (sigma2 * fit.cov_unscaled[(col0 + i, col0 + i)]).max(0.0).sqrt()).collect();
-        let cov01 = if k == 2 { sigma2 * fit.cov_unscaled[(col0, col0 + 1)] } else { 0.0 };
+        let ub: Vec<f64> = (0..k)
+            .map(|i| {
+                (sigma2 * fit.cov_unscaled[(col0 + i, col0 + i)])
+                    .max(0.0)
+                    .sqrt()
+            })
+            .collect();
+        let cov01 = if k == 2 {
+            sigma2 * fit.cov_unscaled[(col0, col0 + 1)]
+        } else {
+            0.0
+        };
         col0 += k;
         let th = st.sel.theta;
         let u_th = st.u.first().map(|x| x.1);
@@ -708,7 +816,9 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                          temperature; check the screw nut/bearing and air temperature records",
                         beta[0]
                     ),
-                    Effect::LinearDrift { rate_um_per_h: beta[0] },
+                    Effect::LinearDrift {
+                        rate_um_per_h: beta[0],
+                    },
                 )
             }
             Family::Warmup => {
@@ -727,14 +837,18 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                         th / 60.0,
                         3.0 * th / 60.0
                     ),
-                    Effect::ExponentialWarmup { amplitude_um: beta[0], tau_s: th },
+                    Effect::ExponentialWarmup {
+                        amplitude_um: beta[0],
+                        tau_s: th,
+                    },
                 )
             }
             Family::Cyclic => {
                 let (a, b) = (beta[0], beta[1]);
                 let amp = a.hypot(b);
                 let u_amp = if amp > 0.0 {
-                    ((a * a * ub[0] * ub[0] + b * b * ub[1] * ub[1] + 2.0 * a * b * cov01) / (amp * amp))
+                    ((a * a * ub[0] * ub[0] + b * b * ub[1] * ub[1] + 2.0 * a * b * cov01)
+                        / (amp * amp))
                         .max(0.0)
                         .sqrt()
                 } else {
@@ -754,7 +868,11 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                         th / 60.0,
                         amp
                     ),
-                    Effect::CyclicDrift { period_s: th, amplitude_um: amp, phase_rad: b.atan2(a) },
+                    Effect::CyclicDrift {
+                        period_s: th,
+                        amplitude_um: amp,
+                        phase_rad: b.atan2(a),
+                    },
                 )
             }
             Family::Thermal => {
@@ -778,7 +896,9 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                     cols.extend(tc);
                     let f2 = fit_mean(&obs, &w_final, &cols);
                     let alpha = f2.beta[cols.len() - 1];
-                    let ua = (sigma2 * f2.cov_unscaled[(cols.len() - 1, cols.len() - 1)]).max(0.0).sqrt();
+                    let ua = (sigma2 * f2.cov_unscaled[(cols.len() - 1, cols.len() - 1)])
+                        .max(0.0)
+                        .sqrt();
                     params.insert("alpha_um_per_m_k".into(), alpha);
                     params_u.insert("alpha_um_per_m_k".into(), ua);
                     cause = format!(
@@ -791,7 +911,13 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                             .unwrap_or_default()
                     );
                 }
-                (cause, Effect::ThermalExpansion { scale_ppm: beta[0], tau_s: th })
+                (
+                    cause,
+                    Effect::ThermalExpansion {
+                        scale_ppm: beta[0],
+                        tau_s: th,
+                    },
+                )
             }
             Family::ThermalTemp => {
                 // The measured material temperature explains the scale change better than a
@@ -835,7 +961,13 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                         .map(|a| format!(" (the file states {a} µm/(m·K))"))
                         .unwrap_or_default()
                 );
-                (cause, Effect::ThermalExpansion { scale_ppm: scale, tau_s: tau })
+                (
+                    cause,
+                    Effect::ThermalExpansion {
+                        scale_ppm: scale,
+                        tau_s: tau,
+                    },
+                )
             }
         };
         findings.push(Finding {
@@ -863,7 +995,8 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         .map(|t| (0..2).filter(|d| fit.has_group[2 * t + d]).count() as f64)
         .collect();
     let ss_all: f64 = ss_t.iter().sum();
-    let dof_all: f64 = (0..m).map(|t| n_t[t] as f64 - groups_t[t]).sum::<f64>() - final_cols.len() as f64;
+    let dof_all: f64 =
+        (0..m).map(|t| n_t[t] as f64 - groups_t[t]).sum::<f64>() - final_cols.len() as f64;
     let mut anomaly: Option<(usize, f64, f64)> = None;
     if dof_all > 2.0 && ss_all > 0.0 {
         for t in 0..m {
@@ -934,7 +1067,10 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         let x_mm = data.targets_mm()[t];
         findings.push(Finding {
             effect: "local_anomaly".into(),
-            params: BTreeMap::from([("index".into(), (t + 1) as f64), ("std_ratio".into(), ratio)]),
+            params: BTreeMap::from([
+                ("index".into(), (t + 1) as f64),
+                ("std_ratio".into(), ratio),
+            ]),
             params_u: BTreeMap::from([("std_ratio".into(), u_ratio)]),
             significance: sig,
             heldout_rms_before_um: (e_before / k).sqrt(),
@@ -946,7 +1082,10 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                 t + 1
             ),
         });
-        effects.push(Effect::LocalAnomaly { index: t + 1, std_ratio: ratio });
+        effects.push(Effect::LocalAnomaly {
+            index: t + 1,
+            std_ratio: ratio,
+        });
     }
 
     // Outliers.
@@ -961,7 +1100,12 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
             .filter(|&j| out[j])
             .map(|j| resid[j] * resid[j] / var_t[obs.target[j]] - ln_n)
             .sum();
-        let before = heldout_rms(&obs, &weights(&vec![false; n], &var_factor), &final_cols, &eval);
+        let before = heldout_rms(
+            &obs,
+            &weights(&vec![false; n], &var_factor),
+            &final_cols,
+            &eval,
+        );
         let after = heldout_rms(&obs, &w_final, &final_cols, &eval);
         let mean_mag = mags.iter().sum::<f64>() / mags.len() as f64;
         findings.push(Finding {
@@ -977,18 +1121,28 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                  reading; repeat those points"
             ),
         });
-        effects.push(Effect::Outliers { rate: n_out as f64 / n as f64, magnitude_um: mean_mag });
+        effects.push(Effect::Outliers {
+            rate: n_out as f64 / n as f64,
+            magnitude_um: mean_mag,
+        });
     }
 
     let mut order: Vec<usize> = (0..findings.len()).collect();
-    order.sort_by(|&a, &b| findings[b].significance.total_cmp(&findings[a].significance));
+    order.sort_by(|&a, &b| {
+        findings[b]
+            .significance
+            .total_cmp(&findings[a].significance)
+    });
     let findings: Vec<Finding> = order.iter().map(|&i| findings[i].clone()).collect();
     let effects: Vec<Effect> = order.iter().map(|&i| effects[i].clone()).collect();
 
     let targets_mm = data.targets_mm();
     let model = AxisModel {
         axis: data.axis.clone().unwrap_or_else(|| "X".into()),
-        targets_mm: targets_mm.iter().map(|x| if x.is_finite() { *x } else { 0.0 }).collect(),
+        targets_mm: targets_mm
+            .iter()
+            .map(|x| if x.is_finite() { *x } else { 0.0 })
+            .collect(),
         systematic_up_um: (0..m).map(|t| fit.alpha[2 * t]).collect(),
         systematic_down_um: (0..m).map(|t| fit.alpha[2 * t + 1]).collect(),
         noise_um: {
@@ -1006,7 +1160,11 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     Ok(Diagnosis {
         report: DiagnosisReport {
             kind: "positioning".into(),
-            baseline: Baseline { model: "static".into(), rms_um: baseline_rms, heldout_rms_um: baseline_heldout },
+            baseline: Baseline {
+                model: "static".into(),
+                rms_um: baseline_rms,
+                heldout_rms_um: baseline_heldout,
+            },
             findings,
             extended_model: None,
             reproduction: None,
@@ -1035,9 +1193,21 @@ pub fn baseline_model(data: &PositioningData) -> AxisModel {
     }
     AxisModel {
         axis: data.axis.clone().unwrap_or_else(|| "X".into()),
-        targets_mm: data.targets_mm().iter().map(|x| if x.is_finite() { *x } else { 0.0 }).collect(),
-        systematic_up_um: rep.targets.iter().map(|t| t.mean_up_um.unwrap_or(0.0)).collect(),
-        systematic_down_um: rep.targets.iter().map(|t| t.mean_down_um.unwrap_or(0.0)).collect(),
+        targets_mm: data
+            .targets_mm()
+            .iter()
+            .map(|x| if x.is_finite() { *x } else { 0.0 })
+            .collect(),
+        systematic_up_um: rep
+            .targets
+            .iter()
+            .map(|t| t.mean_up_um.unwrap_or(0.0))
+            .collect(),
+        systematic_down_um: rep
+            .targets
+            .iter()
+            .map(|t| t.mean_down_um.unwrap_or(0.0))
+            .collect(),
         noise_um: if dof > 0.0 { (ss / dof).sqrt() } else { 0.0 },
         effects: Vec::new(),
     }
@@ -1056,7 +1226,10 @@ pub fn reproduction_check(data: &PositioningData, model: &AxisModel, seeds: usiz
             let sim = iso230::evaluate(&simulate(m, &schedule, 0x5eed + seed as u64));
             let (mut sm, mut nm, mut ss, mut ns) = (0.0, 0usize, 0.0, 0usize);
             for (a, b) in sim.targets.iter().zip(&measured.targets) {
-                for (x, y) in [(a.mean_up_um, b.mean_up_um), (a.mean_down_um, b.mean_down_um)] {
+                for (x, y) in [
+                    (a.mean_up_um, b.mean_up_um),
+                    (a.mean_down_um, b.mean_down_um),
+                ] {
                     if let (Some(x), Some(y)) = (x, y) {
                         sm += (x - y).powi(2);
                         nm += 1;
@@ -1077,10 +1250,20 @@ pub fn reproduction_check(data: &PositioningData, model: &AxisModel, seeds: usiz
     };
     let (mean_rms_um, s_rms_um) = score(model);
     let (baseline_mean_rms_um, baseline_s_rms_um) = score(&base);
-    Reproduction { mean_rms_um, s_rms_um, baseline_mean_rms_um, baseline_s_rms_um, seeds: seeds.max(1) }
+    Reproduction {
+        mean_rms_um,
+        s_rms_um,
+        baseline_mean_rms_um,
+        baseline_s_rms_um,
+        seeds: seeds.max(1),
+    }
 }
 
 /// Direction of a per-direction slot (0 = up).
 pub fn slot_dir(slot: usize) -> Direction {
-    if slot == 0 { Direction::Up } else { Direction::Down }
+    if slot == 0 {
+        Direction::Up
+    } else {
+        Direction::Down
+    }
 }

@@ -87,7 +87,7 @@ pub struct DriftReport {
 
 /// Coverage factor for ±2s-equivalent borders with `n` readings (Student t below 30).
 pub fn coverage_factor(n: usize) -> f64 {
-    if n >= 30 || n < 2 {
+    if !(2..30).contains(&n) {
         return 2.0;
     }
     match StudentsT::new(0.0, 1.0, (n - 1) as f64) {
@@ -103,7 +103,11 @@ pub fn default_reference_cycle(data: &PositioningData) -> usize {
     if !data.has_times {
         return n;
     }
-    let t0 = data.readings.iter().map(|r| r.time_s).fold(f64::INFINITY, f64::min);
+    let t0 = data
+        .readings
+        .iter()
+        .map(|r| r.time_s)
+        .fold(f64::INFINITY, f64::min);
     (1..=n)
         .find(|&c| {
             data.readings
@@ -167,7 +171,9 @@ pub fn eliminate(data: &PositioningData, reference_cycle: usize) -> DriftReport 
         // F test of each pair against the pooled others.
         let n_tests = 2 * m.saturating_sub(1).max(1);
         for i in 0..pairs.len() {
-            let Some(si) = pairs[i].s_diff_um else { continue };
+            let Some(si) = pairs[i].s_diff_um else {
+                continue;
+            };
             let (mut ss, mut dof) = (0.0, 0.0);
             for (j, p) in pairs.iter().enumerate() {
                 if let (true, Some(s)) = (j != i, p.s_diff_um) {
@@ -215,7 +221,9 @@ pub fn eliminate(data: &PositioningData, reference_cycle: usize) -> DriftReport 
             }
         }
         let mut chart = Vec::with_capacity(m);
-        let mut value = g.first().and_then(|t| t.get(ref_cycle - 1).copied().flatten());
+        let mut value = g
+            .first()
+            .and_then(|t| t.get(ref_cycle - 1).copied().flatten());
         for t in 0..m {
             if t > 0 {
                 let p = &pairs[t - 1];
@@ -236,7 +244,11 @@ pub fn eliminate(data: &PositioningData, reference_cycle: usize) -> DriftReport 
                 index: t + 1,
                 target_mm: targets_mm[t],
                 deviation_um: value,
-                border_um: if t == 0 { Some(0.0) } else { pairs[t - 1].s_diff_um.map(|s| k * s) },
+                border_um: if t == 0 {
+                    Some(0.0)
+                } else {
+                    pairs[t - 1].s_diff_um.map(|s| k * s)
+                },
             });
         }
         let classic: Vec<f64> = (1..m)

@@ -97,11 +97,13 @@ fn both<F: Fn(f64, f64) -> f64>(a: Option<f64>, b: Option<f64>, f: F) -> Option<
 }
 
 fn max_of(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
-    it.flatten().fold(None, |acc, v| Some(acc.map_or(v, |a: f64| a.max(v))))
+    it.flatten()
+        .fold(None, |acc, v| Some(acc.map_or(v, |a: f64| a.max(v))))
 }
 
 fn min_of(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
-    it.flatten().fold(None, |acc, v| Some(acc.map_or(v, |a: f64| a.min(v))))
+    it.flatten()
+        .fold(None, |acc, v| Some(acc.map_or(v, |a: f64| a.min(v))))
 }
 
 /// Evaluates a run by ISO 230-2.
@@ -142,14 +144,20 @@ pub fn evaluate(data: &PositioningData) -> Iso230Report {
         .collect();
     let t = &targets;
     let range = |f: &dyn Fn(&TargetStats) -> Option<f64>| {
-        both(max_of(t.iter().map(f)), min_of(t.iter().map(f)), |a, b| a - b)
+        both(max_of(t.iter().map(f)), min_of(t.iter().map(f)), |a, b| {
+            a - b
+        })
     };
     let n_b = t.iter().filter(|x| x.b_um.is_some()).count();
     let hi = |m: Option<f64>, s: Option<f64>| both(m, s, |m, s| m + 2.0 * s);
     let lo = |m: Option<f64>, s: Option<f64>| both(m, s, |m, s| m - 2.0 * s);
     let a_dir = |up: bool| {
         let pick = |x: &TargetStats| {
-            if up { (x.mean_up_um, x.s_up_um) } else { (x.mean_down_um, x.s_down_um) }
+            if up {
+                (x.mean_up_um, x.s_up_um)
+            } else {
+                (x.mean_down_um, x.s_down_um)
+            }
         };
         both(
             max_of(t.iter().map(|x| hi(pick(x).0, pick(x).1))),
@@ -174,8 +182,14 @@ pub fn evaluate(data: &PositioningData) -> Iso230Report {
         a_up: a_dir(true),
         a_down: a_dir(false),
         a: both(
-            max_of(t.iter().flat_map(|x| [hi(x.mean_up_um, x.s_up_um), hi(x.mean_down_um, x.s_down_um)])),
-            min_of(t.iter().flat_map(|x| [lo(x.mean_up_um, x.s_up_um), lo(x.mean_down_um, x.s_down_um)])),
+            max_of(
+                t.iter()
+                    .flat_map(|x| [hi(x.mean_up_um, x.s_up_um), hi(x.mean_down_um, x.s_down_um)]),
+            ),
+            min_of(
+                t.iter()
+                    .flat_map(|x| [lo(x.mean_up_um, x.s_up_um), lo(x.mean_down_um, x.s_down_um)]),
+            ),
             |a, b| a - b,
         ),
     };

@@ -72,7 +72,11 @@ pub enum DatasetError {
     BadRow { line: u64, message: String },
     /// bad metadata `{key}: {value}`: {message}
     #[error("bad metadata `{key}: {value}`: {message}")]
-    BadMetadata { key: String, value: String, message: String },
+    BadMetadata {
+        key: String,
+        value: String,
+        message: String,
+    },
     /// the dataset holds no readings
     #[error("the dataset holds no readings")]
     Empty,
@@ -93,12 +97,10 @@ impl PositioningData {
         let mut metadata = BTreeMap::new();
         for line in text.lines() {
             let t = line.trim_start();
-            if let Some(rest) = t.strip_prefix('#') {
-                if let Some((k, v)) = rest.split_once(':') {
-                    let k = k.trim();
-                    if !k.is_empty() && !k.contains(' ') {
-                        metadata.insert(k.to_string(), v.trim().to_string());
-                    }
+            if let Some((k, v)) = t.strip_prefix('#').and_then(|rest| rest.split_once(':')) {
+                let k = k.trim();
+                if !k.is_empty() && !k.contains(' ') {
+                    metadata.insert(k.to_string(), v.trim().to_string());
                 }
             }
         }
@@ -130,9 +132,14 @@ impl PositioningData {
                 let bytes = text.as_bytes();
                 let mut b = (byte as usize).min(bytes.len());
                 // A record's position is where the reader started, before skipped comments.
-                while b < bytes.len() && (bytes[b] == b'#' || bytes[b] == b'\n' || bytes[b] == b'\r') {
+                while b < bytes.len()
+                    && (bytes[b] == b'#' || bytes[b] == b'\n' || bytes[b] == b'\r')
+                {
                     if bytes[b] == b'#' {
-                        b += bytes[b..].iter().position(|c| *c == b'\n').unwrap_or(bytes.len() - b);
+                        b += bytes[b..]
+                            .iter()
+                            .position(|c| *c == b'\n')
+                            .unwrap_or(bytes.len() - b);
                     }
                     b += 1;
                 }
@@ -150,8 +157,12 @@ impl PositioningData {
                 message,
             };
             let field = |c: usize, name: &str| -> Result<&str, DatasetError> {
-                rec.get(c)
-                    .ok_or_else(|| bad(format!("missing field `{name}` (row has {} fields)", rec.len())))
+                rec.get(c).ok_or_else(|| {
+                    bad(format!(
+                        "missing field `{name}` (row has {} fields)",
+                        rec.len()
+                    ))
+                })
             };
             let num = |c: usize, name: &str| -> Result<f64, DatasetError> {
                 let s = field(c, name)?;
@@ -167,7 +178,9 @@ impl PositioningData {
                 let s = field(c, name)?;
                 match s.parse::<usize>() {
                     Ok(v) if v >= 1 => Ok(v),
-                    _ => Err(bad(format!("`{name}` is `{s}`, expected a whole number from 1"))),
+                    _ => Err(bad(format!(
+                        "`{name}` is `{s}`, expected a whole number from 1"
+                    ))),
                 }
             };
             let opt = |c: Option<usize>, name: &str| -> Result<Option<f64>, DatasetError> {
@@ -210,7 +223,10 @@ impl PositioningData {
             None => None,
         };
         let material_compensation = !matches!(
-            metadata.get("material_compensation").map(|s| s.to_ascii_lowercase()).as_deref(),
+            metadata
+                .get("material_compensation")
+                .map(|s| s.to_ascii_lowercase())
+                .as_deref(),
             Some("off" | "false" | "no")
         );
         let data = PositioningData {
@@ -325,7 +341,10 @@ impl PositioningData {
         if !self.material_compensation {
             let _ = writeln!(s, "# material_compensation: off");
         }
-        let temps = self.readings.iter().any(|r| r.air_c.is_some() || r.material_c.is_some());
+        let temps = self
+            .readings
+            .iter()
+            .any(|r| r.air_c.is_some() || r.material_c.is_some());
         s.push_str("cycle,direction,index,target_mm,deviation_um");
         if self.has_times {
             s.push_str(",time_s");
@@ -446,7 +465,11 @@ pub fn simulate(model: &AxisModel, schedule: &[ScheduledReading], seed: u64) -> 
             if let Some((rate, mag)) = outliers {
                 let u: f64 = rand::Rng::random(&mut rng);
                 if u < rate {
-                    let sign = if rand::Rng::random::<bool>(&mut rng) { 1.0 } else { -1.0 };
+                    let sign = if rand::Rng::random::<bool>(&mut rng) {
+                        1.0
+                    } else {
+                        -1.0
+                    };
                     dev += sign * mag;
                 }
             }
@@ -490,7 +513,10 @@ mod tests {
         assert!(!d.has_times);
         assert_eq!(d.readings.len(), 2);
         assert_eq!(d.readings[1].time_s, 2.0);
-        assert_eq!(d.missing(), vec![(1, Direction::Up, 2), (1, Direction::Down, 1)]);
+        assert_eq!(
+            d.missing(),
+            vec![(1, Direction::Up, 2), (1, Direction::Down, 1)]
+        );
     }
 
     #[test]

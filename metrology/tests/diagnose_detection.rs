@@ -36,7 +36,14 @@ pub fn random_case(seed: u64, effect: &str) -> (PositioningData, AxisModel) {
     let spacing = length_mm / (m - 1) as f64;
     // ISO 230-2 targets with a random offset so that periodic errors show.
     let targets_mm: Vec<f64> = (0..m)
-        .map(|i| i as f64 * spacing + if i == 0 { 0.0 } else { rng.random_range(-0.2..0.2) * spacing })
+        .map(|i| {
+            i as f64 * spacing
+                + if i == 0 {
+                    0.0
+                } else {
+                    rng.random_range(-0.2..0.2) * spacing
+                }
+        })
         .collect();
     let pitch_mm = rng.random_range(5.0..20.0);
     let slope = rng.random_range(-10.0..10.0) / 1000.0;
@@ -45,7 +52,10 @@ pub fn random_case(seed: u64, effect: &str) -> (PositioningData, AxisModel) {
         .map(|x| slope * x + 1.5 * (std::f64::consts::TAU * x / pitch_mm).sin())
         .collect();
     let reversal = rng.random_range(0.5..4.0);
-    let down: Vec<f64> = up.iter().map(|u| u - reversal + rng.random_range(-0.5..0.5)).collect();
+    let down: Vec<f64> = up
+        .iter()
+        .map(|u| u - reversal + rng.random_range(-0.5..0.5))
+        .collect();
     let duration_s = interval_s * (2 * m * n) as f64;
     let mut effects = Vec::new();
     let k = rng.random_range(2.0..5.0) * noise;
@@ -117,7 +127,12 @@ pub fn rates(per_category: usize, seed0: u64) -> Vec<(&'static str, usize, usize
                         top += 1;
                         exact += 1;
                     } else if std::env::var("SHOW_MISSES").is_ok() {
-                        eprintln!("none seed {seed}: {:?}", f.iter().map(|x| (&x.effect, x.significance)).collect::<Vec<_>>());
+                        eprintln!(
+                            "none seed {seed}: {:?}",
+                            f.iter()
+                                .map(|x| (&x.effect, x.significance))
+                                .collect::<Vec<_>>()
+                        );
                     }
                     continue;
                 }
@@ -130,7 +145,9 @@ pub fn rates(per_category: usize, seed0: u64) -> Vec<(&'static str, usize, usize
                         "{cat} seed {seed}: m={} n={} findings {:?}",
                         data.n_targets(),
                         data.n_cycles(),
-                        f.iter().map(|x| (&x.effect, x.significance)).collect::<Vec<_>>()
+                        f.iter()
+                            .map(|x| (&x.effect, x.significance))
+                            .collect::<Vec<_>>()
                     );
                 }
             }

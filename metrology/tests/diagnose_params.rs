@@ -19,7 +19,11 @@ fn axis(m: usize, noise_um: f64, effects: Vec<Effect>) -> AxisModel {
 
 #[test]
 fn cyclic_drift_parameters_within_their_uncertainty() {
-    let truth = Effect::CyclicDrift { period_s: 1500.0, amplitude_um: 1.2, phase_rad: 0.7 };
+    let truth = Effect::CyclicDrift {
+        period_s: 1500.0,
+        amplitude_um: 1.2,
+        phase_rad: 0.7,
+    };
     let m = axis(11, 0.4, vec![truth]);
     let d = simulate(&m, &standard_schedule(11, 20, 10.0), 3);
     let r = diagnose(&d, &Options::default()).unwrap();
@@ -30,9 +34,15 @@ fn cyclic_drift_parameters_within_their_uncertainty() {
     assert!((p - 1500.0).abs() < 4.0 * up, "period {p} ± {up}");
     assert!((a - 1.2).abs() < 4.0 * ua, "amplitude {a} ± {ua}");
     assert!(f.heldout_rms_after_um < f.heldout_rms_before_um);
-    assert!(f.cause.contains(&format!("{:.1} min", p / 60.0)) && f.cause.contains("coolant"), "{}", f.cause);
+    assert!(
+        f.cause.contains(&format!("{:.1} min", p / 60.0)) && f.cause.contains("coolant"),
+        "{}",
+        f.cause
+    );
     // The extended model carries the effect and the baseline fitted from the data.
-    let Effect::CyclicDrift { period_s, .. } = r.model.effects[0] else { panic!() };
+    let Effect::CyclicDrift { period_s, .. } = r.model.effects[0] else {
+        panic!()
+    };
     assert!((period_s - 1500.0).abs() < 4.0 * up);
     for (a, b) in r.model.systematic_up_um.iter().zip(&m.systematic_up_um) {
         assert!((a - b).abs() < 0.5, "{a} vs {b}");
@@ -42,7 +52,14 @@ fn cyclic_drift_parameters_within_their_uncertainty() {
 
 #[test]
 fn warmup_and_linear_drift_parameters() {
-    let m = axis(9, 0.3, vec![Effect::ExponentialWarmup { amplitude_um: -2.0, tau_s: 1800.0 }]);
+    let m = axis(
+        9,
+        0.3,
+        vec![Effect::ExponentialWarmup {
+            amplitude_um: -2.0,
+            tau_s: 1800.0,
+        }],
+    );
     let d = simulate(&m, &standard_schedule(9, 20, 20.0), 4);
     let r = diagnose(&d, &Options::default()).unwrap();
     let f = &r.report.findings[0];
@@ -63,7 +80,14 @@ fn uncompensated_material_temperature_gives_the_expansion_coefficient() {
     // The material warms by 1.5 K with τ = 1 h; readings not normalised to 20 °C, so they
     // carry α·x·ΔT with α = 11.7 µm/(m·K).
     let (alpha, dt_k, tau_s) = (11.7, 1.5, 3600.0);
-    let m = axis(11, 0.3, vec![Effect::ThermalExpansion { scale_ppm: alpha * dt_k, tau_s }]);
+    let m = axis(
+        11,
+        0.3,
+        vec![Effect::ThermalExpansion {
+            scale_ppm: alpha * dt_k,
+            tau_s,
+        }],
+    );
     let mut sched = standard_schedule(11, 15, 20.0);
     for s in &mut sched {
         s.material_c = Some(20.0 + dt_k * (1.0 - (-s.time_s / tau_s).exp()));
@@ -87,14 +111,28 @@ fn the_extended_model_reproduces_the_run_better_than_the_baseline() {
         11,
         0.3,
         vec![
-            Effect::ExponentialWarmup { amplitude_um: 3.0, tau_s: 2400.0 },
-            Effect::LocalAnomaly { index: 4, std_ratio: 4.0 },
+            Effect::ExponentialWarmup {
+                amplitude_um: 3.0,
+                tau_s: 2400.0,
+            },
+            Effect::LocalAnomaly {
+                index: 4,
+                std_ratio: 4.0,
+            },
         ],
     );
     let d = simulate(&m, &standard_schedule(11, 20, 15.0), 21);
     let r = diagnose(&d, &Options::default()).unwrap();
-    let names: Vec<&str> = r.report.findings.iter().map(|f| f.effect.as_str()).collect();
-    assert!(names.contains(&"exponential_warmup") && names.contains(&"local_anomaly"), "{names:?}");
+    let names: Vec<&str> = r
+        .report
+        .findings
+        .iter()
+        .map(|f| f.effect.as_str())
+        .collect();
+    assert!(
+        names.contains(&"exponential_warmup") && names.contains(&"local_anomaly"),
+        "{names:?}"
+    );
     let rep = reproduction_check(&d, &r.model, 8);
     // The baseline reproduces the means by construction but not the scatter the drift and the
     // anomaly add; the extended model reproduces both.

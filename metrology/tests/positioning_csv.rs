@@ -37,7 +37,11 @@ fn err(text: &str) -> String {
 
 #[test]
 fn clear_errors() {
-    assert!(err("").contains("header") || err("").contains("no readings"), "{}", err(""));
+    assert!(
+        err("").contains("header") || err("").contains("no readings"),
+        "{}",
+        err("")
+    );
     assert!(err("cycle,direction,index,target_mm,deviation_um\n").contains("no readings"));
     let e = err("cycle,direction,index,target_mm\n1,+,1,0\n");
     assert!(e.contains("deviation_um"), "{e}");
@@ -47,7 +51,8 @@ fn clear_errors() {
     assert!(e.contains("twice"), "{e}");
     let e = err("cycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n2,+,1,5,2\n");
     assert!(e.contains("target 1"), "{e}");
-    let e = err("# alpha_um_per_m_k: steel\ncycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n");
+    let e =
+        err("# alpha_um_per_m_k: steel\ncycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n");
     assert!(e.contains("alpha_um_per_m_k"), "{e}");
     let e = err("cycle,direction,index,target_mm,deviation_um,time_s\n1,+,1,0,1,later\n");
     assert!(e.contains("line 2") && e.contains("time_s"), "{e}");
@@ -59,6 +64,7 @@ fn clear_errors() {
 
 #[test]
 fn comment_lines_count_in_line_numbers() {
-    let e = err("# a\n# b\ncycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n# c\n1,x,2,5,1\n");
+    let e =
+        err("# a\n# b\ncycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n# c\n1,x,2,5,1\n");
     assert!(e.contains("line 6"), "{e}");
 }

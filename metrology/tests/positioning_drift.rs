@@ -1,4 +1,5 @@
 //! Thermal-drift elimination (Stejskal et al. 2017) against independent expectations.
+#![allow(clippy::needless_range_loop)]
 
 use metrology::axis_model::{AxisModel, Direction, Effect};
 use metrology::drift::{coverage_factor, eliminate};
@@ -21,7 +22,11 @@ fn student_t_widening_below_30_cycles() {
     // at p = Φ(2) = 0.977249868.
     let p: f64 = 0.977_249_868_051_820_8;
     let t2 = (2.0 * p - 1.0) / (2.0 * p * (1.0 - p)).sqrt();
-    assert!((coverage_factor(3) - t2).abs() < 1e-6, "{}", coverage_factor(3));
+    assert!(
+        (coverage_factor(3) - t2).abs() < 1e-6,
+        "{}",
+        coverage_factor(3)
+    );
     // 1 degree of freedom (Cauchy): t = tan(π(p − 1/2)).
     let t1 = (std::f64::consts::PI * (p - 0.5)).tan();
     assert!((coverage_factor(2) - t1).abs() < 1e-6);
@@ -38,7 +43,10 @@ fn cycle_offsets_vanish_from_the_rebuilt_chart() {
     let offsets = [0.0, 1.5, 3.2, 4.0, 4.4];
     let mut readings = Vec::new();
     for (c, off) in offsets.iter().enumerate() {
-        for (dir, sys) in [(Direction::Up, &m.systematic_up_um), (Direction::Down, &m.systematic_down_um)] {
+        for (dir, sys) in [
+            (Direction::Up, &m.systematic_up_um),
+            (Direction::Down, &m.systematic_down_um),
+        ] {
             for i in 0..6 {
                 readings.push(Reading {
                     cycle: c + 1,
@@ -53,10 +61,19 @@ fn cycle_offsets_vanish_from_the_rebuilt_chart() {
             }
         }
     }
-    let d = PositioningData { readings, has_times: true, material_compensation: true, ..Default::default() };
+    let d = PositioningData {
+        readings,
+        has_times: true,
+        material_compensation: true,
+        ..Default::default()
+    };
     let r = eliminate(&d, 3);
     for dd in &r.directions {
-        let sys = if dd.direction == Direction::Up { &m.systematic_up_um } else { &m.systematic_down_um };
+        let sys = if dd.direction == Direction::Up {
+            &m.systematic_up_um
+        } else {
+            &m.systematic_down_um
+        };
         for (p, s) in dd.chart.iter().zip(sys) {
             assert!((p.deviation_um.unwrap() - (s + 3.2)).abs() < 1e-9);
         }
@@ -75,7 +92,11 @@ fn without_drift_a_difference_scatters_sqrt2_times_more() {
     let r = eliminate(&d, 50);
     for dd in &r.directions {
         let mean_s: f64 = dd.pairs.iter().map(|p| p.s_diff_um.unwrap()).sum::<f64>() / 15.0;
-        assert!((mean_s / 0.5 - 2f64.sqrt()).abs() < 0.05, "{}", mean_s / 0.5);
+        assert!(
+            (mean_s / 0.5 - 2f64.sqrt()).abs() < 0.05,
+            "{}",
+            mean_s / 0.5
+        );
         let ratio = dd.mean_ratio.unwrap();
         assert!((ratio - 0.5f64.sqrt()).abs() < 0.04, "{ratio}");
     }
@@ -86,7 +107,14 @@ fn without_drift_a_difference_scatters_sqrt2_times_more() {
 #[test]
 fn drift_inflates_the_classic_scatter_only() {
     // 7 h run with a 12 µm warm-up: the classic s grows, the drift-free scatter stays √2·σ.
-    let m = axis(16, 0.4, vec![Effect::ExponentialWarmup { amplitude_um: 12.0, tau_s: 7200.0 }]);
+    let m = axis(
+        16,
+        0.4,
+        vec![Effect::ExponentialWarmup {
+            amplitude_um: 12.0,
+            tau_s: 7200.0,
+        }],
+    );
     let d = simulate(&m, &standard_schedule(16, 100, 7.0 * 3600.0 / 3200.0), 5);
     let r = eliminate(&d, 50);
     for dd in &r.directions {
@@ -99,10 +127,24 @@ fn drift_inflates_the_classic_scatter_only() {
 #[test]
 fn a_target_that_scatters_more_is_flagged() {
     for seed in 0..10 {
-        let m = axis(16, 0.3, vec![Effect::LocalAnomaly { index: 3, std_ratio: 4.0 }]);
+        let m = axis(
+            16,
+            0.3,
+            vec![Effect::LocalAnomaly {
+                index: 3,
+                std_ratio: 4.0,
+            }],
+        );
         let d = simulate(&m, &standard_schedule(16, 30, 6.0), seed);
         assert_eq!(eliminate(&d, 10).anomalous_targets, vec![3], "seed {seed}");
-        let m = axis(16, 0.3, vec![Effect::LocalAnomaly { index: 16, std_ratio: 4.0 }]);
+        let m = axis(
+            16,
+            0.3,
+            vec![Effect::LocalAnomaly {
+                index: 16,
+                std_ratio: 4.0,
+            }],
+        );
         let d = simulate(&m, &standard_schedule(16, 30, 6.0), seed);
         assert_eq!(eliminate(&d, 10).anomalous_targets, vec![16], "seed {seed}");
     }
@@ -119,7 +161,8 @@ fn a_target_that_scatters_more_is_flagged() {
 fn missing_reference_reading_is_substituted_and_said() {
     let m = axis(6, 0.3, vec![]);
     let mut d = simulate(&m, &standard_schedule(6, 8, 6.0), 1);
-    d.readings.retain(|r| !(r.cycle == 4 && r.index == 1 && r.direction == Direction::Up));
+    d.readings
+        .retain(|r| !(r.cycle == 4 && r.index == 1 && r.direction == Direction::Up));
     let r = eliminate(&d, 4);
     let up = &r.directions[0];
     assert_ne!(up.reference_cycle, Some(4));

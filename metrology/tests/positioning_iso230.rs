@@ -113,10 +113,17 @@ fn agrees_with_an_independent_python_implementation() {
         eprintln!("SKIPPED: python3 with numpy is not available");
         return;
     }
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/iso230_reference.py");
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/iso230_reference.py"
+    );
     for seed in 0..6u64 {
         let m = model(seed);
-        let mut d = simulate(&m, &standard_schedule(m.targets_mm.len(), 5 + seed as usize, 8.0), seed);
+        let mut d = simulate(
+            &m,
+            &standard_schedule(m.targets_mm.len(), 5 + seed as usize, 8.0),
+            seed,
+        );
         if seed % 2 == 1 {
             d.readings.remove(7); // a beam interruption
         }
@@ -124,14 +131,25 @@ fn agrees_with_an_independent_python_implementation() {
         let path = dir.path().join("run.csv");
         std::fs::write(&path, d.to_csv_string()).unwrap();
         let back = PositioningData::from_csv_path(&path).unwrap();
-        let out = std::process::Command::new("python3").arg(script).arg(&path).output().unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let out = std::process::Command::new("python3")
+            .arg(script)
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let py: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         let rs = serde_json::to_value(evaluate(&back).axis).unwrap();
         for (k, v) in py.as_object().unwrap() {
             let a = rs[k].as_f64().unwrap_or(f64::NAN);
             let b = v.as_f64().unwrap();
-            assert!((a - b).abs() < 1e-9, "seed {seed} key {k}: rust {a} python {b}");
+            assert!(
+                (a - b).abs() < 1e-9,
+                "seed {seed} key {k}: rust {a} python {b}"
+            );
         }
     }
 }

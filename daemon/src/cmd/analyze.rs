@@ -45,7 +45,11 @@ pub fn run(c: Command) -> anyhow::Result<()> {
 /// Reads a positioning run from a CSV dataset (or, once the log reader is merged, an MCAP
 /// log: the adapter goes here and must return the same [`PositioningData`]).
 pub fn load_positioning(path: &Path) -> anyhow::Result<PositioningData> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     if ext == "mcap" {
         anyhow::bail!(
             "{}: reading positioning runs from MCAP logs is not available in this build; \
@@ -80,14 +84,21 @@ pub struct MissingReading {
 }
 
 /// The analysis of a run (pure; what `demo` and `replay` can call too).
-pub fn analyze_positioning(data: &PositioningData, reference_cycle: Option<usize>) -> PositioningAnalysis {
+pub fn analyze_positioning(
+    data: &PositioningData,
+    reference_cycle: Option<usize>,
+) -> PositioningAnalysis {
     let iso: Iso230Report = iso230::evaluate(data);
     let ref_cycle = reference_cycle.unwrap_or_else(|| drift::default_reference_cycle(data));
     let drift = drift::eliminate(data, ref_cycle);
     let missing: Vec<MissingReading> = data
         .missing()
         .into_iter()
-        .map(|(cycle, d, index)| MissingReading { cycle, direction: dir_sign(d), index })
+        .map(|(cycle, d, index)| MissingReading {
+            cycle,
+            direction: dir_sign(d),
+            index,
+        })
         .collect();
     let mut notes = Vec::new();
     if !missing.is_empty() {
@@ -146,7 +157,9 @@ fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
                 .targets
                 .iter()
                 .max_by(|x, y| {
-                    let s = |t: &iso230::TargetStats| t.s_up_um.unwrap_or(0.0).max(t.s_down_um.unwrap_or(0.0));
+                    let s = |t: &iso230::TargetStats| {
+                        t.s_up_um.unwrap_or(0.0).max(t.s_down_um.unwrap_or(0.0))
+                    };
                     s(x).total_cmp(&s(y))
                 })
                 .map(|t| t.index)
@@ -267,12 +280,22 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
         let _ = writeln!(
             s,
             "\n  direction {sign}, chart anchored on target 1 of cycle {}",
-            dd.reference_cycle.map(|c| c.to_string()).unwrap_or_else(|| "—".into())
+            dd.reference_cycle
+                .map(|c| c.to_string())
+                .unwrap_or_else(|| "—".into())
         );
         let _ = writeln!(
             s,
             "  {:>7} {:>11} {:>9} {:>13} {:>11} {:>7}   {:>3} {:>11} {:>9}",
-            "pair", "x̄_i−x̄_i+1", "s_diff", "s classic", "ratio", "stands", "i", "drift-free", "±border"
+            "pair",
+            "x̄_i−x̄_i+1",
+            "s_diff",
+            "s classic",
+            "ratio",
+            "stands",
+            "i",
+            "drift-free",
+            "±border"
         );
         let _ = writeln!(
             s,
@@ -280,14 +303,28 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
             "", "µm", "µm", "µm (i+1)", "classic/df", "out", "", "µm", "µm"
         );
         let classic = |i: usize| {
-            an.targets.get(i).and_then(|t| if dd.direction == metrology::axis_model::Direction::Up { t.s_up_um } else { t.s_down_um })
+            an.targets.get(i).and_then(|t| {
+                if dd.direction == metrology::axis_model::Direction::Up {
+                    t.s_up_um
+                } else {
+                    t.s_down_um
+                }
+            })
         };
         for (k, pt) in dd.chart.iter().enumerate() {
             if k == 0 {
                 let _ = writeln!(
                     s,
                     "  {:>7} {:>11} {:>9} {:>13} {:>11} {:>7}   {:>3} {} {}",
-                    "", "", "", "", "", "", pt.index, f(pt.deviation_um, 11), f(pt.border_um, 9)
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    pt.index,
+                    f(pt.deviation_um, 11),
+                    f(pt.border_um, 9)
                 );
                 continue;
             }

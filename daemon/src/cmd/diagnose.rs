@@ -29,7 +29,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let data = crate::cmd::analyze::load_positioning(&args.input)?;
     let mut d: Diagnosis = diagnose::diagnose(&data, &Options::default())
         .with_context(|| format!("diagnosing {}", args.input.display()))?;
-    d.report.reproduction = Some(diagnose::reproduction_check(&data, &d.model, args.check_seeds));
+    d.report.reproduction = Some(diagnose::reproduction_check(
+        &data,
+        &d.model,
+        args.check_seeds,
+    ));
     if let Some(p) = &args.write_model {
         let toml = toml::to_string_pretty(&d.model).context("serialising the model")?;
         let header = format!(
@@ -39,7 +43,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if d.report.findings.is_empty() {
                 "none".to_string()
             } else {
-                d.report.findings.iter().map(|f| f.effect.as_str()).collect::<Vec<_>>().join(", ")
+                d.report
+                    .findings
+                    .iter()
+                    .map(|f| f.effect.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             }
         );
         std::fs::write(p, header + &toml).with_context(|| format!("writing {}", p.display()))?;
@@ -68,7 +77,11 @@ pub fn render_text(d: &Diagnosis) -> String {
         r.baseline.rms_um, r.baseline.heldout_rms_um
     );
     if r.findings.is_empty() {
-        let _ = writeln!(s, "No finding: the baseline explains the data (noise {:.3} µm).", d.model.noise_um);
+        let _ = writeln!(
+            s,
+            "No finding: the baseline explains the data (noise {:.3} µm).",
+            d.model.noise_um
+        );
     }
     for (k, f) in r.findings.iter().enumerate() {
         let params: Vec<String> = f
@@ -79,7 +92,13 @@ pub fn render_text(d: &Diagnosis) -> String {
                 None => format!("{name} = {v:.4}"),
             })
             .collect();
-        let _ = writeln!(s, "\n{}. {} (significance {:.1})", k + 1, f.effect, f.significance);
+        let _ = writeln!(
+            s,
+            "\n{}. {} (significance {:.1})",
+            k + 1,
+            f.effect,
+            f.significance
+        );
         let _ = writeln!(s, "   {}", params.join(", "));
         let _ = writeln!(
             s,
@@ -93,7 +112,11 @@ pub fn render_text(d: &Diagnosis) -> String {
             s,
             "\nSimulating the same run ({} seeds) — RMS of simulated − measured per-target statistics:\n   \
              extended model: x̄ {:.3} µm, s {:.3} µm\n   baseline model: x̄ {:.3} µm, s {:.3} µm",
-            rep.seeds, rep.mean_rms_um, rep.s_rms_um, rep.baseline_mean_rms_um, rep.baseline_s_rms_um
+            rep.seeds,
+            rep.mean_rms_um,
+            rep.s_rms_um,
+            rep.baseline_mean_rms_um,
+            rep.baseline_s_rms_um
         );
     }
     if let Some(p) = &r.extended_model {

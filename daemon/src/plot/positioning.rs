@@ -59,7 +59,11 @@ fn with_backend(
     draw_png: &dyn Fn(&DrawingArea<BitMapBackend, Shift>) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
     ensure_font()?;
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     match ext.as_str() {
         "svg" => {
             let root = SVGBackend::new(path, size).into_drawing_area();
@@ -123,20 +127,30 @@ fn band_chart<DB: DrawingBackend>(
             Direction::Up => (UP, "approach +"),
             Direction::Down => (DOWN, "approach −"),
         };
-        let mean: Vec<(f64, f64)> = pts.iter().filter_map(|(x, m, _)| Some((*x, (*m)?))).collect();
+        let mean: Vec<(f64, f64)> = pts
+            .iter()
+            .filter_map(|(x, m, _)| Some((*x, (*m)?)))
+            .collect();
         chart
             .draw_series(LineSeries::new(mean.clone(), c.stroke_width(2)))
             .map_err(e)?
             .label(name)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-        chart.draw_series(mean.iter().map(|p| Circle::new(*p, 3, c.filled()))).map_err(e)?;
+        chart
+            .draw_series(mean.iter().map(|p| Circle::new(*p, 3, c.filled())))
+            .map_err(e)?;
         for sign in [1.0, -1.0] {
             let edge: Vec<(f64, f64)> = pts
                 .iter()
                 .filter_map(|(x, m, b)| Some((*x, (*m)? + sign * (*b)?)))
                 .collect();
             let s = chart
-                .draw_series(DashedLineSeries::new(edge, 6, 4, c.mix(0.7).stroke_width(1)))
+                .draw_series(DashedLineSeries::new(
+                    edge,
+                    6,
+                    4,
+                    c.mix(0.7).stroke_width(1),
+                ))
                 .map_err(e)?;
             if sign > 0.0 && *dir == Direction::Up {
                 s.label(border_name).legend(move |(x, y)| {
@@ -168,18 +182,32 @@ fn draw_positioning_on<DB: DrawingBackend>(
     let iso: Vec<(Direction, Band)> = vec![
         (
             Direction::Up,
-            an.targets.iter().map(|t| (t.target_mm, t.mean_up_um, t.s_up_um.map(|s| 2.0 * s))).collect(),
+            an.targets
+                .iter()
+                .map(|t| (t.target_mm, t.mean_up_um, t.s_up_um.map(|s| 2.0 * s)))
+                .collect(),
         ),
         (
             Direction::Down,
-            an.targets.iter().map(|t| (t.target_mm, t.mean_down_um, t.s_down_um.map(|s| 2.0 * s))).collect(),
+            an.targets
+                .iter()
+                .map(|t| (t.target_mm, t.mean_down_um, t.s_down_um.map(|s| 2.0 * s)))
+                .collect(),
         ),
     ];
     let df: Vec<(Direction, Band)> = an
         .drift_elimination
         .directions
         .iter()
-        .map(|d| (d.direction, d.chart.iter().map(|p| (p.target_mm, p.deviation_um, p.border_um)).collect()))
+        .map(|d| {
+            (
+                d.direction,
+                d.chart
+                    .iter()
+                    .map(|p| (p.target_mm, p.deviation_um, p.border_um))
+                    .collect(),
+            )
+        })
         .collect();
     // One y scale for both charts so that the narrowing of the scatter is seen.
     let all = iso.iter().chain(&df).flat_map(|(_, v)| {
@@ -207,15 +235,31 @@ fn draw_positioning_on<DB: DrawingBackend>(
         data.readings
             .iter()
             .filter(|r| r.index == target && r.direction == dir)
-            .map(|r| (if data.has_times { r.time_s / 3600.0 } else { r.time_s }, r.deviation_um))
+            .map(|r| {
+                (
+                    if data.has_times {
+                        r.time_s / 3600.0
+                    } else {
+                        r.time_s
+                    },
+                    r.deviation_um,
+                )
+            })
             .collect()
     };
     let (up, down) = (pts(Direction::Up), pts(Direction::Down));
     let xr = range(up.iter().chain(&down).map(|p| p.0));
     let yr = range(up.iter().chain(&down).map(|p| p.1));
-    let x_mm = an.targets.get(target.wrapping_sub(1)).map(|t| t.target_mm).unwrap_or(f64::NAN);
+    let x_mm = an
+        .targets
+        .get(target.wrapping_sub(1))
+        .map(|t| t.target_mm)
+        .unwrap_or(f64::NAN);
     let mut chart = ChartBuilder::on(&bottom)
-        .caption(format!("target {target} ({x_mm:.3} mm): deviation vs time over the cycles"), (FONT, 20))
+        .caption(
+            format!("target {target} ({x_mm:.3} mm): deviation vs time over the cycles"),
+            (FONT, 20),
+        )
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(60)
@@ -223,7 +267,11 @@ fn draw_positioning_on<DB: DrawingBackend>(
         .map_err(e)?;
     chart
         .configure_mesh()
-        .x_desc(if data.has_times { "time / h" } else { "reading number (no times in the dataset)" })
+        .x_desc(if data.has_times {
+            "time / h"
+        } else {
+            "reading number (no times in the dataset)"
+        })
         .y_desc("deviation / µm")
         .label_style((FONT, 14))
         .light_line_style(RGBColor(235, 235, 235))
@@ -235,7 +283,9 @@ fn draw_positioning_on<DB: DrawingBackend>(
             .map_err(e)?
             .label(name)
             .legend(move |(x, y)| Circle::new((x + 10, y), 4, c.filled()));
-        chart.draw_series(p.iter().map(|q| Circle::new(*q, 3, c.filled()))).map_err(e)?;
+        chart
+            .draw_series(p.iter().map(|q| Circle::new(*q, 3, c.filled())))
+            .map_err(e)?;
     }
     chart
         .configure_series_labels()
@@ -278,7 +328,11 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
     root.fill(&WHITE).map_err(e)?;
     let areas = root.split_evenly((2, 2));
     let tscale = if data.has_times { 3600.0 } else { 1.0 };
-    let tdesc = if data.has_times { "time / h" } else { "reading number" };
+    let tdesc = if data.has_times {
+        "time / h"
+    } else {
+        "reading number"
+    };
     let t: Vec<f64> = data.readings.iter().map(|r| r.time_s / tscale).collect();
     let (t0, t1) = range(t.iter().copied());
     let xr = range(data.readings.iter().map(|r| r.target_mm));
@@ -287,15 +341,27 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
     let rb = &d.baseline_residuals_um;
     let yr = range(rb.iter().copied());
     let mut c = ChartBuilder::on(&areas[0])
-        .caption("baseline residuals vs time (line: found effects)", (FONT, 18))
+        .caption(
+            "baseline residuals vs time (line: found effects)",
+            (FONT, 18),
+        )
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
         .build_cartesian_2d(t0..t1, yr.0..yr.1)
         .map_err(e)?;
-    c.configure_mesh().x_desc(tdesc).y_desc("residual / µm").label_style((FONT, 13)).draw().map_err(e)?;
+    c.configure_mesh()
+        .x_desc(tdesc)
+        .y_desc("residual / µm")
+        .label_style((FONT, 13))
+        .draw()
+        .map_err(e)?;
     c.draw_series(data.readings.iter().zip(rb).map(|(r, v)| {
-        let col = if r.direction == Direction::Up { UP } else { DOWN };
+        let col = if r.direction == Direction::Up {
+            UP
+        } else {
+            DOWN
+        };
         Circle::new((r.time_s / tscale, *v), 2, col.mix(0.6).filled())
     }))
     .map_err(e)?;
@@ -303,11 +369,19 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
     let m = &d.model;
     let mid = m.targets_mm.len() / 2;
     let steps = 400;
-    let (ta, tb) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
+    let (ta, tb) = t
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
     let mut curve: Vec<(f64, f64)> = (0..=steps)
         .map(|k| {
             let ts = (ta + (tb - ta) * k as f64 / steps as f64) * tscale;
-            (ts / tscale, m.deterministic_um(mid, Direction::Up, ts) - m.systematic_up_um.get(mid).copied().unwrap_or(0.0))
+            (
+                ts / tscale,
+                m.deterministic_um(mid, Direction::Up, ts)
+                    - m.systematic_up_um.get(mid).copied().unwrap_or(0.0),
+            )
         })
         .collect();
     let mean = curve.iter().map(|p| p.1).sum::<f64>() / curve.len() as f64;
@@ -315,20 +389,33 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
         p.1 -= mean;
     }
     if !m.effects.is_empty() {
-        c.draw_series(LineSeries::new(curve, BLACK.stroke_width(2))).map_err(e)?;
+        c.draw_series(LineSeries::new(curve, BLACK.stroke_width(2)))
+            .map_err(e)?;
     }
 
     // 2: residuals against position and time together (colour = time).
     let mut c = ChartBuilder::on(&areas[1])
-        .caption("baseline residuals vs position (colour: time, blue → red)", (FONT, 18))
+        .caption(
+            "baseline residuals vs position (colour: time, blue → red)",
+            (FONT, 18),
+        )
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
         .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)
         .map_err(e)?;
-    c.configure_mesh().x_desc("target position / mm").y_desc("residual / µm").label_style((FONT, 13)).draw().map_err(e)?;
+    c.configure_mesh()
+        .x_desc("target position / mm")
+        .y_desc("residual / µm")
+        .label_style((FONT, 13))
+        .draw()
+        .map_err(e)?;
     c.draw_series(data.readings.iter().zip(rb).map(|(r, v)| {
-        Circle::new((r.target_mm, *v), 2, heat((r.time_s / tscale - t0) / (t1 - t0)).filled())
+        Circle::new(
+            (r.target_mm, *v),
+            2,
+            heat((r.time_s / tscale - t0) / (t1 - t0)).filled(),
+        )
     }))
     .map_err(e)?;
 
@@ -346,17 +433,39 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
     let sd: Vec<[f64; 2]> = s
         .iter()
         .zip(&n)
-        .map(|(s, n)| [0, 1].map(|k| if n[k] > 0 { (s[k] / n[k] as f64).sqrt() } else { 0.0 }))
+        .map(|(s, n)| {
+            [0, 1].map(|k| {
+                if n[k] > 0 {
+                    (s[k] / n[k] as f64).sqrt()
+                } else {
+                    0.0
+                }
+            })
+        })
         .collect();
-    let ymax = sd.iter().flat_map(|v| v.iter()).copied().fold(0.0, f64::max) * 1.15 + 1e-3;
+    let ymax = sd
+        .iter()
+        .flat_map(|v| v.iter())
+        .copied()
+        .fold(0.0, f64::max)
+        * 1.15
+        + 1e-3;
     let mut c = ChartBuilder::on(&areas[2])
-        .caption("RMS residual per target (after the found mean effects)", (FONT, 18))
+        .caption(
+            "RMS residual per target (after the found mean effects)",
+            (FONT, 18),
+        )
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
         .build_cartesian_2d(0.5f64..(n_t as f64 + 0.5), 0.0..ymax)
         .map_err(e)?;
-    c.configure_mesh().x_desc("target index").y_desc("RMS residual / µm").label_style((FONT, 13)).draw().map_err(e)?;
+    c.configure_mesh()
+        .x_desc("target index")
+        .y_desc("RMS residual / µm")
+        .label_style((FONT, 13))
+        .draw()
+        .map_err(e)?;
     for (k, col) in [(0usize, UP), (1, DOWN)] {
         c.draw_series(sd.iter().enumerate().map(|(i, v)| {
             let x0 = i as f64 + 1.0 + if k == 0 { -0.35 } else { 0.0 };
@@ -369,15 +478,27 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
     let rf = &d.residuals_um;
     let yr = range(rf.iter().copied());
     let mut c = ChartBuilder::on(&areas[3])
-        .caption("residuals of the extended model (rings: outliers)", (FONT, 18))
+        .caption(
+            "residuals of the extended model (rings: outliers)",
+            (FONT, 18),
+        )
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
         .build_cartesian_2d(t0..t1, yr.0..yr.1)
         .map_err(e)?;
-    c.configure_mesh().x_desc(tdesc).y_desc("residual / µm").label_style((FONT, 13)).draw().map_err(e)?;
+    c.configure_mesh()
+        .x_desc(tdesc)
+        .y_desc("residual / µm")
+        .label_style((FONT, 13))
+        .draw()
+        .map_err(e)?;
     c.draw_series(data.readings.iter().zip(rf).map(|(r, v)| {
-        let col = if r.direction == Direction::Up { UP } else { DOWN };
+        let col = if r.direction == Direction::Up {
+            UP
+        } else {
+            DOWN
+        };
         Circle::new((r.time_s / tscale, *v), 2, col.mix(0.6).filled())
     }))
     .map_err(e)?;
@@ -395,6 +516,11 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
 
 /// Draws the residual views of a diagnosis to `path` (.svg or .png).
 pub fn draw_diagnosis(path: &Path, data: &PositioningData, d: &Diagnosis) -> anyhow::Result<()> {
-    with_backend(path, (1500, 1000), &|r| draw_diagnosis_on(r, data, d), &|r| draw_diagnosis_on(r, data, d))
-        .with_context(|| "drawing the diagnosis charts".to_string())
+    with_backend(
+        path,
+        (1500, 1000),
+        &|r| draw_diagnosis_on(r, data, d),
+        &|r| draw_diagnosis_on(r, data, d),
+    )
+    .with_context(|| "drawing the diagnosis charts".to_string())
 }

@@ -186,15 +186,37 @@ pub fn print_out(text: &str) -> anyhow::Result<()> {
     }
 }
 
+thread_local! {
+    // Decimals of the tables: enough for three significant digits of the run's scatter
+    // (a nanometre stage and a large machine both read well).
+    static DECIMALS: std::cell::Cell<usize> = const { std::cell::Cell::new(2) };
+}
+
 fn f(v: Option<f64>, w: usize) -> String {
+    let p = DECIMALS.with(|d| d.get());
     match v {
-        Some(v) => format!("{v:>w$.2}"),
+        Some(v) => format!("{v:>w$.p$}"),
         None => format!("{:>w$}", "—"),
     }
 }
 
+fn choose_decimals(an: &PositioningAnalysis) -> usize {
+    let smallest = an
+        .targets
+        .iter()
+        .flat_map(|t| [t.s_up_um, t.s_down_um])
+        .flatten()
+        .filter(|s| *s > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    if !smallest.is_finite() {
+        return 2;
+    }
+    (2.0 - smallest.log10().floor()).clamp(2.0, 5.0) as usize
+}
+
 /// The human-readable report.
 pub fn render_text(an: &PositioningAnalysis) -> String {
+    DECIMALS.with(|d| d.set(choose_decimals(an)));
     let mut s = String::new();
     let _ = writeln!(
         s,

@@ -144,7 +144,13 @@ fn diagnose_finds_the_hidden_drift_and_writes_a_model_the_simulator_reads() {
         f["heldout_rms_after_um"].as_f64().unwrap() < f["heldout_rms_before_um"].as_f64().unwrap()
     );
     assert_eq!(v["extended_model"], model.to_str().unwrap());
-    let m: AxisModel = toml::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    #[derive(serde::Deserialize)]
+    struct Scenario {
+        axis: AxisModel,
+    }
+    let m = toml::from_str::<Scenario>(&std::fs::read_to_string(&model).unwrap())
+        .unwrap()
+        .axis;
     assert!(matches!(m.effects[0], Effect::CyclicDrift { .. }));
     assert!(
         v["reproduction"]["s_rms_um"].as_f64().unwrap()

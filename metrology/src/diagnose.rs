@@ -1177,6 +1177,29 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     })
 }
 
+/// An [`AxisModel`] as the `[axis]` table of a simulator scenario: what
+/// `diagnose --write-model` writes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AxisTable {
+    pub axis: AxisModel,
+}
+
+/// Reads an axis model from TOML: an `[axis]` table (as written by `--write-model` and found
+/// in scenarios; other tables are ignored) or a bare model.
+pub fn axis_model_from_toml(text: &str) -> Result<AxisModel, toml::de::Error> {
+    #[derive(Deserialize)]
+    struct Any {
+        axis: toml::Value,
+    }
+    // A bare model has `axis = "X"` (its name); a scenario has an `[axis]` table.
+    match toml::from_str::<Any>(text) {
+        Ok(Any {
+            axis: toml::Value::Table(t),
+        }) => toml::Value::Table(t).try_into(),
+        _ => toml::from_str::<AxisModel>(text),
+    }
+}
+
 /// The baseline model fitted from the data: per-target, per-direction means and the pooled
 /// noise, no effects.
 pub fn baseline_model(data: &PositioningData) -> AxisModel {

@@ -162,3 +162,19 @@ fn too_small_a_run_is_a_clear_error() {
     let e = diagnose(&d, &Options::default()).unwrap_err().to_string();
     assert!(e.contains("at least 3 cycles"), "{e}");
 }
+
+#[test]
+fn axis_model_reads_from_an_axis_table_or_bare() {
+    use metrology::diagnose::{AxisTable, axis_model_from_toml};
+    let m = axis(4, 0.3, vec![Effect::LinearDrift { rate_um_per_h: 1.0 }]);
+    let table = toml::to_string(&AxisTable { axis: m.clone() }).unwrap();
+    assert!(table.contains("[axis]"));
+    assert_eq!(axis_model_from_toml(&table).unwrap(), m);
+    let scenario = format!("seed = 3\n[program]\nx = 1\n{table}");
+    assert_eq!(axis_model_from_toml(&scenario).unwrap(), m);
+    assert_eq!(
+        axis_model_from_toml(&toml::to_string(&m).unwrap()).unwrap(),
+        m
+    );
+    assert!(axis_model_from_toml("axis = 3").is_err());
+}

@@ -14,7 +14,8 @@ pub struct Args {
     /// Print the JSON report (datasets.md, "Diagnosis report") instead of text.
     #[arg(long)]
     pub json: bool,
-    /// Write the extended axis model (TOML, as the simulator reads it) to FILE.
+    /// Write the extended axis model to FILE: the `[axis]` table of a simulator scenario
+    /// (TOML).
     #[arg(long, value_name = "FILE")]
     pub write_model: Option<PathBuf>,
     /// Draw the residual views (.svg or .png).
@@ -35,7 +36,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.check_seeds,
     ));
     if let Some(p) = &args.write_model {
-        let toml = toml::to_string_pretty(&d.model).context("serialising the model")?;
+        // The `[axis]` table of a simulator scenario (sim's `Scenario::axis`), so it can
+        // replace that table as it is.
+        let toml = toml::to_string_pretty(&metrology::diagnose::AxisTable {
+            axis: d.model.clone(),
+        })
+        .context("serialising the model")?;
         let header = format!(
             "# Axis model extended by `metrolog diagnose {}`: baseline fitted from the data plus\n\
              # the effects found ({}).\n",

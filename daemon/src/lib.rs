@@ -7,3 +7,4 @@ pub mod config;
 pub mod log;
 pub mod pipeline;
 pub mod service;
+pub mod plot;

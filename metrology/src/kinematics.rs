@@ -353,7 +353,7 @@ impl Machine {
     }
 
     /// Transform of one joint (parent → child) at value `q`, with its errors.
-    fn joint_transform(j: &Joint, q: f64, link: SmallDisplacement, motion: SmallDisplacement) -> Isometry3<f64> {
+    pub(crate) fn joint_transform(j: &Joint, q: f64, link: SmallDisplacement, motion: SmallDisplacement) -> Isometry3<f64> {
         // Workpiece side: the component moves opposite to the relative motion (ISO 841), and its
         // physical errors are the opposite of the relative-motion errors (module conventions).
         let (sign, link_d, motion_d) = match j.side {

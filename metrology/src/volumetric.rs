@@ -20,12 +20,12 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use nalgebra::Vector3;
+use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::kinematics::{
-    link_sensitivity, motion_sensitivity, AxisName, ErrorSource, Machine, Pose, SmallDisplacement,
+    link_sensitivity, motion_sensitivity, AxisName, ErrorSource, Joint, Machine, Pose, SmallDisplacement,
 };
 
 /// Errors of volumetric models and compensation tables.
@@ -354,24 +354,67 @@ pub fn volumetric_grid(
             return Err(VolumetricError::MissingAxis(a.letter()));
         }
     }
-    let xs = grid.values(0);
-    let ys = grid.values(1);
-    let zs = grid.values(2);
-    // Splines evaluated once per grid line, not once per point.
-    let dx: Vec<_> = xs.iter().map(|&q| errors.displacement(AxisName::X, q)).collect();
-    let dy: Vec<_> = ys.iter().map(|&q| errors.displacement(AxisName::Y, q)).collect();
-    let dz: Vec<_> = zs.iter().map(|&q| errors.displacement(AxisName::Z, q)).collect();
+    let vals = [grid.values(0), grid.values(1), grid.values(2)];
+    // Every joint's transform (actual and nominal) once per grid line, not once per point:
+    // the grid then costs a few isometry products per point (the 50³ budget is 100 ms).
+    let mut actual: [Vec<Isometry3<f64>>; 3] = Default::default();
+    let mut nominal: [Vec<Isometry3<f64>>; 3] = Default::default();
+    for j in machine.workpiece_joints.iter().chain(machine.tool_joints.iter()) {
+        let a = j.axis.index();
+        if a > 2 {
+            continue;
+        }
+        let link = errors.link_of(j.axis);
+        actual[a] = vals[a]
+            .iter()
+            .map(|&q| Machine::joint_transform(j, q, link, errors.displacement(j.axis, q)))
+            .collect();
+        nominal[a] = vals[a]
+            .iter()
+            .map(|&q| Machine::joint_transform(j, q, SmallDisplacement::ZERO, SmallDisplacement::ZERO))
+            .collect();
+    }
+    // A machine with rotary axes (held at zero here) goes through the general model.
+    let linear_only = machine
+        .workpiece_joints
+        .iter()
+        .chain(machine.tool_joints.iter())
+        .all(|j| j.axis.is_linear());
+    let tool = Point3::from(machine.tool_offset_mm);
+    let (xs, ys, zs) = (&vals[0], &vals[1], &vals[2]);
     let out: Vec<GridPoint> = (0..xs.len())
         .into_par_iter()
         .flat_map_iter(|i| {
-            let (ys, zs, dx, dy, dz) = (&ys, &zs, &dx, &dy, &dz);
-            let x = xs[i];
+            let (actual, nominal) = (&actual, &nominal);
             (0..ys.len()).flat_map(move |j| {
                 (0..zs.len()).map(move |k| {
-                    let pose = Pose::xyz(x, ys[j], zs[k]);
-                    let t = Tabulated { base: errors, d: [dx[i], dy[j], dz[k]] };
-                    let e = machine.volumetric_error_um(&pose, &t, None);
-                    GridPoint { pos_mm: [x, ys[j], zs[k]], error_um: [e.x, e.y, e.z] }
+                    let idx = [i, j, k];
+                    let pos = [xs[i], ys[j], zs[k]];
+                    let e = if linear_only {
+                        let chain = |js: &[Joint], t: &[Vec<Isometry3<f64>>; 3]| {
+                            js.iter().fold(Isometry3::identity(), |acc, jt| {
+                                let a = jt.axis.index();
+                                acc * t[a][idx[a]]
+                            })
+                        };
+                        let tw_n = chain(&machine.workpiece_joints, nominal);
+                        let tt_n = chain(&machine.tool_joints, nominal);
+                        let w = tw_n.inverse_transform_point(&(tt_n * tool));
+                        let p_tool = chain(&machine.tool_joints, actual) * tool;
+                        let p_work = chain(&machine.workpiece_joints, actual) * w;
+                        (p_tool - p_work) * 1e3
+                    } else {
+                        let t = Tabulated {
+                            base: errors,
+                            d: [
+                                errors.displacement(AxisName::X, pos[0]),
+                                errors.displacement(AxisName::Y, pos[1]),
+                                errors.displacement(AxisName::Z, pos[2]),
+                            ],
+                        };
+                        machine.volumetric_error_um(&Pose::xyz(pos[0], pos[1], pos[2]), &t, None)
+                    };
+                    GridPoint { pos_mm: pos, error_um: [e.x, e.y, e.z] }
                 })
             })
         })

@@ -129,3 +129,24 @@ fn grid_and_compensation_tables() {
     let s = summarize(&pts);
     assert_eq!(s.n_points, 60);
 }
+
+#[test]
+fn grid_fast_path_matches_the_general_model() {
+    let mut csv = String::from("error,position_mm,value\nEC0Y,,20\nEB0Z,,-10\nEA0Z,,5\n");
+    for (n, name) in ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX", "EXY", "EYY", "EZY", "EAY", "EBY", "ECY", "EXZ", "EYZ", "EZZ", "EAZ", "EBZ", "ECZ"].iter().enumerate() {
+        for i in 0..=8 {
+            let q = i as f64 * 60.0;
+            csv.push_str(&format!("{name},{q},{}\n", (q / 90.0 + n as f64).sin() * 30.0));
+        }
+    }
+    let e = errors_from(&csv);
+    for chain in ["WYFXZT", "WFXYZT", "WXYFZT"] {
+        let cfg = MachineConfig { chain: chain.into(), tool_offset_mm: [5.0, -3.0, -100.0], axes: Default::default() };
+        let m = Machine::from_config(&cfg).unwrap();
+        let g = GridSpec::parse("0:480:4,10:400:3,0:300:5").unwrap();
+        for p in volumetric_grid(&m, &e, &g).unwrap() {
+            let v = m.volumetric_error_um(&Pose::xyz(p.pos_mm[0], p.pos_mm[1], p.pos_mm[2]), &e, None);
+            assert!((v - Vector3::from(p.error_um)).norm() < 1e-9, "{chain} {:?}", p.pos_mm);
+        }
+    }
+}

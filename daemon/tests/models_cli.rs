@@ -1,5 +1,8 @@
 //! The model commands end to end, on the example inputs and on broken inputs.
 
+// Parallel arrays indexed together read more plainly with an index.
+#![allow(clippy::needless_range_loop)]
+
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -12,8 +15,15 @@ fn ex(name: &str) -> String {
 }
 
 fn run(args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_metrolog")).args(args).output().expect("run metrolog");
-    (o.status.success(), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
+    let o = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(args)
+        .output()
+        .expect("run metrolog");
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stdout).into(),
+        String::from_utf8_lossy(&o.stderr).into(),
+    )
 }
 
 #[test]
@@ -56,8 +66,20 @@ fn volumetric_writes_tables() {
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["summary"]["n_points"], 120);
     assert_eq!(std::fs::read_to_string(&csv).unwrap().lines().count(), 121);
-    assert!(std::fs::read_to_string(&ini).unwrap().contains("$AN_CEC_OUTPUT_AXIS[8]=(AX3)"));
-    let (ok, _, err) = run(&["volumetric", "--machine", &m, "--errors", &e, "--grid", "0:500"]);
+    assert!(
+        std::fs::read_to_string(&ini)
+            .unwrap()
+            .contains("$AN_CEC_OUTPUT_AXIS[8]=(AX3)")
+    );
+    let (ok, _, err) = run(&[
+        "volumetric",
+        "--machine",
+        &m,
+        "--errors",
+        &e,
+        "--grid",
+        "0:500",
+    ]);
     assert!(!ok && err.contains("min:max:count"), "{err}");
 }
 
@@ -110,18 +132,35 @@ fn identify_errors_are_clear() {
     std::fs::write(&f, "run,pose,time_s,x_mm,y_mm,z_mm,a_deg,c_deg,ex_um,ey_um,ez_um\n1,1,0,120,80,100,0,0,1,2,3\n").unwrap();
     let (ok, _, err) = run(&["identify", "capball", fs]);
     assert!(!ok && err.contains("measure more poses"), "{err}");
-    std::fs::write(&f, "run,pose,x_mm,y_mm,z_mm,a_deg,c_deg,ex_mm,ey_mm,ez_mm\n1,1,120,80,100,0,0,1,2,3\n").unwrap();
+    std::fs::write(
+        &f,
+        "run,pose,x_mm,y_mm,z_mm,a_deg,c_deg,ex_mm,ey_mm,ez_mm\n1,1,120,80,100,0,0,1,2,3\n",
+    )
+    .unwrap();
     let (ok, _, err) = run(&["identify", "capball", fs]);
     assert!(!ok && err.contains("µm"), "{err}");
     let (ok, _, err) = run(&["identify", "capball", "/nonexistent/x.mcap"]);
     assert!(!ok && err.contains("CSV"), "{err}");
-    let (ok, _, err) = run(&["identify", "psd", &ex("psd_readings.csv"), "--reference", "9"]);
+    let (ok, _, err) = run(&[
+        "identify",
+        "psd",
+        &ex("psd_readings.csv"),
+        "--reference",
+        "9",
+    ]);
     assert!(!ok && err.contains("reference run 9"), "{err}");
 }
 
 #[test]
 fn identify_psd_trajectory_and_sensor_frame() {
-    let (ok, out, err) = run(&["identify", "psd", &ex("psd_readings.csv"), "--reference", "0", "--json"]);
+    let (ok, out, err) = run(&[
+        "identify",
+        "psd",
+        &ex("psd_readings.csv"),
+        "--reference",
+        "0",
+        "--json",
+    ]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     // The example's warm run tilts Z by EB0Z = 6 µrad; with 0.15 µm reading noise,
@@ -130,11 +169,23 @@ fn identify_psd_trajectory_and_sensor_frame() {
     assert!((eb0z - 6.0).abs() < 7.0, "{eb0z}");
     let dir = tempfile::tempdir().unwrap();
     let t = dir.path().join("t.csv");
-    let (ok, out, err) = run(&["identify", "trajectory", "--out", t.to_str().unwrap(), "--poses", "200"]);
+    let (ok, out, err) = run(&[
+        "identify",
+        "trajectory",
+        "--out",
+        t.to_str().unwrap(),
+        "--poses",
+        "200",
+    ]);
     assert!(ok, "{err}");
     assert!(out.contains("condition number"));
     assert_eq!(std::fs::read_to_string(&t).unwrap().lines().count(), 201);
-    let (ok, out, err) = run(&["identify", "sensor-frame", &ex("capball_cube.csv"), "--json"]);
+    let (ok, out, err) = run(&[
+        "identify",
+        "sensor-frame",
+        &ex("capball_cube.csv"),
+        "--json",
+    ]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert!((v["gains"][0].as_f64().unwrap() - 1.006).abs() < 0.001);

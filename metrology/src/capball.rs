@@ -36,8 +36,8 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, SMatrix, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 use crate::kinematics::{
-    link_sensitivity, AxisName, ErrorSource, KinematicsError, Machine, MachineConfig, AxisConfig, Pose,
-    SmallDisplacement,
+    AxisConfig, AxisName, ErrorSource, KinematicsError, Machine, MachineConfig, Pose,
+    SmallDisplacement, link_sensitivity,
 };
 
 /// Number of identified parameters (8 link + 6 setup).
@@ -45,8 +45,20 @@ pub const N_PARAMS: usize = 14;
 
 /// Names of the parameters, in the order of the parameter vector.
 pub const PARAM_NAMES: [&str; N_PARAMS] = [
-    "EC0Y_urad", "EB0Z_urad", "EA0Z_urad", "EB0A_urad", "EC0A_urad", "EA0C_urad", "EB0C_urad", "EY0C_um",
-    "ball_x_um", "ball_y_um", "ball_z_um", "tool_x_um", "tool_y_um", "tool_z_um",
+    "EC0Y_urad",
+    "EB0Z_urad",
+    "EA0Z_urad",
+    "EB0A_urad",
+    "EC0A_urad",
+    "EA0C_urad",
+    "EB0C_urad",
+    "EY0C_um",
+    "ball_x_um",
+    "ball_y_um",
+    "ball_z_um",
+    "tool_x_um",
+    "tool_y_um",
+    "tool_z_um",
 ];
 
 /// Errors of CapBall identification and calibration.
@@ -62,13 +74,19 @@ pub enum CapballError {
     #[error("pose {index}: a position or measured value is not a finite number")]
     NonFinite { index: usize },
     /// the trajectory does not excite every parameter (condition number {condition:.3e}); the least determined is {worst}: sweep A and C over wider ranges
-    #[error("the trajectory does not excite every parameter (condition number {condition:.3e}); the least determined is {worst}: sweep A and C over wider ranges")]
+    #[error(
+        "the trajectory does not excite every parameter (condition number {condition:.3e}); the least determined is {worst}: sweep A and C over wider ranges"
+    )]
     Singular { condition: f64, worst: String },
     /// pose {index}: volumetric error of {value_um:.0} µm is implausible for a CapBall (range about ±1000 µm): are the values in µm?
-    #[error("pose {index}: volumetric error of {value_um:.0} µm is implausible for a CapBall (range about ±1000 µm): are the values in µm?")]
+    #[error(
+        "pose {index}: volumetric error of {value_um:.0} µm is implausible for a CapBall (range about ±1000 µm): are the values in µm?"
+    )]
     Implausible { index: usize, value_um: f64 },
     /// the poses do not keep the tool on one ball position (spread {spread_mm:.3} mm): check the machine description (chain, pivots) or the pose columns
-    #[error("the poses do not keep the tool on one ball position (spread {spread_mm:.3} mm): check the machine description (chain, pivots) or the pose columns")]
+    #[error(
+        "the poses do not keep the tool on one ball position (spread {spread_mm:.3} mm): check the machine description (chain, pivots) or the pose columns"
+    )]
     NotOnBall { spread_mm: f64 },
     /// the sensor-frame calibration needs at least 4 non-coplanar points, got {0}
     #[error("the sensor-frame calibration needs at least 4 non-coplanar points, got {0}")]
@@ -117,8 +135,20 @@ impl CapballErrors {
         let l = &self.link;
         let s = &self.setup;
         [
-            l.ec0y_urad, l.eb0z_urad, l.ea0z_urad, l.eb0a_urad, l.ec0a_urad, l.ea0c_urad, l.eb0c_urad, l.ey0c_um,
-            s.ball_x_um, s.ball_y_um, s.ball_z_um, s.tool_x_um, s.tool_y_um, s.tool_z_um,
+            l.ec0y_urad,
+            l.eb0z_urad,
+            l.ea0z_urad,
+            l.eb0a_urad,
+            l.ec0a_urad,
+            l.ea0c_urad,
+            l.eb0c_urad,
+            l.ey0c_um,
+            s.ball_x_um,
+            s.ball_y_um,
+            s.ball_z_um,
+            s.tool_x_um,
+            s.tool_y_um,
+            s.tool_z_um,
         ]
     }
 
@@ -152,18 +182,38 @@ impl ErrorSource for CapballErrors {
         let l = &self.link;
         let (rot, trans) = match axis {
             AxisName::Y => (Vector3::new(0.0, 0.0, l.ec0y_urad), Vector3::zeros()),
-            AxisName::Z => (Vector3::new(l.ea0z_urad, l.eb0z_urad, 0.0), Vector3::zeros()),
-            AxisName::A => (Vector3::new(0.0, l.eb0a_urad, l.ec0a_urad), Vector3::zeros()),
-            AxisName::C => (Vector3::new(l.ea0c_urad, l.eb0c_urad, 0.0), Vector3::new(0.0, l.ey0c_um, 0.0)),
+            AxisName::Z => (
+                Vector3::new(l.ea0z_urad, l.eb0z_urad, 0.0),
+                Vector3::zeros(),
+            ),
+            AxisName::A => (
+                Vector3::new(0.0, l.eb0a_urad, l.ec0a_urad),
+                Vector3::zeros(),
+            ),
+            AxisName::C => (
+                Vector3::new(l.ea0c_urad, l.eb0c_urad, 0.0),
+                Vector3::new(0.0, l.ey0c_um, 0.0),
+            ),
             _ => (Vector3::zeros(), Vector3::zeros()),
         };
-        SmallDisplacement { rot_urad: rot, trans_um: trans }
+        SmallDisplacement {
+            rot_urad: rot,
+            trans_um: trans,
+        }
     }
     fn tool_offset_um(&self) -> Vector3<f64> {
-        Vector3::new(self.setup.tool_x_um, self.setup.tool_y_um, self.setup.tool_z_um)
+        Vector3::new(
+            self.setup.tool_x_um,
+            self.setup.tool_y_um,
+            self.setup.tool_z_um,
+        )
     }
     fn work_point_um(&self) -> Vector3<f64> {
-        Vector3::new(self.setup.ball_x_um, self.setup.ball_y_um, self.setup.ball_z_um)
+        Vector3::new(
+            self.setup.ball_x_um,
+            self.setup.ball_y_um,
+            self.setup.ball_z_um,
+        )
     }
 }
 
@@ -223,14 +273,23 @@ pub struct TrajectorySpec {
 impl Default for TrajectorySpec {
     /// The scale of paper 001: 807 poses.
     fn default() -> Self {
-        Self { n_poses: 807, a_start_deg: 0.0, a_end_deg: -90.0, c_turns: 6.0 }
+        Self {
+            n_poses: 807,
+            a_start_deg: 0.0,
+            a_end_deg: -90.0,
+            c_turns: 6.0,
+        }
     }
 }
 
 impl TrajectorySpec {
     /// The validation trajectory of paper 001: the same sweep with A running the other way.
     pub fn reversed_a(&self) -> Self {
-        Self { a_start_deg: self.a_end_deg, a_end_deg: self.a_start_deg, ..*self }
+        Self {
+            a_start_deg: self.a_end_deg,
+            a_end_deg: self.a_start_deg,
+            ..*self
+        }
     }
 }
 
@@ -239,8 +298,12 @@ impl CapballSetup {
     /// origin, and a ball at (120, 80, 100) mm on the table (our choice; the paper does not
     /// give its ball position).
     pub fn paper_default() -> Self {
-        let machine = Machine::from_chain("WCAYFXZT").unwrap_or_else(|_| unreachable!("fixed chain"));
-        Self { machine, ball_mm: Vector3::new(120.0, 80.0, 100.0) }
+        let machine =
+            Machine::from_chain("WCAYFXZT").unwrap_or_else(|_| unreachable!("fixed chain"));
+        Self {
+            machine,
+            ball_mm: Vector3::new(120.0, 80.0, 100.0),
+        }
     }
 
     /// A setup from a machine description (TOML) and a ball position.
@@ -260,29 +323,59 @@ impl CapballSetup {
     /// The machine description of [`Self::paper_default`], as a config.
     pub fn paper_machine_config() -> MachineConfig {
         let mut axes = std::collections::BTreeMap::new();
-        axes.insert("A".into(), AxisConfig { direction: Some([1.0, 0.0, 0.0]), pivot_mm: Some([0.0; 3]) });
-        axes.insert("C".into(), AxisConfig { direction: Some([0.0, 0.0, 1.0]), pivot_mm: Some([0.0; 3]) });
-        MachineConfig { chain: "WCAYFXZT".into(), tool_offset_mm: [0.0; 3], axes }
+        axes.insert(
+            "A".into(),
+            AxisConfig {
+                direction: Some([1.0, 0.0, 0.0]),
+                pivot_mm: Some([0.0; 3]),
+            },
+        );
+        axes.insert(
+            "C".into(),
+            AxisConfig {
+                direction: Some([0.0, 0.0, 1.0]),
+                pivot_mm: Some([0.0; 3]),
+            },
+        );
+        MachineConfig {
+            chain: "WCAYFXZT".into(),
+            tool_offset_mm: [0.0; 3],
+            axes,
+        }
     }
 
     /// Find the ball from the poses (the table point under the tool), checking that every
     /// pose holds the tool on the same point within 10 µm.
     pub fn with_ball_from_poses(machine: Machine, poses: &[Pose]) -> Result<Self, CapballError> {
         if poses.is_empty() {
-            return Err(CapballError::TooFewPoses { n: 0, eq: 0, need: N_PARAMS });
+            return Err(CapballError::TooFewPoses {
+                n: 0,
+                eq: 0,
+                need: N_PARAMS,
+            });
         }
-        let pts: Vec<Vector3<f64>> = poses.iter().map(|p| machine.nominal_work_point_mm(p)).collect();
+        let pts: Vec<Vector3<f64>> = poses
+            .iter()
+            .map(|p| machine.nominal_work_point_mm(p))
+            .collect();
         let mean = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
         let spread = pts.iter().map(|p| (p - mean).norm()).fold(0.0, f64::max);
-        if !(spread <= 0.01) {
+        if spread.is_nan() || spread > 0.01 {
             return Err(CapballError::NotOnBall { spread_mm: spread });
         }
-        Ok(Self { machine, ball_mm: mean })
+        Ok(Self {
+            machine,
+            ball_mm: mean,
+        })
     }
 
     /// The pose that holds the nominal tool point on the ball at angles `a_deg`, `c_deg`.
     pub fn pose_for(&self, a_deg: f64, c_deg: f64) -> Pose {
-        let p = Pose { a_deg, c_deg, ..Pose::default() };
+        let p = Pose {
+            a_deg,
+            c_deg,
+            ..Pose::default()
+        };
         self.machine.inverse_linear(&p, self.ball_mm)
     }
 
@@ -292,7 +385,11 @@ impl CapballSetup {
         let n = spec.n_poses.max(1);
         (0..n)
             .map(|i| {
-                let t = if n > 1 { i as f64 / (n - 1) as f64 } else { 0.0 };
+                let t = if n > 1 {
+                    i as f64 / (n - 1) as f64
+                } else {
+                    0.0
+                };
                 let a = spec.a_start_deg + (spec.a_end_deg - spec.a_start_deg) * t;
                 let c = (360.0 * spec.c_turns * t).rem_euclid(360.0);
                 self.pose_for(a, c)
@@ -303,7 +400,8 @@ impl CapballSetup {
     /// What the CapBall reads at a pose (exact rigid-body forward model), µm, machine frame.
     /// This is the model the simulator uses.
     pub fn volumetric_error_um(&self, errors: &CapballErrors, pose: &Pose) -> Vector3<f64> {
-        self.machine.volumetric_error_um(pose, errors, Some(self.ball_mm))
+        self.machine
+            .volumetric_error_um(pose, errors, Some(self.ball_mm))
     }
 
     /// Analytic identification Jacobian at a pose (3 × 14): each column is the small
@@ -344,7 +442,8 @@ impl CapballSetup {
     pub fn stacked_jacobian(&self, poses: &[Pose]) -> DMatrix<f64> {
         let mut j = DMatrix::zeros(3 * poses.len(), N_PARAMS);
         for (i, p) in poses.iter().enumerate() {
-            j.view_mut((3 * i, 0), (3, N_PARAMS)).copy_from(&self.jacobian(p));
+            j.view_mut((3 * i, 0), (3, N_PARAMS))
+                .copy_from(&self.jacobian(p));
         }
         j
     }
@@ -358,21 +457,35 @@ impl CapballSetup {
     }
 
     /// Least-squares identification of the 14 parameters (paper 001, eq. 5) with covariance.
-    pub fn identify(&self, poses: &[Pose], measured_um: &[[f64; 3]]) -> Result<Identification, CapballError> {
+    pub fn identify(
+        &self,
+        poses: &[Pose],
+        measured_um: &[[f64; 3]],
+    ) -> Result<Identification, CapballError> {
         let n = poses.len();
         if measured_um.len() != n {
-            return Err(CapballError::LengthMismatch { poses: n, values: measured_um.len() });
+            return Err(CapballError::LengthMismatch {
+                poses: n,
+                values: measured_um.len(),
+            });
         }
         // One more equation than parameters, so that a residual variance exists.
         if 3 * n <= N_PARAMS {
-            return Err(CapballError::TooFewPoses { n, eq: 3 * n, need: N_PARAMS });
+            return Err(CapballError::TooFewPoses {
+                n,
+                eq: 3 * n,
+                need: N_PARAMS,
+            });
         }
         for (i, (p, m)) in poses.iter().zip(measured_um).enumerate() {
             if p.check_finite().is_err() || m.iter().any(|v| !v.is_finite()) {
                 return Err(CapballError::NonFinite { index: i + 1 });
             }
             if let Some(v) = m.iter().copied().find(|v| v.abs() > 5000.0) {
-                return Err(CapballError::Implausible { index: i + 1, value_um: v });
+                return Err(CapballError::Implausible {
+                    index: i + 1,
+                    value_um: v,
+                });
             }
         }
         let j = self.stacked_jacobian(poses);
@@ -385,7 +498,10 @@ impl CapballSetup {
         let qtb14 = qtb.rows(0, N_PARAMS).into_owned();
         let svd = r.svd(true, true);
         let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
-            return Err(CapballError::Singular { condition: f64::INFINITY, worst: "?".into() });
+            return Err(CapballError::Singular {
+                condition: f64::INFINITY,
+                worst: "?".into(),
+            });
         };
         let sv = &svd.singular_values;
         let (mut imax, mut imin) = (0, 0);
@@ -397,8 +513,12 @@ impl CapballSetup {
                 imin = i;
             }
         }
-        let condition = if sv[imin] > 0.0 { sv[imax] / sv[imin] } else { f64::INFINITY };
-        if !(condition < 1e8) {
+        let condition = if sv[imin] > 0.0 {
+            sv[imax] / sv[imin]
+        } else {
+            f64::INFINITY
+        };
+        if condition.is_nan() || condition >= 1e8 {
             let v = vt.row(imin);
             let worst = (0..N_PARAMS)
                 .max_by(|&a, &b| v[a].abs().total_cmp(&v[b].abs()))
@@ -438,7 +558,9 @@ impl CapballSetup {
         Ok(Identification {
             errors: CapballErrors::from_slice(&params),
             std_uncertainty: (0..N_PARAMS).map(|i| cov[(i, i)].max(0.0).sqrt()).collect(),
-            covariance: (0..N_PARAMS).map(|i| (0..N_PARAMS).map(|k| cov[(i, k)]).collect()).collect(),
+            covariance: (0..N_PARAMS)
+                .map(|i| (0..N_PARAMS).map(|k| cov[(i, k)]).collect())
+                .collect(),
             params,
             condition_number: condition,
             residual_rms_um: rms,
@@ -457,10 +579,17 @@ impl CapballSetup {
         measured_um: &[[f64; 3]],
     ) -> Result<[f64; 3], CapballError> {
         if measured_um.len() != poses.len() {
-            return Err(CapballError::LengthMismatch { poses: poses.len(), values: measured_um.len() });
+            return Err(CapballError::LengthMismatch {
+                poses: poses.len(),
+                values: measured_um.len(),
+            });
         }
         if poses.is_empty() {
-            return Err(CapballError::TooFewPoses { n: 0, eq: 0, need: 1 });
+            return Err(CapballError::TooFewPoses {
+                n: 0,
+                eq: 0,
+                need: 1,
+            });
         }
         let p = DVector::from_column_slice(&ident.params);
         let mut rms = [0.0; 3];
@@ -483,8 +612,13 @@ impl CapballSetup {
 /// The forward model of [`CapballSetup::paper_default`]: link and setup errors plus a pose
 /// (x, y, z in mm, a, c in degrees) → volumetric error (ex, ey, ez) in µm. What `sim/` calls.
 pub fn forward_um(link: &LinkErrors, setup: &SetupErrors, pose: &Pose) -> [f64; 3] {
-    let e = CapballSetup::paper_default()
-        .volumetric_error_um(&CapballErrors { link: *link, setup: *setup }, pose);
+    let e = CapballSetup::paper_default().volumetric_error_um(
+        &CapballErrors {
+            link: *link,
+            setup: *setup,
+        },
+        pose,
+    );
     [e.x, e.y, e.z]
 }
 
@@ -558,7 +692,10 @@ pub fn calibrate_sensor_frame(
 ) -> Result<SensorFrame, CapballError> {
     let n = programmed_um.len();
     if readings_um.len() != n {
-        return Err(CapballError::LengthMismatch { poses: n, values: readings_um.len() });
+        return Err(CapballError::LengthMismatch {
+            poses: n,
+            values: readings_um.len(),
+        });
     }
     if n < 4 {
         return Err(CapballError::CalibrationPoints(n));
@@ -575,10 +712,14 @@ pub fn calibrate_sensor_frame(
     if sv_min <= sv_max * 1e-10 {
         return Err(CapballError::CalibrationPoints(n));
     }
-    let pinv = svd.pseudo_inverse(sv_max * 1e-12).map_err(|_| CapballError::CalibrationPoints(n))?;
+    let pinv = svd
+        .pseudo_inverse(sv_max * 1e-12)
+        .map_err(|_| CapballError::CalibrationPoints(n))?;
     let t = &hm * pinv;
     let t4 = Matrix4::from_fn(|i, k| t[(i, k)]);
-    let cols: Vec<Vector3<f64>> = (0..3).map(|k| Vector3::new(t4[(0, k)], t4[(1, k)], t4[(2, k)])).collect();
+    let cols: Vec<Vector3<f64>> = (0..3)
+        .map(|k| Vector3::new(t4[(0, k)], t4[(1, k)], t4[(2, k)]))
+        .collect();
     let gains = [cols[0].norm(), cols[1].norm(), cols[2].norm()];
     let u: Vec<Vector3<f64>> = cols.iter().map(|c| c / c.norm()).collect();
     let resid = &t * &hs - &hm;
@@ -587,7 +728,11 @@ pub fn calibrate_sensor_frame(
         t: std::array::from_fn(|i| std::array::from_fn(|k| t4[(i, k)])),
         gains,
         gain_error_pct: gains.map(|g| (g - 1.0) * 100.0),
-        non_orthogonality_urad: [u[0].dot(&u[1]) * 1e6, u[0].dot(&u[2]) * 1e6, u[1].dot(&u[2]) * 1e6],
+        non_orthogonality_urad: [
+            u[0].dot(&u[1]) * 1e6,
+            u[0].dot(&u[2]) * 1e6,
+            u[1].dot(&u[2]) * 1e6,
+        ],
         offsets_um: [t4[(0, 3)], t4[(1, 3)], t4[(2, 3)]],
         last_row: [t4[(3, 0)], t4[(3, 1)], t4[(3, 2)], t4[(3, 3)]],
         residual_rms_um: rms,
@@ -598,8 +743,15 @@ pub fn calibrate_sensor_frame(
 /// What the three sensors read for a machine-frame displacement `m_um`, given the true sensor
 /// directions as the columns of `directions` (gains included) and offsets: `m = D s + o`, so
 /// `s = D⁻¹ (m − o)`. For simulation of the calibration cube.
-pub fn sensor_readings_um(directions: &Matrix3<f64>, offsets_um: &Vector3<f64>, m_um: &Vector3<f64>) -> Vector3<f64> {
-    directions.try_inverse().map(|inv| inv * (m_um - offsets_um)).unwrap_or_else(Vector3::zeros)
+pub fn sensor_readings_um(
+    directions: &Matrix3<f64>,
+    offsets_um: &Vector3<f64>,
+    m_um: &Vector3<f64>,
+) -> Vector3<f64> {
+    directions
+        .try_inverse()
+        .map(|inv| inv * (m_um - offsets_um))
+        .unwrap_or_else(Vector3::zeros)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -633,13 +785,20 @@ pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
             )));
         }
         if matches!(h, "a_rad" | "c_rad") {
-            return Err(err(format!("column `{h}`: angles must be given in degrees as a_deg, c_deg")));
+            return Err(err(format!(
+                "column `{h}`: angles must be given in degrees as a_deg, c_deg"
+            )));
         }
     }
-    let need = ["pose", "x_mm", "y_mm", "z_mm", "a_deg", "c_deg", "ex_um", "ey_um", "ez_um"];
+    let need = [
+        "pose", "x_mm", "y_mm", "z_mm", "a_deg", "c_deg", "ex_um", "ey_um", "ez_um",
+    ];
     let mut idx = Vec::new();
     for n in need {
-        idx.push(col(n).ok_or_else(|| err(format!("missing column `{n}` (header must name {need:?})")))?);
+        idx.push(
+            col(n)
+                .ok_or_else(|| err(format!("missing column `{n}` (header must name {need:?})")))?,
+        );
     }
     let run_col = col("run");
     let time_col = col("time_s");
@@ -652,11 +811,19 @@ pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
             s.parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .ok_or_else(|| err(format!("row {row}: column `{name}`: `{s}` is not a finite number")))
+                .ok_or_else(|| {
+                    err(format!(
+                        "row {row}: column `{name}`: `{s}` is not a finite number"
+                    ))
+                })
         };
         let int = |i: usize, name: &str| -> Result<u32, CapballError> {
             let s = rec.get(i).unwrap_or("");
-            s.parse::<u32>().map_err(|_| err(format!("row {row}: column `{name}`: `{s}` is not a whole number")))
+            s.parse::<u32>().map_err(|_| {
+                err(format!(
+                    "row {row}: column `{name}`: `{s}` is not a whole number"
+                ))
+            })
         };
         let pose = Pose {
             x_mm: num(idx[1], "x_mm")?,
@@ -677,7 +844,11 @@ pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
                 _ => None,
             },
             pose,
-            e_um: [num(idx[6], "ex_um")?, num(idx[7], "ey_um")?, num(idx[8], "ez_um")?],
+            e_um: [
+                num(idx[6], "ex_um")?,
+                num(idx[7], "ey_um")?,
+                num(idx[8], "ez_um")?,
+            ],
         });
     }
     if out.is_empty() {
@@ -693,8 +864,17 @@ pub fn write_dataset(records: &[CapballRecord]) -> String {
         let t = r.time_s.map(|t| format!("{t:.3}")).unwrap_or_default();
         s.push_str(&format!(
             "{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.4},{:.4},{:.4}\n",
-            r.run, r.pose_index, t, r.pose.x_mm, r.pose.y_mm, r.pose.z_mm, r.pose.a_deg, r.pose.c_deg,
-            r.e_um[0], r.e_um[1], r.e_um[2]
+            r.run,
+            r.pose_index,
+            t,
+            r.pose.x_mm,
+            r.pose.y_mm,
+            r.pose.z_mm,
+            r.pose.a_deg,
+            r.pose.c_deg,
+            r.e_um[0],
+            r.e_um[1],
+            r.e_um[2]
         ));
     }
     s

@@ -31,7 +31,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum KinematicsError {
     /// chain "{0}" must read like "WCAYFXZT": W first, T last, one F, axes X Y Z A B C at most once each
-    #[error("chain \"{0}\" must read like \"WCAYFXZT\": W first, T last, one F, axes X Y Z A B C at most once each")]
+    #[error(
+        "chain \"{0}\" must read like \"WCAYFXZT\": W first, T last, one F, axes X Y Z A B C at most once each"
+    )]
     BadChain(String),
     /// axis {0} in the machine description is not in the chain
     #[error("axis {0} in the machine description is not in the chain")]
@@ -174,11 +176,23 @@ pub struct Pose {
 
 impl Pose {
     pub fn new(x_mm: f64, y_mm: f64, z_mm: f64, a_deg: f64, c_deg: f64) -> Self {
-        Self { x_mm, y_mm, z_mm, a_deg, b_deg: 0.0, c_deg }
+        Self {
+            x_mm,
+            y_mm,
+            z_mm,
+            a_deg,
+            b_deg: 0.0,
+            c_deg,
+        }
     }
 
     pub fn xyz(x_mm: f64, y_mm: f64, z_mm: f64) -> Self {
-        Self { x_mm, y_mm, z_mm, ..Self::default() }
+        Self {
+            x_mm,
+            y_mm,
+            z_mm,
+            ..Self::default()
+        }
     }
 
     /// Value of one axis: mm for linear, degrees for rotary.
@@ -222,10 +236,16 @@ pub struct SmallDisplacement {
 }
 
 impl SmallDisplacement {
-    pub const ZERO: Self = Self { rot_urad: Vector3::new(0.0, 0.0, 0.0), trans_um: Vector3::new(0.0, 0.0, 0.0) };
+    pub const ZERO: Self = Self {
+        rot_urad: Vector3::new(0.0, 0.0, 0.0),
+        trans_um: Vector3::new(0.0, 0.0, 0.0),
+    };
 
     fn negated(self) -> Self {
-        Self { rot_urad: -self.rot_urad, trans_um: -self.trans_um }
+        Self {
+            rot_urad: -self.rot_urad,
+            trans_um: -self.trans_um,
+        }
     }
 
     /// The exact rigid transform (translation then rotation about the local origin), mm.
@@ -285,7 +305,12 @@ impl Machine {
 
     pub fn from_config(cfg: &MachineConfig) -> Result<Self, KinematicsError> {
         let bad = || KinematicsError::BadChain(cfg.chain.clone());
-        let chars: Vec<char> = cfg.chain.trim().chars().map(|c| c.to_ascii_uppercase()).collect();
+        let chars: Vec<char> = cfg
+            .chain
+            .trim()
+            .chars()
+            .map(|c| c.to_ascii_uppercase())
+            .collect();
         if chars.len() < 3 || chars[0] != 'W' || *chars.last().unwrap_or(&' ') != 'T' {
             return Err(bad());
         }
@@ -301,12 +326,19 @@ impl Machine {
                 return Err(bad());
             }
             seen.push(axis);
-            let ac = cfg.axes.get(&axis.letter().to_string()).cloned().unwrap_or_default();
+            let ac = cfg
+                .axes
+                .get(&axis.letter().to_string())
+                .cloned()
+                .unwrap_or_default();
             let dir = match ac.direction {
                 Some(d) => {
                     let v = Vector3::from(d);
-                    if !(v.norm() > 1e-12) {
-                        return Err(KinematicsError::ZeroDirection { axis: c.to_string(), dir: d });
+                    if v.norm().is_nan() || v.norm() <= 1e-12 {
+                        return Err(KinematicsError::ZeroDirection {
+                            axis: c.to_string(),
+                            dir: d,
+                        });
                     }
                     v.normalize()
                 }
@@ -330,7 +362,11 @@ impl Machine {
         }
         for key in cfg.axes.keys() {
             let known = key.chars().count() == 1
-                && key.chars().next().and_then(AxisName::from_char).is_some_and(|a| seen.contains(&a));
+                && key
+                    .chars()
+                    .next()
+                    .and_then(AxisName::from_char)
+                    .is_some_and(|a| seen.contains(&a));
             if !known {
                 return Err(KinematicsError::UnknownAxis(key.clone()));
             }
@@ -345,15 +381,28 @@ impl Machine {
 
     /// The axes of the machine in chain order (workpiece side first).
     pub fn axes(&self) -> Vec<AxisName> {
-        self.workpiece_joints.iter().rev().chain(self.tool_joints.iter()).map(|j| j.axis).collect()
+        self.workpiece_joints
+            .iter()
+            .rev()
+            .chain(self.tool_joints.iter())
+            .map(|j| j.axis)
+            .collect()
     }
 
     pub fn joint(&self, axis: AxisName) -> Option<&Joint> {
-        self.workpiece_joints.iter().chain(self.tool_joints.iter()).find(|j| j.axis == axis)
+        self.workpiece_joints
+            .iter()
+            .chain(self.tool_joints.iter())
+            .find(|j| j.axis == axis)
     }
 
     /// Transform of one joint (parent → child) at value `q`, with its errors.
-    pub(crate) fn joint_transform(j: &Joint, q: f64, link: SmallDisplacement, motion: SmallDisplacement) -> Isometry3<f64> {
+    pub(crate) fn joint_transform(
+        j: &Joint,
+        q: f64,
+        link: SmallDisplacement,
+        motion: SmallDisplacement,
+    ) -> Isometry3<f64> {
         // Workpiece side: the component moves opposite to the relative motion (ISO 841), and its
         // physical errors are the opposite of the relative-motion errors (module conventions).
         let (sign, link_d, motion_d) = match j.side {
@@ -388,7 +437,8 @@ impl Machine {
 
     /// Nominal tool point in frame coordinates, mm.
     pub fn nominal_tool_point_mm(&self, pose: &Pose) -> Vector3<f64> {
-        (Self::branch(&self.tool_joints, pose, &NoErrors) * Point3::from(self.tool_offset_mm)).coords
+        (Self::branch(&self.tool_joints, pose, &NoErrors) * Point3::from(self.tool_offset_mm))
+            .coords
     }
 
     /// Nominal tool point in workpiece coordinates, mm: the workpiece point under the tool.
@@ -456,14 +506,19 @@ impl Machine {
                 let q = pose.get(j.axis);
                 let parent = t;
                 let sign = if j.side == Side::Tool { 1.0 } else { -1.0 };
-                let child = parent * Self::joint_transform(j, q, SmallDisplacement::ZERO, SmallDisplacement::ZERO);
+                let child = parent
+                    * Self::joint_transform(j, q, SmallDisplacement::ZERO, SmallDisplacement::ZERO);
                 let (link_origin, motion_frame) = if j.axis.is_linear() {
                     (parent.translation.vector, child)
                 } else {
                     let pivot = parent * Point3::from(j.pivot_mm);
-                    let rot = UnitQuaternion::from_scaled_axis(j.direction * (sign * q.to_radians()));
+                    let rot =
+                        UnitQuaternion::from_scaled_axis(j.direction * (sign * q.to_radians()));
                     let mf = parent
-                        * Isometry3::from_parts(Translation3::from(j.pivot_mm), UnitQuaternion::identity())
+                        * Isometry3::from_parts(
+                            Translation3::from(j.pivot_mm),
+                            UnitQuaternion::identity(),
+                        )
                         * Isometry3::from_parts(Translation3::identity(), rot);
                     (pivot.coords, mf)
                 };
@@ -569,7 +624,10 @@ mod tests {
         impl ErrorSource for Exx {
             fn motion(&self, a: AxisName, _q: f64) -> SmallDisplacement {
                 if a == AxisName::Y {
-                    SmallDisplacement { rot_urad: Vector3::zeros(), trans_um: Vector3::new(0.0, 5.0, 0.0) }
+                    SmallDisplacement {
+                        rot_urad: Vector3::zeros(),
+                        trans_um: Vector3::new(0.0, 5.0, 0.0),
+                    }
                 } else {
                     SmallDisplacement::ZERO
                 }
@@ -578,7 +636,10 @@ mod tests {
         for chain in ["WYFXZT", "WFXYZT"] {
             let m = Machine::from_chain(chain).unwrap();
             let e = m.volumetric_error_um(&Pose::xyz(1.0, 2.0, 3.0), &Exx, None);
-            assert!((e - Vector3::new(0.0, 5.0, 0.0)).norm() < 1e-9, "{chain}: {e}");
+            assert!(
+                (e - Vector3::new(0.0, 5.0, 0.0)).norm() < 1e-9,
+                "{chain}: {e}"
+            );
         }
     }
 }

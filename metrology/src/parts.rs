@@ -61,17 +61,26 @@ pub struct PartsReport {
 
 fn stats(which: &str, x: &[f64], lo: f64, hi: f64) -> Result<SampleStats, PartsError> {
     if x.len() < 2 {
-        return Err(PartsError::TooFew { which: which.into(), n: x.len() });
+        return Err(PartsError::TooFew {
+            which: which.into(),
+            n: x.len(),
+        });
     }
     if let Some(i) = x.iter().position(|v| !v.is_finite()) {
-        return Err(PartsError::NonFinite { which: which.into(), index: i + 1 });
+        return Err(PartsError::NonFinite {
+            which: which.into(),
+            index: i + 1,
+        });
     }
     let n = x.len() as f64;
     let mean = x.iter().sum::<f64>() / n;
     let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
     let sd = var.sqrt();
     let predicted = if sd > 0.0 {
-        let nd = Normal::new(mean, sd).map_err(|e| PartsError::Parse { which: which.into(), msg: e.to_string() })?;
+        let nd = Normal::new(mean, sd).map_err(|e| PartsError::Parse {
+            which: which.into(),
+            msg: e.to_string(),
+        })?;
         nd.cdf(lo) + (1.0 - nd.cdf(hi))
     } else if mean < lo || mean > hi {
         1.0
@@ -79,12 +88,18 @@ fn stats(which: &str, x: &[f64], lo: f64, hi: f64) -> Result<SampleStats, PartsE
         0.0
     };
     let observed = x.iter().filter(|&&v| v < lo || v > hi).count() as f64 / n;
-    Ok(SampleStats { n: x.len(), mean, std_dev: sd, predicted_reject_pct: predicted * 100.0, observed_reject_pct: observed * 100.0 })
+    Ok(SampleStats {
+        n: x.len(),
+        mean,
+        std_dev: sd,
+        predicted_reject_pct: predicted * 100.0,
+        observed_reject_pct: observed * 100.0,
+    })
 }
 
 /// Compare two samples of a part dimension against the tolerance `[lo, hi]`.
 pub fn compare(before: &[f64], after: &[f64], lo: f64, hi: f64) -> Result<PartsReport, PartsError> {
-    if !(lo < hi) || !lo.is_finite() || !hi.is_finite() {
+    if !lo.is_finite() || !hi.is_finite() || lo >= hi {
         return Err(PartsError::BadTolerance { lo, hi });
     }
     let b = stats("before", before, lo, hi)?;
@@ -99,7 +114,11 @@ pub fn compare(before: &[f64], after: &[f64], lo: f64, hi: f64) -> Result<PartsR
     let dof = (vb + va).powi(2) / (vb * vb / (b.n as f64 - 1.0) + va * va / (a.n as f64 - 1.0));
     let td = StudentsT::new(0.0, 1.0, dof).map_err(|_| PartsError::NoScatter)?;
     let p = 2.0 * (1.0 - td.cdf(t.abs()));
-    let variance_ratio = if b.std_dev > 0.0 { (a.std_dev / b.std_dev).powi(2) } else { f64::INFINITY };
+    let variance_ratio = if b.std_dev > 0.0 {
+        (a.std_dev / b.std_dev).powi(2)
+    } else {
+        f64::INFINITY
+    };
     Ok(PartsReport {
         tolerance: [lo, hi],
         mean_shift: a.mean - b.mean,
@@ -125,7 +144,10 @@ pub fn parse_sample(which: &str, text: &str) -> Result<Vec<f64>, PartsError> {
         }
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
         if col.is_none() && out.is_empty() {
-            if let Some(k) = fields.iter().position(|f| *f == "value" || f.ends_with("_mm") || f.ends_with("_um")) {
+            if let Some(k) = fields
+                .iter()
+                .position(|f| *f == "value" || f.ends_with("_mm") || f.ends_with("_um"))
+            {
                 col = Some(k);
                 continue;
             }

@@ -38,7 +38,11 @@ use crate::kinematics::{ErrorSource, Machine, Pose};
 pub enum PsdError {
     /// segment {segment}: expected {expected} points, got {got}
     #[error("segment {segment}: expected {expected} points, got {got}")]
-    PointCount { segment: u8, expected: usize, got: usize },
+    PointCount {
+        segment: u8,
+        expected: usize,
+        got: usize,
+    },
     /// segment {segment}, point {point}: a reading is not a finite number
     #[error("segment {segment}, point {point}: a reading is not a finite number")]
     NonFinite { segment: u8, point: usize },
@@ -68,7 +72,16 @@ pub struct PsdLayout {
 impl PsdLayout {
     /// The demonstrator of paper 003: X 184 mm, Y 167 mm, Z 350 mm, 7 + 4 × 11 points.
     pub fn paper() -> Self {
-        Self { x_lo: 0.0, x_hi: 184.0, y_lo: 0.0, y_hi: 167.0, z0: 0.0, z1: 350.0, n_points: 11, n_s1: 7 }
+        Self {
+            x_lo: 0.0,
+            x_hi: 184.0,
+            y_lo: 0.0,
+            y_hi: 167.0,
+            z0: 0.0,
+            z1: 350.0,
+            n_points: 11,
+            n_s1: 7,
+        }
     }
 
     fn check(&self) -> Result<(), PsdError> {
@@ -82,7 +95,9 @@ impl PsdLayout {
     }
 
     fn lin(a: f64, b: f64, n: usize) -> Vec<f64> {
-        (0..n).map(|i| a + (b - a) * i as f64 / (n - 1) as f64).collect()
+        (0..n)
+            .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
+            .collect()
     }
     pub fn xs(&self) -> Vec<f64> {
         Self::lin(self.x_lo, self.x_hi, self.n_points)
@@ -126,9 +141,16 @@ impl PsdReadings {
     pub fn minus(&self, reference: &PsdReadings) -> Result<PsdReadings, PsdError> {
         let sub = |seg: u8, a: &[[f64; 2]], b: &[[f64; 2]]| -> Result<Vec<[f64; 2]>, PsdError> {
             if a.len() != b.len() {
-                return Err(PsdError::PointCount { segment: seg, expected: b.len(), got: a.len() });
+                return Err(PsdError::PointCount {
+                    segment: seg,
+                    expected: b.len(),
+                    got: a.len(),
+                });
             }
-            Ok(a.iter().zip(b).map(|(p, q)| [p[0] - q[0], p[1] - q[1]]).collect())
+            Ok(a.iter()
+                .zip(b)
+                .map(|(p, q)| [p[0] - q[0], p[1] - q[1]])
+                .collect())
         };
         Ok(PsdReadings {
             s1: sub(1, &self.s1, &reference.s1)?,
@@ -140,19 +162,30 @@ impl PsdReadings {
     }
 
     fn segments(&self) -> [(u8, &Vec<[f64; 2]>); 5] {
-        [(1, &self.s1), (2, &self.s2), (3, &self.s3), (4, &self.s4), (5, &self.s5)]
+        [
+            (1, &self.s1),
+            (2, &self.s2),
+            (3, &self.s3),
+            (4, &self.s4),
+            (5, &self.s5),
+        ]
     }
 
     /// All readings in one vector (S1 … S5, two per point).
     pub fn to_vec(&self) -> Vec<f64> {
-        self.segments().iter().flat_map(|(_, s)| s.iter().flat_map(|p| p.iter().copied())).collect()
+        self.segments()
+            .iter()
+            .flat_map(|(_, s)| s.iter().flat_map(|p| p.iter().copied()))
+            .collect()
     }
 
     /// The inverse of [`Self::to_vec`] for a layout.
     pub fn from_vec(layout: &PsdLayout, v: &[f64]) -> Self {
         let mut it = v.iter().copied();
         let mut take = |n: usize| -> Vec<[f64; 2]> {
-            (0..n).map(|_| [it.next().unwrap_or(0.0), it.next().unwrap_or(0.0)]).collect()
+            (0..n)
+                .map(|_| [it.next().unwrap_or(0.0), it.next().unwrap_or(0.0)])
+                .collect()
         };
         let n = layout.n_points;
         let s1 = take(layout.n_s1);
@@ -210,8 +243,16 @@ impl PsdErrors {
     pub fn to_vec(&self) -> Vec<f64> {
         let mut v = Vec::new();
         for s in [
-            &self.exx_um, &self.eyy_um, &self.eyx_um, &self.ezx_um, &self.exy_um, &self.ezy_um, &self.exz_um,
-            &self.eyz_um, &self.eax_urad, &self.eby_urad,
+            &self.exx_um,
+            &self.eyy_um,
+            &self.eyx_um,
+            &self.ezx_um,
+            &self.exy_um,
+            &self.ezy_um,
+            &self.exz_um,
+            &self.eyz_um,
+            &self.eax_urad,
+            &self.eby_urad,
         ] {
             v.extend_from_slice(s);
         }
@@ -245,7 +286,15 @@ impl PsdErrors {
                 n.push(format!("{g}[{}]", i + 1));
             }
         }
-        for s in ["EC0Y_urad", "EB0Z_urad", "EA0Z_urad", "xy_rotation_urad", "x_tilt_urad", "y_tilt_urad", "z_offset_um"] {
+        for s in [
+            "EC0Y_urad",
+            "EB0Z_urad",
+            "EA0Z_urad",
+            "xy_rotation_urad",
+            "x_tilt_urad",
+            "y_tilt_urad",
+            "z_offset_um",
+        ] {
             n.push(s.to_string());
         }
         n
@@ -260,7 +309,11 @@ fn line_fit(p: &[f64], v: &[f64]) -> (f64, f64, Vec<f64>) {
     let sxx: f64 = p.iter().map(|x| (x - pm).powi(2)).sum();
     let sxy: f64 = p.iter().zip(v).map(|(x, y)| (x - pm) * (y - vm)).sum();
     let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
-    let resid = p.iter().zip(v).map(|(x, y)| y - vm - slope * (x - pm)).collect();
+    let resid = p
+        .iter()
+        .zip(v)
+        .map(|(x, y)| y - vm - slope * (x - pm))
+        .collect();
     (vm + slope * (p[0] - pm), slope, resid)
 }
 
@@ -275,10 +328,20 @@ pub fn derive_errors(layout: &PsdLayout, r: &PsdReadings) -> Result<PsdErrors, P
     for (seg, s) in r.segments() {
         let expected = if seg == 1 { layout.n_s1 } else { n };
         if s.len() != expected {
-            return Err(PsdError::PointCount { segment: seg, expected, got: s.len() });
+            return Err(PsdError::PointCount {
+                segment: seg,
+                expected,
+                got: s.len(),
+            });
         }
-        if let Some(i) = s.iter().position(|p| !p[0].is_finite() || !p[1].is_finite()) {
-            return Err(PsdError::NonFinite { segment: seg, point: i + 1 });
+        if let Some(i) = s
+            .iter()
+            .position(|p| !p[0].is_finite() || !p[1].is_finite())
+        {
+            return Err(PsdError::NonFinite {
+                segment: seg,
+                point: i + 1,
+            });
         }
     }
     let (xs, ys, ys1, zs) = (layout.xs(), layout.ys(), layout.ys1(), layout.zs());
@@ -310,8 +373,14 @@ pub fn derive_errors(layout: &PsdLayout, r: &PsdReadings) -> Result<PsdErrors, P
     let (_, s_xz, exz) = line_fit(&zs, &col(&r.s5, 0));
     let (_, s_yz, eyz) = line_fit(&zs, &col(&r.s5, 1));
     let c_z = z4_0 - ezy[0] - eby_urad[0] * 1e-3 * dx;
-    let exx = xs.iter().map(|x| exx_lo + (exx_hi - exx_lo) * (x - layout.x_lo) / dx).collect();
-    let eyy = ys.iter().map(|y| eyy_lo + (eyy_hi - eyy_lo) * (y - layout.y_lo) / dy).collect();
+    let exx = xs
+        .iter()
+        .map(|x| exx_lo + (exx_hi - exx_lo) * (x - layout.x_lo) / dx)
+        .collect();
+    let eyy = ys
+        .iter()
+        .map(|y| eyy_lo + (eyy_hi - eyy_lo) * (y - layout.y_lo) / dy)
+        .collect();
     // A line of slope s µm/mm is s·1e3 µrad.
     Ok(PsdErrors {
         x_mm: xs,
@@ -331,7 +400,12 @@ pub fn derive_errors(layout: &PsdLayout, r: &PsdReadings) -> Result<PsdErrors, P
         ec0y_urad: -(s_xy + s_yx) * 1e3,
         eb0z_urad: (s_xz + s_zx) * 1e3,
         ea0z_urad: -(s_yz + s_zy) * 1e3,
-        frame: FrameTerms { xy_rotation_urad: s_yx * 1e3, x_tilt_urad: s_zx * 1e3, y_tilt_urad: s_zy * 1e3, z_offset_um: c_z },
+        frame: FrameTerms {
+            xy_rotation_urad: s_yx * 1e3,
+            x_tilt_urad: s_zx * 1e3,
+            y_tilt_urad: s_zy * 1e3,
+            z_offset_um: c_z,
+        },
     })
 }
 
@@ -342,31 +416,53 @@ pub fn simulate_readings(layout: &PsdLayout, e: &PsdErrors) -> PsdReadings {
     let n = layout.n_points;
     let at = |v: &Vec<f64>, i: usize| v.get(i).copied().unwrap_or(0.0);
     let f = &e.frame;
-    let (s_yx, s_zx, s_zy) = (f.xy_rotation_urad * 1e-3, f.x_tilt_urad * 1e-3, f.y_tilt_urad * 1e-3);
+    let (s_yx, s_zx, s_zy) = (
+        f.xy_rotation_urad * 1e-3,
+        f.x_tilt_urad * 1e-3,
+        f.y_tilt_urad * 1e-3,
+    );
     let s_xy = -e.ec0y_urad * 1e-3 - s_yx;
     let s_xz = e.eb0z_urad * 1e-3 - s_zx;
     let s_yz = -e.ea0z_urad * 1e-3 - s_zy;
-    let eby = |i: usize| if i < e.eby_urad.len() { e.eby_urad[i] * 1e-3 } else { 0.0 };
+    let eby = |i: usize| {
+        if i < e.eby_urad.len() {
+            e.eby_urad[i] * 1e-3
+        } else {
+            0.0
+        }
+    };
     // Ez in the plane at grid indices (ix, iy); the roll of Y is known on S1's points only,
     // and only those points (and iy = 0 for S4) are ever needed.
     let ez = |ix: usize, iy: usize| {
         let (x, y) = (xs[ix], ys[iy]);
-        at(&e.ezx_um, ix) + at(&e.ezy_um, iy) + s_zx * (x - layout.x_lo) + s_zy * (y - layout.y_lo)
+        at(&e.ezx_um, ix)
+            + at(&e.ezy_um, iy)
+            + s_zx * (x - layout.x_lo)
+            + s_zy * (y - layout.y_lo)
             + at(&e.eax_urad, ix) * 1e-3 * (y - layout.y_lo)
             - eby(iy) * (x - layout.x_hi)
             + f.z_offset_um
     };
-    let ex_plane = |ix: usize, iy: usize| at(&e.exx_um, ix) + at(&e.exy_um, iy) + s_xy * (ys[iy] - layout.y_lo);
-    let ey_plane = |ix: usize, iy: usize| at(&e.eyy_um, iy) + at(&e.eyx_um, ix) + s_yx * (xs[ix] - layout.x_lo);
+    let ex_plane = |ix: usize, iy: usize| {
+        at(&e.exx_um, ix) + at(&e.exy_um, iy) + s_xy * (ys[iy] - layout.y_lo)
+    };
+    let ey_plane = |ix: usize, iy: usize| {
+        at(&e.eyy_um, iy) + at(&e.eyx_um, ix) + s_yx * (xs[ix] - layout.x_lo)
+    };
     PsdReadings {
-        s1: (0..layout.n_s1).map(|i| [ex_plane(0, i), ez(0, i)]).collect(),
+        s1: (0..layout.n_s1)
+            .map(|i| [ex_plane(0, i), ez(0, i)])
+            .collect(),
         s2: (0..n).map(|i| [ey_plane(i, n - 1), ez(i, n - 1)]).collect(),
         s3: (0..n).map(|i| [ex_plane(n - 1, i), ez(n - 1, i)]).collect(),
         s4: (0..n).map(|i| [ey_plane(i, 0), ez(i, 0)]).collect(),
         s5: (0..n)
             .map(|i| {
                 let dz = zs[i] - layout.z0;
-                [ex_plane(0, 0) + at(&e.exz_um, i) + s_xz * dz, ey_plane(0, 0) + at(&e.eyz_um, i) + s_yz * dz]
+                [
+                    ex_plane(0, 0) + at(&e.exz_um, i) + s_xz * dz,
+                    ey_plane(0, 0) + at(&e.eyz_um, i) + s_yz * dz,
+                ]
             })
             .collect(),
     }
@@ -374,15 +470,44 @@ pub fn simulate_readings(layout: &PsdLayout, e: &PsdErrors) -> PsdReadings {
 
 /// What the PSD reads on a machine described by the rigid-body kinematics (volumetric error
 /// components perpendicular to each beam segment, tool point = PSD centre).
-pub fn readings_from_machine(layout: &PsdLayout, machine: &Machine, errors: &dyn ErrorSource) -> PsdReadings {
+pub fn readings_from_machine(
+    layout: &PsdLayout,
+    machine: &Machine,
+    errors: &dyn ErrorSource,
+) -> PsdReadings {
     let n = layout.n_points;
     let e = |seg: u8, i: usize| machine.volumetric_error_um(&layout.position(seg, i), errors, None);
     PsdReadings {
-        s1: (0..layout.n_s1).map(|i| { let v = e(1, i); [v.x, v.z] }).collect(),
-        s2: (0..n).map(|i| { let v = e(2, i); [v.y, v.z] }).collect(),
-        s3: (0..n).map(|i| { let v = e(3, i); [v.x, v.z] }).collect(),
-        s4: (0..n).map(|i| { let v = e(4, i); [v.y, v.z] }).collect(),
-        s5: (0..n).map(|i| { let v = e(5, i); [v.x, v.y] }).collect(),
+        s1: (0..layout.n_s1)
+            .map(|i| {
+                let v = e(1, i);
+                [v.x, v.z]
+            })
+            .collect(),
+        s2: (0..n)
+            .map(|i| {
+                let v = e(2, i);
+                [v.y, v.z]
+            })
+            .collect(),
+        s3: (0..n)
+            .map(|i| {
+                let v = e(3, i);
+                [v.x, v.z]
+            })
+            .collect(),
+        s4: (0..n)
+            .map(|i| {
+                let v = e(4, i);
+                [v.y, v.z]
+            })
+            .collect(),
+        s5: (0..n)
+            .map(|i| {
+                let v = e(5, i);
+                [v.x, v.y]
+            })
+            .collect(),
     }
 }
 
@@ -408,29 +533,56 @@ pub fn derive_uncertainty(layout: &PsdLayout, sigma_um: f64) -> Result<Vec<f64>,
 /// Parse the PSD readings CSV: `run,segment,point,r1_um,r2_um` with `segment` 1..5, `point`
 /// 1..n in ascending coordinate, and (r1, r2) = (ex, ez) on S1/S3, (ey, ez) on S2/S4, (ex, ey)
 /// on S5. `#` lines are comments. Returns the runs in file order.
-pub fn parse_readings_csv(layout: &PsdLayout, text: &str) -> Result<Vec<(u32, PsdReadings)>, PsdError> {
+pub fn parse_readings_csv(
+    layout: &PsdLayout,
+    text: &str,
+) -> Result<Vec<(u32, PsdReadings)>, PsdError> {
     let err = |m: String| PsdError::Csv(m);
-    let mut rdr = csv::ReaderBuilder::new().comment(Some(b'#')).trim(csv::Trim::All).from_reader(text.as_bytes());
+    let mut rdr = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
     let headers = rdr.headers().map_err(|e| err(e.to_string()))?.clone();
     let idx = |n: &str| {
-        headers
-            .iter()
-            .position(|h| h == n)
-            .ok_or_else(|| err(format!("missing column `{n}` (need run,segment,point,r1_um,r2_um)")))
+        headers.iter().position(|h| h == n).ok_or_else(|| {
+            err(format!(
+                "missing column `{n}` (need run,segment,point,r1_um,r2_um)"
+            ))
+        })
     };
-    let (ir, is, ip, i1, i2) = (idx("run")?, idx("segment")?, idx("point")?, idx("r1_um")?, idx("r2_um")?);
-    let mut runs: Vec<(u32, Vec<Vec<Option<[f64; 2]>>>)> = Vec::new();
+    let (ir, is, ip, i1, i2) = (
+        idx("run")?,
+        idx("segment")?,
+        idx("point")?,
+        idx("r1_um")?,
+        idx("r2_um")?,
+    );
+    // Per run: per segment, per point, the two readings once seen.
+    type Slots = Vec<Vec<Option<[f64; 2]>>>;
+    let mut runs: Vec<(u32, Slots)> = Vec::new();
     for (line, rec) in rdr.records().enumerate() {
         let row = line + 2;
         let rec = rec.map_err(|e| err(e.to_string()))?;
         let get = |i: usize| rec.get(i).unwrap_or("");
         let int = |i: usize, name: &str| -> Result<usize, PsdError> {
-            get(i).parse::<usize>().map_err(|_| err(format!("row {row}: `{name}` = `{}` is not a whole number", get(i))))
+            get(i).parse::<usize>().map_err(|_| {
+                err(format!(
+                    "row {row}: `{name}` = `{}` is not a whole number",
+                    get(i)
+                ))
+            })
         };
         let num = |i: usize, name: &str| -> Result<f64, PsdError> {
-            get(i).parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
-                err(format!("row {row}: `{name}` = `{}` is not a finite number", get(i)))
-            })
+            get(i)
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    err(format!(
+                        "row {row}: `{name}` = `{}` is not a finite number",
+                        get(i)
+                    ))
+                })
         };
         let run = int(ir, "run")? as u32;
         let seg = int(is, "segment")?;
@@ -438,15 +590,23 @@ pub fn parse_readings_csv(layout: &PsdLayout, text: &str) -> Result<Vec<(u32, Ps
         if !(1..=5).contains(&seg) {
             return Err(err(format!("row {row}: segment {seg} is not 1..5")));
         }
-        let max = if seg == 1 { layout.n_s1 } else { layout.n_points };
+        let max = if seg == 1 {
+            layout.n_s1
+        } else {
+            layout.n_points
+        };
         if pt == 0 || pt > max {
-            return Err(err(format!("row {row}: point {pt} of segment {seg} is not 1..{max}")));
+            return Err(err(format!(
+                "row {row}: point {pt} of segment {seg} is not 1..{max}"
+            )));
         }
         let val = [num(i1, "r1_um")?, num(i2, "r2_um")?];
         let pos = match runs.iter().position(|(r, _)| *r == run) {
             Some(p) => p,
             None => {
-                let segs = (1..=5).map(|s| vec![None; if s == 1 { layout.n_s1 } else { layout.n_points }]).collect();
+                let segs = (1..=5)
+                    .map(|s| vec![None; if s == 1 { layout.n_s1 } else { layout.n_points }])
+                    .collect();
                 runs.push((run, segs));
                 runs.len() - 1
             }
@@ -459,13 +619,28 @@ pub fn parse_readings_csv(layout: &PsdLayout, text: &str) -> Result<Vec<(u32, Ps
         for (s, pts) in segs.iter().enumerate() {
             let mut v = Vec::new();
             for (i, p) in pts.iter().enumerate() {
-                v.push(p.ok_or_else(|| err(format!("run {run}: segment {} point {} is missing", s + 1, i + 1)))?);
+                v.push(p.ok_or_else(|| {
+                    err(format!(
+                        "run {run}: segment {} point {} is missing",
+                        s + 1,
+                        i + 1
+                    ))
+                })?);
             }
             full.push(v);
         }
         let mut it = full.into_iter();
         let mut next = || it.next().unwrap_or_default();
-        out.push((run, PsdReadings { s1: next(), s2: next(), s3: next(), s4: next(), s5: next() }));
+        out.push((
+            run,
+            PsdReadings {
+                s1: next(),
+                s2: next(),
+                s3: next(),
+                s4: next(),
+                s5: next(),
+            },
+        ));
     }
     if out.is_empty() {
         return Err(err("no data rows".into()));

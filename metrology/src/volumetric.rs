@@ -25,14 +25,17 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::kinematics::{
-    link_sensitivity, motion_sensitivity, AxisName, ErrorSource, Joint, Machine, Pose, SmallDisplacement,
+    AxisName, ErrorSource, Joint, Machine, Pose, SmallDisplacement, link_sensitivity,
+    motion_sensitivity,
 };
 
 /// Errors of volumetric models and compensation tables.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum VolumetricError {
     /// row {row}: error name `{name}` is not an ISO 230-1 name of a linear-axis error (EXX … ECZ, EC0Y, EB0Z, EA0Z)
-    #[error("row {row}: error name `{name}` is not an ISO 230-1 name of a linear-axis error (EXX … ECZ, EC0Y, EB0Z, EA0Z)")]
+    #[error(
+        "row {row}: error name `{name}` is not an ISO 230-1 name of a linear-axis error (EXX … ECZ, EC0Y, EB0Z, EA0Z)"
+    )]
     BadName { row: usize, name: String },
     /// row {row}: {msg}
     #[error("row {row}: {msg}")]
@@ -44,7 +47,9 @@ pub enum VolumetricError {
     #[error("component errors CSV: {0}")]
     Csv(String),
     /// grid `{0}`: expected three ranges like `0:500:11,0:400:9,0:300:7` (min:max:count per axis)
-    #[error("grid `{0}`: expected three ranges like `0:500:11,0:400:9,0:300:7` (min:max:count per axis)")]
+    #[error(
+        "grid `{0}`: expected three ranges like `0:500:11,0:400:9,0:300:7` (min:max:count per axis)"
+    )]
     BadGrid(String),
     /// the machine has no linear axis {0}: the volumetric model needs X, Y and Z
     #[error("the machine has no linear axis {0}: the volumetric model needs X, Y and Z")]
@@ -55,7 +60,11 @@ pub enum VolumetricError {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum ErrorCurve {
     /// Natural cubic spline through (position, value); beyond the ends the end value holds.
-    Table { positions_mm: Vec<f64>, values: Vec<f64>, second_derivatives: Vec<f64> },
+    Table {
+        positions_mm: Vec<f64>,
+        values: Vec<f64>,
+        second_derivatives: Vec<f64>,
+    },
     /// `Σ c_k · q^k`, q in mm.
     Polynomial { coeffs: Vec<f64> },
 }
@@ -66,18 +75,29 @@ impl ErrorCurve {
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
         let distinct = points.windows(2).all(|w| w[1].0 > w[0].0);
         if points.len() < 2 || !distinct {
-            return Err(VolumetricError::ShortTable { name: name.into(), n: points.len() });
+            return Err(VolumetricError::ShortTable {
+                name: name.into(),
+                n: points.len(),
+            });
         }
         let x: Vec<f64> = points.iter().map(|p| p.0).collect();
         let y: Vec<f64> = points.iter().map(|p| p.1).collect();
         let m = natural_spline_second_derivatives(&x, &y);
-        Ok(Self::Table { positions_mm: x, values: y, second_derivatives: m })
+        Ok(Self::Table {
+            positions_mm: x,
+            values: y,
+            second_derivatives: m,
+        })
     }
 
     pub fn eval(&self, q: f64) -> f64 {
         match self {
             Self::Polynomial { coeffs } => coeffs.iter().rev().fold(0.0, |acc, c| acc * q + c),
-            Self::Table { positions_mm: x, values: y, second_derivatives: m } => {
+            Self::Table {
+                positions_mm: x,
+                values: y,
+                second_derivatives: m,
+            } => {
                 let n = x.len();
                 if q <= x[0] {
                     return y[0];
@@ -89,7 +109,9 @@ impl ErrorCurve {
                 let h = x[i + 1] - x[i];
                 let a = (x[i + 1] - q) / h;
                 let b = (q - x[i]) / h;
-                a * y[i] + b * y[i + 1] + ((a * a * a - a) * m[i] + (b * b * b - b) * m[i + 1]) * h * h / 6.0
+                a * y[i]
+                    + b * y[i + 1]
+                    + ((a * a * a - a) * m[i] + (b * b * b - b) * m[i + 1]) * h * h / 6.0
             }
         }
     }
@@ -97,7 +119,9 @@ impl ErrorCurve {
     /// Range covered by a table (None for a polynomial).
     pub fn range_mm(&self) -> Option<(f64, f64)> {
         match self {
-            Self::Table { positions_mm, .. } => Some((positions_mm[0], positions_mm[positions_mm.len() - 1])),
+            Self::Table { positions_mm, .. } => {
+                Some((positions_mm[0], positions_mm[positions_mm.len() - 1]))
+            }
             Self::Polynomial { .. } => None,
         }
     }
@@ -157,7 +181,11 @@ fn parse_name(name: &str) -> Option<(AxisName, usize, bool)> {
 
 /// ISO 230-1 name of a motion error component.
 pub fn error_name(axis: AxisName, component: usize) -> String {
-    format!("E{}{}", ['A', 'B', 'C', 'X', 'Y', 'Z'][component.min(5)], axis.letter())
+    format!(
+        "E{}{}",
+        ['A', 'B', 'C', 'X', 'Y', 'Z'][component.min(5)],
+        axis.letter()
+    )
 }
 
 /// The 21 errors of three linear axes (absent ones are zero).
@@ -179,12 +207,16 @@ impl ComponentErrors {
             .trim(csv::Trim::All)
             .flexible(true)
             .from_reader(text.as_bytes());
-        let headers = rdr.headers().map_err(|e| VolumetricError::Csv(e.to_string()))?.clone();
+        let headers = rdr
+            .headers()
+            .map_err(|e| VolumetricError::Csv(e.to_string()))?
+            .clone();
         let col = |n: &str| {
-            headers
-                .iter()
-                .position(|h| h == n)
-                .ok_or_else(|| VolumetricError::Csv(format!("missing column `{n}` (need error,position_mm,value)")))
+            headers.iter().position(|h| h == n).ok_or_else(|| {
+                VolumetricError::Csv(format!(
+                    "missing column `{n}` (need error,position_mm,value)"
+                ))
+            })
         };
         let (ci, cp, cv) = (col("error")?, col("position_mm")?, col("value")?);
         let mut points: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
@@ -193,13 +225,19 @@ impl ComponentErrors {
             let row = line + 2;
             let rec = rec.map_err(|e| VolumetricError::Csv(e.to_string()))?;
             let name = rec.get(ci).unwrap_or("").trim().to_ascii_uppercase();
-            let (_, _, is_sq) =
-                parse_name(&name).ok_or_else(|| VolumetricError::BadName { row, name: name.clone() })?;
-            let v_s = rec.get(cv).unwrap_or("");
-            let v: f64 = v_s.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| VolumetricError::BadRow {
+            let (_, _, is_sq) = parse_name(&name).ok_or_else(|| VolumetricError::BadName {
                 row,
-                msg: format!("value `{v_s}` is not a finite number"),
+                name: name.clone(),
             })?;
+            let v_s = rec.get(cv).unwrap_or("");
+            let v: f64 = v_s
+                .parse()
+                .ok()
+                .filter(|v: &f64| v.is_finite())
+                .ok_or_else(|| VolumetricError::BadRow {
+                    row,
+                    msg: format!("value `{v_s}` is not a finite number"),
+                })?;
             if is_sq {
                 sq.insert(name, v);
             } else {
@@ -215,7 +253,10 @@ impl ComponentErrors {
         for (name, pts) in points {
             motion.insert(name.clone(), ErrorCurve::table(&name, pts)?);
         }
-        Ok(Self { motion, squareness_urad: sq })
+        Ok(Self {
+            motion,
+            squareness_urad: sq,
+        })
     }
 
     /// Motion error of an axis at position `q` (mm).
@@ -226,7 +267,10 @@ impl ComponentErrors {
                 *slot = c.eval(q);
             }
         }
-        SmallDisplacement { rot_urad: Vector3::new(v[0], v[1], v[2]), trans_um: Vector3::new(v[3], v[4], v[5]) }
+        SmallDisplacement {
+            rot_urad: Vector3::new(v[0], v[1], v[2]),
+            trans_um: Vector3::new(v[3], v[4], v[5]),
+        }
     }
 
     fn link_of(&self, axis: AxisName) -> SmallDisplacement {
@@ -237,7 +281,10 @@ impl ComponentErrors {
                 rot[k] = *v;
             }
         }
-        SmallDisplacement { rot_urad: rot, trans_um: Vector3::zeros() }
+        SmallDisplacement {
+            rot_urad: rot,
+            trans_um: Vector3::zeros(),
+        }
     }
 }
 
@@ -246,12 +293,20 @@ impl ErrorSource for ComponentErrors {
         self.link_of(axis)
     }
     fn motion(&self, axis: AxisName, q: f64) -> SmallDisplacement {
-        if axis.is_linear() { self.displacement(axis, q) } else { SmallDisplacement::ZERO }
+        if axis.is_linear() {
+            self.displacement(axis, q)
+        } else {
+            SmallDisplacement::ZERO
+        }
     }
 }
 
 /// First-order (small-angle) volumetric error, µm: paper 004 eq. 1 with A ≈ I + [ε]×.
-pub fn small_angle_error_um(machine: &Machine, errors: &dyn ErrorSource, pose: &Pose) -> Vector3<f64> {
+pub fn small_angle_error_um(
+    machine: &Machine,
+    errors: &dyn ErrorSource,
+    pose: &Pose,
+) -> Vector3<f64> {
     let frames = machine.joint_frames(pose);
     let p = machine.nominal_tool_point_mm(pose);
     let mut e = Vector3::zeros();
@@ -259,7 +314,11 @@ pub fn small_angle_error_um(machine: &Machine, errors: &dyn ErrorSource, pose: &
         let m = errors.motion(f.axis, f.q);
         let l = errors.link(f.axis);
         for k in 0..6 {
-            let (mv, lv) = if k < 3 { (m.rot_urad[k], l.rot_urad[k]) } else { (m.trans_um[k - 3], l.trans_um[k - 3]) };
+            let (mv, lv) = if k < 3 {
+                (m.rot_urad[k], l.rot_urad[k])
+            } else {
+                (m.trans_um[k - 3], l.trans_um[k - 3])
+            };
             if mv != 0.0 {
                 e += motion_sensitivity(f, k, &p) * mv;
             }
@@ -309,7 +368,9 @@ impl GridSpec {
         if n == 1 {
             return vec![a];
         }
-        (0..n).map(|i| a + (b - a) * i as f64 / (n - 1) as f64).collect()
+        (0..n)
+            .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
+            .collect()
     }
 
     pub fn len(&self) -> usize {
@@ -339,7 +400,11 @@ impl ErrorSource for Tabulated<'_> {
         self.base.link_of(axis)
     }
     fn motion(&self, axis: AxisName, _q: f64) -> SmallDisplacement {
-        if axis.is_linear() { self.d[axis.index()] } else { SmallDisplacement::ZERO }
+        if axis.is_linear() {
+            self.d[axis.index()]
+        } else {
+            SmallDisplacement::ZERO
+        }
     }
 }
 
@@ -359,7 +424,11 @@ pub fn volumetric_grid(
     // the grid then costs a few isometry products per point (the 50³ budget is 100 ms).
     let mut actual: [Vec<Isometry3<f64>>; 3] = Default::default();
     let mut nominal: [Vec<Isometry3<f64>>; 3] = Default::default();
-    for j in machine.workpiece_joints.iter().chain(machine.tool_joints.iter()) {
+    for j in machine
+        .workpiece_joints
+        .iter()
+        .chain(machine.tool_joints.iter())
+    {
         let a = j.axis.index();
         if a > 2 {
             continue;
@@ -371,7 +440,9 @@ pub fn volumetric_grid(
             .collect();
         nominal[a] = vals[a]
             .iter()
-            .map(|&q| Machine::joint_transform(j, q, SmallDisplacement::ZERO, SmallDisplacement::ZERO))
+            .map(|&q| {
+                Machine::joint_transform(j, q, SmallDisplacement::ZERO, SmallDisplacement::ZERO)
+            })
             .collect();
     }
     // A machine with rotary axes (held at zero here) goes through the general model.
@@ -414,7 +485,10 @@ pub fn volumetric_grid(
                         };
                         machine.volumetric_error_um(&Pose::xyz(pos[0], pos[1], pos[2]), &t, None)
                     };
-                    GridPoint { pos_mm: pos, error_um: [e.x, e.y, e.z] }
+                    GridPoint {
+                        pos_mm: pos,
+                        error_um: [e.x, e.y, e.z],
+                    }
                 })
             })
         })
@@ -430,8 +504,15 @@ pub fn compensation_csv(points: &[GridPoint]) -> String {
         let _ = writeln!(
             s,
             "{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
-            p.pos_mm[0], p.pos_mm[1], p.pos_mm[2], p.error_um[0], p.error_um[1], p.error_um[2],
-            -p.error_um[0], -p.error_um[1], -p.error_um[2]
+            p.pos_mm[0],
+            p.pos_mm[1],
+            p.pos_mm[2],
+            p.error_um[0],
+            p.error_um[1],
+            p.error_um[2],
+            -p.error_um[0],
+            -p.error_um[1],
+            -p.error_um[2]
         );
     }
     s
@@ -467,7 +548,9 @@ pub fn siemens_cec(points: &[GridPoint], grid: &GridSpec, axis_names: [&str; 3])
     let n = [grid.ranges[0].2, grid.ranges[1].2, grid.ranges[2].2];
     let idx = |i: usize, j: usize, k: usize| (i * n[1] + j) * n[2] + k;
     let corr = |i: usize, j: usize, k: usize, out: usize| -points[idx(i, j, k)].error_um[out];
-    let mut ini = String::from("%_N_NC_CEC_INI\n; written by metrolog volumetric: correction = −volumetric error\nCHANDATA(1)\n");
+    let mut ini = String::from(
+        "%_N_NC_CEC_INI\n; written by metrolog volumetric: correction = −volumetric error\nCHANDATA(1)\n",
+    );
     let mut tables = vec![vec![vec![0.0; 0]; 3]; 3];
     let mut t = 0;
     for input in 0..3 {
@@ -480,12 +563,25 @@ pub fn siemens_cec(points: &[GridPoint], grid: &GridSpec, axis_names: [&str; 3])
                         _ => (0, 0, q),
                     };
                     let c = corr(i, j, k, out);
-                    if input == 0 { c } else { c - corr(0, 0, 0, out) }
+                    if input == 0 {
+                        c
+                    } else {
+                        c - corr(0, 0, 0, out)
+                    }
                 })
                 .collect();
             let (min, max, cnt) = grid.ranges[input];
-            let step = if cnt > 1 { (max - min) / (cnt - 1) as f64 } else { 0.0 };
-            let _ = writeln!(ini, "; table {t}: correction of {} from the position of {}", "XYZ".as_bytes()[out] as char, "XYZ".as_bytes()[input] as char);
+            let step = if cnt > 1 {
+                (max - min) / (cnt - 1) as f64
+            } else {
+                0.0
+            };
+            let _ = writeln!(
+                ini,
+                "; table {t}: correction of {} from the position of {}",
+                "XYZ".as_bytes()[out] as char,
+                "XYZ".as_bytes()[input] as char
+            );
             for (p, v) in vals.iter().enumerate() {
                 let _ = writeln!(ini, "$AN_CEC[{t},{p}]={:.6}", v * 1e-3);
             }
@@ -506,14 +602,19 @@ pub fn siemens_cec(points: &[GridPoint], grid: &GridSpec, axis_names: [&str; 3])
     for i in 0..n[0] {
         for j in 0..n[1] {
             for k in 0..n[2] {
-                for out in 0..3 {
-                    let sum = tables[0][out][i] + tables[1][out][j] + tables[2][out][k];
+                for (out, ((tx, ty), tz)) in
+                    tables[0].iter().zip(&tables[1]).zip(&tables[2]).enumerate()
+                {
+                    let sum = tx[i] + ty[j] + tz[k];
                     worst = worst.max((sum - corr(i, j, k, out)).abs());
                 }
             }
         }
     }
-    CecTables { ini, max_separation_residual_um: worst }
+    CecTables {
+        ini,
+        max_separation_residual_um: worst,
+    }
 }
 
 /// Summary of a volumetric grid: largest error magnitude and RMS per direction.
@@ -533,10 +634,15 @@ pub fn summarize(points: &[GridPoint]) -> GridSummary {
         if nrm > best.0 {
             best = (nrm, p.pos_mm);
         }
-        for k in 0..3 {
-            rms[k] += p.error_um[k] * p.error_um[k];
+        for (r, e) in rms.iter_mut().zip(p.error_um) {
+            *r += e * e;
         }
     }
     let n = points.len().max(1) as f64;
-    GridSummary { n_points: points.len(), max_norm_um: best.0, max_at_mm: best.1, rms_um: rms.map(|v| (v / n).sqrt()) }
+    GridSummary {
+        n_points: points.len(),
+        max_norm_um: best.0,
+        max_at_mm: best.1,
+        rms_um: rms.map(|v| (v / n).sqrt()),
+    }
 }

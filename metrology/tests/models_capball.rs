@@ -1,6 +1,9 @@
 //! CapBall model tests: Jacobian against a numerical derivative, identification by simulation
 //! with known truth, sensor-frame calibration, degenerate inputs.
 
+// Parallel arrays indexed together read more plainly with an index.
+#![allow(clippy::needless_range_loop)]
+
 use metrology::capball::*;
 use metrology::kinematics::Pose;
 use nalgebra::{Matrix3, Vector3};
@@ -31,14 +34,24 @@ fn truth() -> CapballErrors {
     }
 }
 
-fn simulate(setup: &CapballSetup, poses: &[Pose], e: &CapballErrors, noise_um: f64, seed: u64) -> Vec<[f64; 3]> {
+fn simulate(
+    setup: &CapballSetup,
+    poses: &[Pose],
+    e: &CapballErrors,
+    noise_um: f64,
+    seed: u64,
+) -> Vec<[f64; 3]> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = Normal::new(0.0, noise_um).unwrap();
     poses
         .iter()
         .map(|p| {
             let v = setup.volumetric_error_um(e, p);
-            [v.x + n.sample(&mut rng), v.y + n.sample(&mut rng), v.z + n.sample(&mut rng)]
+            [
+                v.x + n.sample(&mut rng),
+                v.y + n.sample(&mut rng),
+                v.z + n.sample(&mut rng),
+            ]
         })
         .collect()
 }
@@ -46,12 +59,21 @@ fn simulate(setup: &CapballSetup, poses: &[Pose], e: &CapballErrors, noise_um: f
 #[test]
 fn analytic_jacobian_matches_numerical_derivative() {
     let s = CapballSetup::paper_default();
-    for &(a, c) in &[(0.0, 0.0), (-30.0, 45.0), (-75.0, 200.0), (-90.0, 310.0), (20.0, 123.0)] {
+    for &(a, c) in &[
+        (0.0, 0.0),
+        (-30.0, 45.0),
+        (-75.0, 200.0),
+        (-90.0, 310.0),
+        (20.0, 123.0),
+    ] {
         let p = s.pose_for(a, c);
         let ja = s.jacobian(&p);
         let jn = s.jacobian_numeric(&p);
         let d = (ja - jn).abs().max();
-        assert!(d < 1e-6, "pose a={a} c={c}: max |J_analytic − J_numeric| = {d}\n{ja}\n{jn}");
+        assert!(
+            d < 1e-6,
+            "pose a={a} c={c}: max |J_analytic − J_numeric| = {d}\n{ja}\n{jn}"
+        );
     }
 }
 
@@ -82,11 +104,26 @@ fn identification_recovers_truth_within_its_uncertainty() {
     for seed in 0..8 {
         let meas = simulate(&s, &poses, &truth(), 0.3, seed);
         let id = s.identify(&poses, &meas).unwrap();
-        assert!(id.condition_number < 1e3, "condition {}", id.condition_number);
-        assert!((id.residual_sigma_um - 0.3).abs() < 0.03, "sigma {}", id.residual_sigma_um);
+        assert!(
+            id.condition_number < 1e3,
+            "condition {}",
+            id.condition_number
+        );
+        assert!(
+            (id.residual_sigma_um - 0.3).abs() < 0.03,
+            "sigma {}",
+            id.residual_sigma_um
+        );
         for k in 0..N_PARAMS {
             let z = (id.params[k] - t[k]) / id.std_uncertainty[k];
-            assert!(z.abs() < 4.5, "{}: {} vs {} (u = {})", PARAM_NAMES[k], id.params[k], t[k], id.std_uncertainty[k]);
+            assert!(
+                z.abs() < 4.5,
+                "{}: {} vs {} (u = {})",
+                PARAM_NAMES[k],
+                id.params[k],
+                t[k],
+                id.std_uncertainty[k]
+            );
             z2.push(z * z);
         }
     }
@@ -101,18 +138,29 @@ fn validation_on_reversed_trajectory() {
     let spec = TrajectorySpec::default();
     let id_poses = s.trajectory(&spec);
     let va_poses = s.trajectory(&spec.reversed_a());
-    let id = s.identify(&id_poses, &simulate(&s, &id_poses, &truth(), 0.5, 1)).unwrap();
-    let rms = s.validation_rms_um(&id, &va_poses, &simulate(&s, &va_poses, &truth(), 0.5, 2)).unwrap();
+    let id = s
+        .identify(&id_poses, &simulate(&s, &id_poses, &truth(), 0.5, 1))
+        .unwrap();
+    let rms = s
+        .validation_rms_um(&id, &va_poses, &simulate(&s, &va_poses, &truth(), 0.5, 2))
+        .unwrap();
     for k in 0..3 {
         assert!((rms[k] - 0.5).abs() < 0.06, "validation rms {rms:?}");
-        assert!((id.residual_rms_um[k] - 0.5).abs() < 0.06, "identification rms {:?}", id.residual_rms_um);
+        assert!(
+            (id.residual_rms_um[k] - 0.5).abs() < 0.06,
+            "identification rms {:?}",
+            id.residual_rms_um
+        );
     }
 }
 
 #[test]
 fn degenerate_inputs_get_clear_errors() {
     let s = CapballSetup::paper_default();
-    let poses = s.trajectory(&TrajectorySpec { n_poses: 4, ..Default::default() });
+    let poses = s.trajectory(&TrajectorySpec {
+        n_poses: 4,
+        ..Default::default()
+    });
     let e = s.identify(&poses, &[[0.0; 3]; 4]).unwrap_err();
     assert!(matches!(e, CapballError::TooFewPoses { .. }), "{e}");
     let e = s.identify(&poses, &[[0.0; 3]; 3]).unwrap_err();
@@ -124,10 +172,16 @@ fn degenerate_inputs_get_clear_errors() {
     let mut bad = vec![[0.0; 3]; 807];
     bad[10][1] = f64::NAN;
     let all = s.trajectory(&TrajectorySpec::default());
-    assert_eq!(s.identify(&all, &bad).unwrap_err(), CapballError::NonFinite { index: 11 });
+    assert_eq!(
+        s.identify(&all, &bad).unwrap_err(),
+        CapballError::NonFinite { index: 11 }
+    );
     // Values in mm mistaken for µm are fine, but values in nm are not plausible.
     bad[10][1] = 25_000.0;
-    assert!(matches!(s.identify(&all, &bad).unwrap_err(), CapballError::Implausible { .. }));
+    assert!(matches!(
+        s.identify(&all, &bad).unwrap_err(),
+        CapballError::Implausible { .. }
+    ));
 }
 
 #[test]
@@ -158,11 +212,20 @@ fn sensor_frame_calibration_recovers_gains_and_offsets() {
 #[test]
 fn dataset_round_trip_and_unit_checks() {
     let s = CapballSetup::paper_default();
-    let poses = s.trajectory(&TrajectorySpec { n_poses: 20, ..Default::default() });
+    let poses = s.trajectory(&TrajectorySpec {
+        n_poses: 20,
+        ..Default::default()
+    });
     let recs: Vec<_> = poses
         .iter()
         .enumerate()
-        .map(|(i, p)| CapballRecord { run: 1, pose_index: i as u32 + 1, time_s: Some(i as f64), pose: *p, e_um: [1.0, 2.0, 3.0] })
+        .map(|(i, p)| CapballRecord {
+            run: 1,
+            pose_index: i as u32 + 1,
+            time_s: Some(i as f64),
+            pose: *p,
+            e_um: [1.0, 2.0, 3.0],
+        })
         .collect();
     let text = write_dataset(&recs);
     let back = parse_dataset(&format!("# comment\n{text}")).unwrap();

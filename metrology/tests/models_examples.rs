@@ -2,6 +2,9 @@
 //! `cargo test -p metrolog-metrology --test models_examples -- --ignored`), and checks that the
 //! committed examples still parse.
 
+// Parallel arrays indexed together read more plainly with an index.
+#![allow(clippy::needless_range_loop)]
+
 use std::path::PathBuf;
 
 use metrology::capball::*;
@@ -25,10 +28,32 @@ fn generate_examples() {
     // CapBall: identification (A one way) and validation (A reversed) runs.
     let s = CapballSetup::paper_default();
     let truth = CapballErrors {
-        link: LinkErrors { ec0y_urad: 25.0, eb0z_urad: -40.0, ea0z_urad: 15.0, eb0a_urad: 60.0, ec0a_urad: -35.0, ea0c_urad: 20.0, eb0c_urad: -50.0, ey0c_um: 12.0 },
-        setup: SetupErrors { ball_x_um: 30.0, ball_y_um: -20.0, ball_z_um: 10.0, tool_x_um: -15.0, tool_y_um: 8.0, tool_z_um: 40.0 },
+        link: LinkErrors {
+            ec0y_urad: 25.0,
+            eb0z_urad: -40.0,
+            ea0z_urad: 15.0,
+            eb0a_urad: 60.0,
+            ec0a_urad: -35.0,
+            ea0c_urad: 20.0,
+            eb0c_urad: -50.0,
+            ey0c_um: 12.0,
+        },
+        setup: SetupErrors {
+            ball_x_um: 30.0,
+            ball_y_um: -20.0,
+            ball_z_um: 10.0,
+            tool_x_um: -15.0,
+            tool_y_um: 8.0,
+            tool_z_um: 40.0,
+        },
     };
-    for (name, spec) in [("capball_identification.csv", TrajectorySpec::default()), ("capball_validation.csv", TrajectorySpec::default().reversed_a())] {
+    for (name, spec) in [
+        ("capball_identification.csv", TrajectorySpec::default()),
+        (
+            "capball_validation.csv",
+            TrajectorySpec::default().reversed_a(),
+        ),
+    ] {
         let poses = s.trajectory(&spec);
         let recs: Vec<_> = poses
             .iter()
@@ -40,13 +65,21 @@ fn generate_examples() {
                     pose_index: i as u32 + 1,
                     time_s: Some(i as f64 * 0.75),
                     pose: *p,
-                    e_um: [e.x + noise.sample(&mut rng), e.y + noise.sample(&mut rng), e.z + noise.sample(&mut rng)],
+                    e_um: [
+                        e.x + noise.sample(&mut rng),
+                        e.y + noise.sample(&mut rng),
+                        e.z + noise.sample(&mut rng),
+                    ],
                 }
             })
             .collect();
         std::fs::write(d.join(name), write_dataset(&recs)).unwrap();
     }
-    std::fs::write(d.join("capball_truth.json"), serde_json::to_string_pretty(&truth).unwrap()).unwrap();
+    std::fs::write(
+        d.join("capball_truth.json"),
+        serde_json::to_string_pretty(&truth).unwrap(),
+    )
+    .unwrap();
     // Sensor-frame cube.
     let dm = nalgebra::Matrix3::from_columns(&[
         Vector3::new(1.0, 0.002, -0.001) * 1.006,
@@ -58,7 +91,15 @@ fn generate_examples() {
     for m in cube_points_um(250.0, 5) {
         let r = sensor_readings_um(&dm, &o, &m);
         let n = Normal::new(0.0, 0.1).unwrap();
-        cube.push_str(&format!("{},{},{},{:.4},{:.4},{:.4}\n", m.x, m.y, m.z, r.x + n.sample(&mut rng), r.y + n.sample(&mut rng), r.z + n.sample(&mut rng)));
+        cube.push_str(&format!(
+            "{},{},{},{:.4},{:.4},{:.4}\n",
+            m.x,
+            m.y,
+            m.z,
+            r.x + n.sample(&mut rng),
+            r.y + n.sample(&mut rng),
+            r.z + n.sample(&mut rng)
+        ));
     }
     std::fs::write(d.join("capball_cube.csv"), cube).unwrap();
     // PSD: reference run 0 and a warmed-up run 1 (a 10 µm/m scale change and tilted Z).
@@ -69,13 +110,29 @@ fn generate_examples() {
     warm.eyy_um = l.ys().iter().map(|y| -0.3 + 0.008 * y).collect();
     warm.eb0z_urad = 6.0;
     warm.ea0z_urad = -4.0;
-    warm.ezx_um = l.xs().iter().map(|x| 0.6 * (1.0 - ((x - 92.0) / 92.0).powi(2)) - 0.36).collect();
+    warm.ezx_um = l
+        .xs()
+        .iter()
+        .map(|x| 0.6 * (1.0 - ((x - 92.0) / 92.0).powi(2)) - 0.36)
+        .collect();
     let _ = zero;
     let n = Normal::new(0.0, 0.15).unwrap();
-    let mut noisy = |r: PsdReadings| PsdReadings::from_vec(&l, &r.to_vec().iter().map(|v| v + n.sample(&mut rng)).collect::<Vec<_>>());
+    let mut noisy = |r: PsdReadings| {
+        PsdReadings::from_vec(
+            &l,
+            &r.to_vec()
+                .iter()
+                .map(|v| v + n.sample(&mut rng))
+                .collect::<Vec<_>>(),
+        )
+    };
     let r0 = noisy(simulate_readings(&l, &zero_like(&l)));
     let r1 = noisy(simulate_readings(&l, &warm));
-    std::fs::write(d.join("psd_readings.csv"), write_readings_csv(&[(0, r0), (1, r1)])).unwrap();
+    std::fs::write(
+        d.join("psd_readings.csv"),
+        write_readings_csv(&[(0, r0), (1, r1)]),
+    )
+    .unwrap();
 }
 
 fn zero_like(l: &PsdLayout) -> PsdErrors {
@@ -101,9 +158,14 @@ fn zero_like(l: &PsdLayout) -> PsdErrors {
 #[test]
 fn committed_examples_parse() {
     let d = dir();
-    let Ok(text) = std::fs::read_to_string(d.join("capball_identification.csv")) else { return };
+    let Ok(text) = std::fs::read_to_string(d.join("capball_identification.csv")) else {
+        return;
+    };
     let recs = parse_dataset(&text).unwrap();
     assert_eq!(recs.len(), 807);
     let psd = std::fs::read_to_string(d.join("psd_readings.csv")).unwrap();
-    assert_eq!(parse_readings_csv(&PsdLayout::paper(), &psd).unwrap().len(), 2);
+    assert_eq!(
+        parse_readings_csv(&PsdLayout::paper(), &psd).unwrap().len(),
+        2
+    );
 }

@@ -1,6 +1,9 @@
 //! PSD laser-frame model: exact round trip, noise propagation against the stated uncertainty,
 //! and a cross-check against the rigid-body kinematics.
 
+// Parallel arrays indexed together read more plainly with an index.
+#![allow(clippy::needless_range_loop)]
+
 use metrology::kinematics::{AxisName, ErrorSource, Machine, SmallDisplacement};
 use metrology::psd_frame::*;
 use nalgebra::Vector3;
@@ -14,13 +17,28 @@ fn deslope(p: &[f64], v: &[f64]) -> Vec<f64> {
     let pm = p.iter().sum::<f64>() / n;
     let vm = v.iter().sum::<f64>() / n;
     let sxx: f64 = p.iter().map(|x| (x - pm).powi(2)).sum();
-    let b = p.iter().zip(v).map(|(x, y)| (x - pm) * (y - vm)).sum::<f64>() / sxx;
-    p.iter().zip(v).map(|(x, y)| y - vm - b * (x - pm)).collect()
+    let b = p
+        .iter()
+        .zip(v)
+        .map(|(x, y)| (x - pm) * (y - vm))
+        .sum::<f64>()
+        / sxx;
+    p.iter()
+        .zip(v)
+        .map(|(x, y)| y - vm - b * (x - pm))
+        .collect()
 }
 
 fn truth(l: &PsdLayout) -> PsdErrors {
     let (xs, ys, ys1, zs) = (l.xs(), l.ys(), l.ys1(), l.zs());
-    let f = |p: &[f64], a: f64, w: f64| deslope(p, &p.iter().map(|x| a * (x * w).sin() + 0.3 * a * (x * w * 2.3).cos()).collect::<Vec<_>>());
+    let f = |p: &[f64], a: f64, w: f64| {
+        deslope(
+            p,
+            &p.iter()
+                .map(|x| a * (x * w).sin() + 0.3 * a * (x * w * 2.3).cos())
+                .collect::<Vec<_>>(),
+        )
+    };
     PsdErrors {
         exx_um: xs.iter().map(|x| 1.5 + 0.02 * x).collect(),
         eyy_um: ys.iter().map(|y| -0.8 + 0.015 * y).collect(),
@@ -35,7 +53,12 @@ fn truth(l: &PsdLayout) -> PsdErrors {
         ec0y_urad: 12.0,
         eb0z_urad: -9.0,
         ea0z_urad: 7.0,
-        frame: FrameTerms { xy_rotation_urad: 4.0, x_tilt_urad: -3.0, y_tilt_urad: 2.0, z_offset_um: 0.7 },
+        frame: FrameTerms {
+            xy_rotation_urad: 4.0,
+            x_tilt_urad: -3.0,
+            y_tilt_urad: 2.0,
+            z_offset_um: 0.7,
+        },
         x_mm: xs,
         y_mm: ys,
         y_s1_mm: ys1,
@@ -54,7 +77,12 @@ fn exact_round_trip_through_the_field_model() {
     let (a, b) = (t.to_vec(), d.to_vec());
     assert_eq!(a.len(), b.len());
     for (k, name) in t.names().iter().enumerate() {
-        assert!((a[k] - b[k]).abs() < 1e-9, "{name}: truth {} derived {}", a[k], b[k]);
+        assert!(
+            (a[k] - b[k]).abs() < 1e-9,
+            "{name}: truth {} derived {}",
+            a[k],
+            b[k]
+        );
     }
 }
 
@@ -75,11 +103,20 @@ fn noise_propagates_as_stated_normalised_errors() {
     let mut worst: f64 = 0.0;
     for _ in 0..200 {
         let noisy = |base: &PsdReadings, rng: &mut ChaCha8Rng| {
-            PsdReadings::from_vec(&l, &base.to_vec().iter().map(|v| v + n.sample(rng)).collect::<Vec<_>>())
+            PsdReadings::from_vec(
+                &l,
+                &base
+                    .to_vec()
+                    .iter()
+                    .map(|v| v + n.sample(rng))
+                    .collect::<Vec<_>>(),
+            )
         };
         let run = noisy(&clean, &mut rng);
         let reference = noisy(&zero, &mut rng);
-        let d = derive_errors(&l, &run.minus(&reference).unwrap()).unwrap().to_vec();
+        let d = derive_errors(&l, &run.minus(&reference).unwrap())
+            .unwrap()
+            .to_vec();
         for k in 0..tv.len() {
             if u[k] > 1e-12 {
                 let z = (d[k] - tv[k]) / u[k];
@@ -108,7 +145,10 @@ impl ErrorSource for Rigid {
             AxisName::Z => Vector3::new(15.0, -20.0, 0.0),
             _ => Vector3::zeros(),
         };
-        SmallDisplacement { rot_urad: rot, trans_um: Vector3::zeros() }
+        SmallDisplacement {
+            rot_urad: rot,
+            trans_um: Vector3::zeros(),
+        }
     }
     fn motion(&self, a: AxisName, q: f64) -> SmallDisplacement {
         // Positioning 20 µm/m on X and −10 µm/m on Y; straightnesses symmetric about the
@@ -118,10 +158,16 @@ impl ErrorSource for Rigid {
                 Vector3::new(1e-3 * (q - 92.0).powi(2), 0.0, 0.0),
                 Vector3::new(0.02 * q, 1e-4 * (q - 92.0).powi(2), 0.0),
             ),
-            AxisName::Y => (Vector3::zeros(), Vector3::new(0.0, -0.01 * q, -2e-4 * (q - 83.5).powi(2))),
+            AxisName::Y => (
+                Vector3::zeros(),
+                Vector3::new(0.0, -0.01 * q, -2e-4 * (q - 83.5).powi(2)),
+            ),
             _ => (Vector3::zeros(), Vector3::zeros()),
         };
-        SmallDisplacement { rot_urad: rot, trans_um: tr }
+        SmallDisplacement {
+            rot_urad: rot,
+            trans_um: tr,
+        }
     }
 }
 
@@ -147,14 +193,39 @@ fn rigid_body_machine_cross_check() {
     assert!((sy + 1.67).abs() < 1e-3, "{sy}");
     // Straightness (least-squares line removed) and the roll of X.
     let xs = l.xs();
-    let eyx = deslope(&xs, &xs.iter().map(|x| 1e-4 * (x - 92.0).powi(2)).collect::<Vec<_>>());
-    let eax = deslope(&xs, &xs.iter().map(|x| 1e-3 * (x - 92.0).powi(2)).collect::<Vec<_>>());
+    let eyx = deslope(
+        &xs,
+        &xs.iter()
+            .map(|x| 1e-4 * (x - 92.0).powi(2))
+            .collect::<Vec<_>>(),
+    );
+    let eax = deslope(
+        &xs,
+        &xs.iter()
+            .map(|x| 1e-3 * (x - 92.0).powi(2))
+            .collect::<Vec<_>>(),
+    );
     for i in 0..11 {
-        assert!((d.eyx_um[i] - eyx[i]).abs() < 1e-4, "EYX[{i}] {} vs {}", d.eyx_um[i], eyx[i]);
-        assert!((d.eax_urad[i] - eax[i]).abs() < 1e-3, "EAX[{i}] {} vs {}", d.eax_urad[i], eax[i]);
+        assert!(
+            (d.eyx_um[i] - eyx[i]).abs() < 1e-4,
+            "EYX[{i}] {} vs {}",
+            d.eyx_um[i],
+            eyx[i]
+        );
+        assert!(
+            (d.eax_urad[i] - eax[i]).abs() < 1e-3,
+            "EAX[{i}] {} vs {}",
+            d.eax_urad[i],
+            eax[i]
+        );
     }
     let ys = l.ys();
-    let ezy = deslope(&ys, &ys.iter().map(|y| -2e-4 * (y - 83.5).powi(2)).collect::<Vec<_>>());
+    let ezy = deslope(
+        &ys,
+        &ys.iter()
+            .map(|y| -2e-4 * (y - 83.5).powi(2))
+            .collect::<Vec<_>>(),
+    );
     for i in 0..11 {
         assert!((d.ezy_um[i] - ezy[i]).abs() < 1e-4);
     }
@@ -168,10 +239,22 @@ fn degenerate_inputs() {
     let l = PsdLayout::paper();
     let mut r = simulate_readings(&l, &truth(&l));
     r.s3[4][1] = f64::NAN;
-    assert_eq!(derive_errors(&l, &r).unwrap_err(), PsdError::NonFinite { segment: 3, point: 5 });
+    assert_eq!(
+        derive_errors(&l, &r).unwrap_err(),
+        PsdError::NonFinite {
+            segment: 3,
+            point: 5
+        }
+    );
     r.s3.pop();
-    assert!(matches!(derive_errors(&l, &r).unwrap_err(), PsdError::PointCount { segment: 3, .. }));
-    let bad = PsdLayout { x_hi: -1.0, ..PsdLayout::paper() };
+    assert!(matches!(
+        derive_errors(&l, &r).unwrap_err(),
+        PsdError::PointCount { segment: 3, .. }
+    ));
+    let bad = PsdLayout {
+        x_hi: -1.0,
+        ..PsdLayout::paper()
+    };
     assert!(derive_errors(&bad, &r).is_err());
     // CSV round trip and missing points.
     let r = simulate_readings(&l, &truth(&l));
@@ -179,7 +262,16 @@ fn degenerate_inputs() {
     let runs = parse_readings_csv(&l, &text).unwrap();
     assert_eq!(runs.len(), 2);
     assert!((runs[1].1.s5[3][1] - r.s5[3][1]).abs() < 1e-4);
-    let cut: String = text.lines().filter(|s| !s.starts_with("3,5,11,")).map(|s| format!("{s}\n")).collect();
-    assert!(parse_readings_csv(&l, &cut).unwrap_err().to_string().contains("segment 5 point 11"));
+    let cut: String = text
+        .lines()
+        .filter(|s| !s.starts_with("3,5,11,"))
+        .map(|s| format!("{s}\n"))
+        .collect();
+    assert!(
+        parse_readings_csv(&l, &cut)
+            .unwrap_err()
+            .to_string()
+            .contains("segment 5 point 11")
+    );
     assert!(parse_readings_csv(&l, "run,segment,point,r1_um,r2_um\n0,6,1,0,0\n").is_err());
 }

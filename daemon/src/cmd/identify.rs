@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use metrology::capball::{self, CapballSetup, Identification, TrajectorySpec, PARAM_NAMES};
+use metrology::capball::{self, CapballSetup, Identification, PARAM_NAMES, TrajectorySpec};
 use metrology::kinematics::{Machine, Pose};
 use metrology::psd_frame::{self, PsdLayout};
 use nalgebra::Vector3;
@@ -110,7 +110,9 @@ pub fn run(c: Command) -> anyhow::Result<()> {
 }
 
 fn read(p: &Path) -> anyhow::Result<String> {
-    if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("mcap")) {
+    if p.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+    {
         anyhow::bail!(
             "{}: reading CapBall/PSD values from MCAP logs is not wired in yet; export the dataset as CSV",
             p.display()
@@ -121,7 +123,9 @@ fn read(p: &Path) -> anyhow::Result<String> {
 
 fn machine_from(p: &Option<PathBuf>) -> anyhow::Result<Machine> {
     Ok(match p {
-        Some(p) => Machine::from_toml(&read(p)?).with_context(|| format!("machine {}", p.display()))?,
+        Some(p) => {
+            Machine::from_toml(&read(p)?).with_context(|| format!("machine {}", p.display()))?
+        }
         None => Machine::from_config(&CapballSetup::paper_machine_config())?,
     })
 }
@@ -150,7 +154,8 @@ fn split_runs(recs: &[capball::CapballRecord]) -> Vec<(u32, Vec<Pose>, Vec<[f64;
 
 fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     let machine = machine_from(&a.machine)?;
-    let recs = capball::parse_dataset(&read(&a.data)?).with_context(|| format!("{}", a.data.display()))?;
+    let recs =
+        capball::parse_dataset(&read(&a.data)?).with_context(|| format!("{}", a.data.display()))?;
     let mut runs = split_runs(&recs);
     if let Some(r) = a.run {
         runs.retain(|x| x.0 == r);
@@ -160,7 +165,8 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     }
     let validation = match &a.validate {
         Some(p) => {
-            let v = capball::parse_dataset(&read(p)?).with_context(|| format!("{}", p.display()))?;
+            let v =
+                capball::parse_dataset(&read(p)?).with_context(|| format!("{}", p.display()))?;
             Some(split_runs(&v))
         }
         None => None,
@@ -169,14 +175,17 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     for (run, poses, meas) in &runs {
         let setup = CapballSetup::with_ball_from_poses(machine.clone(), poses)
             .with_context(|| format!("run {run}"))?;
-        let id = setup.identify(poses, meas).with_context(|| format!("run {run}"))?;
+        let id = setup
+            .identify(poses, meas)
+            .with_context(|| format!("run {run}"))?;
         let val = match &validation {
             Some(v) => {
-                let (vp, vm): (Vec<Pose>, Vec<[f64; 3]>) = v.iter().fold((vec![], vec![]), |mut acc, x| {
-                    acc.0.extend_from_slice(&x.1);
-                    acc.1.extend_from_slice(&x.2);
-                    acc
-                });
+                let (vp, vm): (Vec<Pose>, Vec<[f64; 3]>) =
+                    v.iter().fold((vec![], vec![]), |mut acc, x| {
+                        acc.0.extend_from_slice(&x.1);
+                        acc.1.extend_from_slice(&x.2);
+                        acc
+                    });
                 Some(setup.validation_rms_um(&id, &vp, &vm)?)
             }
             None => None,
@@ -196,7 +205,10 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
                 })
             })
             .collect();
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "runs": v }))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({ "runs": v }))?
+        );
         return Ok(());
     }
     for (run, ball, id, val) in &results {
@@ -205,19 +217,30 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_identification(run: u32, ball: &Vector3<f64>, id: &Identification, val: Option<&[f64; 3]>) {
+fn print_identification(
+    run: u32,
+    ball: &Vector3<f64>,
+    id: &Identification,
+    val: Option<&[f64; 3]>,
+) {
     println!(
         "run {run}: {} poses, ball at ({:.3}, {:.3}, {:.3}) mm, condition number {:.1}",
         id.n_poses, ball.x, ball.y, ball.z, id.condition_number
     );
     println!("  {:<12} {:>12} {:>12}", "parameter", "value", "u (k=1)");
-    for k in 0..PARAM_NAMES.len() {
-        println!("  {:<12} {:>12.3} {:>12.3}", PARAM_NAMES[k], id.params[k], id.std_uncertainty[k]);
+    for ((name, p), u) in PARAM_NAMES.iter().zip(&id.params).zip(&id.std_uncertainty) {
+        println!("  {name:<12} {p:>12.3} {u:>12.3}");
     }
     let r = id.residual_rms_um;
-    println!("  identification residual RMS x {:.3} y {:.3} z {:.3} µm (s = {:.3} µm)", r[0], r[1], r[2], id.residual_sigma_um);
+    println!(
+        "  identification residual RMS x {:.3} y {:.3} z {:.3} µm (s = {:.3} µm)",
+        r[0], r[1], r[2], id.residual_sigma_um
+    );
     if let Some(v) = val {
-        println!("  validation residual RMS     x {:.3} y {:.3} z {:.3} µm", v[0], v[1], v[2]);
+        println!(
+            "  validation residual RMS     x {:.3} y {:.3} z {:.3} µm",
+            v[0], v[1], v[2]
+        );
     }
 }
 
@@ -230,19 +253,37 @@ fn run_trajectory(a: TrajectoryArgs) -> anyhow::Result<()> {
         }
         None => CapballSetup::paper_default().ball_mm,
     };
-    if let Some(missing) = ["Y", "Z", "A", "C"].iter().find(|n| !machine.chain.contains(**n)) {
-        anyhow::bail!("machine {}: the CapBall model needs axes Y, Z, A and C (no {missing})", machine.chain);
+    if let Some(missing) = ["Y", "Z", "A", "C"]
+        .iter()
+        .find(|n| !machine.chain.contains(**n))
+    {
+        anyhow::bail!(
+            "machine {}: the CapBall model needs axes Y, Z, A and C (no {missing})",
+            machine.chain
+        );
     }
-    let setup = CapballSetup { machine, ball_mm: ball };
+    let setup = CapballSetup {
+        machine,
+        ball_mm: ball,
+    };
     if a.poses < 5 {
-        anyhow::bail!("--poses {}: at least 5 poses are needed for 14 parameters", a.poses);
+        anyhow::bail!(
+            "--poses {}: at least 5 poses are needed for 14 parameters",
+            a.poses
+        );
     }
-    let mut spec = TrajectorySpec { n_poses: a.poses, a_start_deg: a.a_start_deg, a_end_deg: a.a_end_deg, c_turns: a.c_turns };
+    let mut spec = TrajectorySpec {
+        n_poses: a.poses,
+        a_start_deg: a.a_start_deg,
+        a_end_deg: a.a_end_deg,
+        c_turns: a.c_turns,
+    };
     if a.reverse_a {
         spec = spec.reversed_a();
     }
     let poses = setup.trajectory(&spec);
-    std::fs::write(&a.out, capball::write_trajectory(&poses)).with_context(|| format!("writing {}", a.out.display()))?;
+    std::fs::write(&a.out, capball::write_trajectory(&poses))
+        .with_context(|| format!("writing {}", a.out.display()))?;
     println!(
         "{} poses written to {}; identification Jacobian condition number {:.1}",
         poses.len(),
@@ -254,12 +295,19 @@ fn run_trajectory(a: TrajectoryArgs) -> anyhow::Result<()> {
 
 fn run_sensor_frame(a: SensorFrameArgs) -> anyhow::Result<()> {
     let text = read(&a.data)?;
-    let mut rdr = csv::ReaderBuilder::new().comment(Some(b'#')).trim(csv::Trim::All).from_reader(text.as_bytes());
+    let mut rdr = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
     let h = rdr.headers()?.clone();
     let names = ["mx_um", "my_um", "mz_um", "s1_um", "s2_um", "s3_um"];
     let idx: Vec<usize> = names
         .iter()
-        .map(|n| h.iter().position(|x| x == *n).ok_or_else(|| anyhow::anyhow!("missing column `{n}` (need {names:?})")))
+        .map(|n| {
+            h.iter()
+                .position(|x| x == *n)
+                .ok_or_else(|| anyhow::anyhow!("missing column `{n}` (need {names:?})"))
+        })
         .collect::<anyhow::Result<_>>()?;
     let (mut m, mut s) = (Vec::new(), Vec::new());
     for (i, rec) in rdr.records().enumerate() {
@@ -277,15 +325,35 @@ fn run_sensor_frame(a: SensorFrameArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&f)?);
         return Ok(());
     }
-    println!("sensor frame from {} points (residual RMS {:.3} µm)", f.n_points, f.residual_rms_um);
+    println!(
+        "sensor frame from {} points (residual RMS {:.3} µm)",
+        f.n_points, f.residual_rms_um
+    );
     for row in &f.t {
-        println!("  [{:>10.6} {:>10.6} {:>10.6} {:>10.3}]", row[0], row[1], row[2], row[3]);
+        println!(
+            "  [{:>10.6} {:>10.6} {:>10.6} {:>10.3}]",
+            row[0], row[1], row[2], row[3]
+        );
     }
-    println!("gains {:.5} {:.5} {:.5} ({:+.2} %, {:+.2} %, {:+.2} %)", f.gains[0], f.gains[1], f.gains[2], f.gain_error_pct[0], f.gain_error_pct[1], f.gain_error_pct[2]);
+    println!(
+        "gains {:.5} {:.5} {:.5} ({:+.2} %, {:+.2} %, {:+.2} %)",
+        f.gains[0],
+        f.gains[1],
+        f.gains[2],
+        f.gain_error_pct[0],
+        f.gain_error_pct[1],
+        f.gain_error_pct[2]
+    );
     let n = f.non_orthogonality_urad;
-    println!("non-orthogonality (cosines) t1·t2 {:.0} t1·t3 {:.0} t2·t3 {:.0} µrad", n[0], n[1], n[2]);
+    println!(
+        "non-orthogonality (cosines) t1·t2 {:.0} t1·t3 {:.0} t2·t3 {:.0} µrad",
+        n[0], n[1], n[2]
+    );
     let o = f.offsets_um;
-    println!("offsets {:.3} {:.3} {:.3} µm; last row {:?}", o[0], o[1], o[2], f.last_row);
+    println!(
+        "offsets {:.3} {:.3} {:.3} µm; last row {:?}",
+        o[0], o[1], o[2], f.last_row
+    );
     Ok(())
 }
 
@@ -293,25 +361,41 @@ fn run_psd(a: PsdArgs) -> anyhow::Result<()> {
     let layout = match &a.layout {
         Some(s) => {
             let v = numbers(s, 6, "--layout")?;
-            PsdLayout { x_lo: v[0], x_hi: v[1], y_lo: v[2], y_hi: v[3], z0: v[4], z1: v[5], ..PsdLayout::paper() }
+            PsdLayout {
+                x_lo: v[0],
+                x_hi: v[1],
+                y_lo: v[2],
+                y_hi: v[3],
+                z0: v[4],
+                z1: v[5],
+                ..PsdLayout::paper()
+            }
         }
         None => PsdLayout::paper(),
     };
     if !(a.sigma_um.is_finite() && a.sigma_um >= 0.0) {
         anyhow::bail!("--sigma-um {}: must be a non-negative number", a.sigma_um);
     }
-    let runs = psd_frame::parse_readings_csv(&layout, &read(&a.data)?).with_context(|| format!("{}", a.data.display()))?;
+    let runs = psd_frame::parse_readings_csv(&layout, &read(&a.data)?)
+        .with_context(|| format!("{}", a.data.display()))?;
     let reference = runs
         .iter()
         .find(|r| r.0 == a.reference)
-        .ok_or_else(|| anyhow::anyhow!("reference run {} is not in {}", a.reference, a.data.display()))?
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "reference run {} is not in {}",
+                a.reference,
+                a.data.display()
+            )
+        })?
         .1
         .clone();
     // Reference subtraction doubles the variance of every reading.
     let u = psd_frame::derive_uncertainty(&layout, a.sigma_um * 2f64.sqrt())?;
     let mut out = Vec::new();
     for (run, r) in runs.iter().filter(|r| r.0 != a.reference) {
-        let e = psd_frame::derive_errors(&layout, &r.minus(&reference)?).with_context(|| format!("run {run}"))?;
+        let e = psd_frame::derive_errors(&layout, &r.minus(&reference)?)
+            .with_context(|| format!("run {run}"))?;
         out.push((*run, e));
     }
     if out.is_empty() {
@@ -322,15 +406,36 @@ fn run_psd(a: PsdArgs) -> anyhow::Result<()> {
             .iter()
             .map(|(run, e)| serde_json::json!({ "run": run, "errors": e, "names": e.names(), "std_uncertainty": u }))
             .collect();
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "reference": a.reference, "runs": v }))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({ "reference": a.reference, "runs": v })
+            )?
+        );
         return Ok(());
     }
     for (run, e) in &out {
         println!("run {run} − run {}:", a.reference);
         let names = e.names();
-        let ui = |n: &str| names.iter().position(|x| x == n).map(|k| u[k]).unwrap_or(f64::NAN);
-        println!("  squareness EC0Y {:.2} EB0Z {:.2} EA0Z {:.2} µrad (u {:.2} {:.2} {:.2})", e.ec0y_urad, e.eb0z_urad, e.ea0z_urad, ui("EC0Y_urad"), ui("EB0Z_urad"), ui("EA0Z_urad"));
-        let span = |v: &[f64]| v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min);
+        let ui = |n: &str| {
+            names
+                .iter()
+                .position(|x| x == n)
+                .map(|k| u[k])
+                .unwrap_or(f64::NAN)
+        };
+        println!(
+            "  squareness EC0Y {:.2} EB0Z {:.2} EA0Z {:.2} µrad (u {:.2} {:.2} {:.2})",
+            e.ec0y_urad,
+            e.eb0z_urad,
+            e.ea0z_urad,
+            ui("EC0Y_urad"),
+            ui("EB0Z_urad"),
+            ui("EA0Z_urad")
+        );
+        let span = |v: &[f64]| {
+            v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
+        };
         println!(
             "  positioning change over the travel: X {:.2} µm, Y {:.2} µm",
             e.exx_um.last().unwrap_or(&0.0) - e.exx_um.first().unwrap_or(&0.0),
@@ -338,9 +443,18 @@ fn run_psd(a: PsdArgs) -> anyhow::Result<()> {
         );
         println!(
             "  straightness ranges EYX {:.2} EZX {:.2} EXY {:.2} EZY {:.2} EXZ {:.2} EYZ {:.2} µm",
-            span(&e.eyx_um), span(&e.ezx_um), span(&e.exy_um), span(&e.ezy_um), span(&e.exz_um), span(&e.eyz_um)
+            span(&e.eyx_um),
+            span(&e.ezx_um),
+            span(&e.exy_um),
+            span(&e.ezy_um),
+            span(&e.exz_um),
+            span(&e.eyz_um)
         );
-        println!("  roll ranges EAX {:.2} EBY {:.2} µrad", span(&e.eax_urad), span(&e.eby_urad));
+        println!(
+            "  roll ranges EAX {:.2} EBY {:.2} µrad",
+            span(&e.eax_urad),
+            span(&e.eby_urad)
+        );
     }
     Ok(())
 }

@@ -26,7 +26,8 @@ pub struct Args {
 
 fn parse_tolerance(s: &str) -> anyhow::Result<(f64, f64)> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-    let bad = || anyhow::anyhow!("--tolerance `{s}`: expected two numbers `LO,HI`, e.g. `-0.010,0.015`");
+    let bad =
+        || anyhow::anyhow!("--tolerance `{s}`: expected two numbers `LO,HI`, e.g. `-0.010,0.015`");
     if parts.len() != 2 {
         return Err(bad());
     }
@@ -38,7 +39,8 @@ fn parse_tolerance(s: &str) -> anyhow::Result<(f64, f64)> {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let (lo, hi) = parse_tolerance(&args.tolerance)?;
     let read = |p: &PathBuf, which: &str| -> anyhow::Result<Vec<f64>> {
-        let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        let text =
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
         Ok(metrology::parts::parse_sample(which, &text)?)
     };
     let before = read(&args.before, "before")?;
@@ -49,7 +51,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     println!("tolerance [{lo}, {hi}]");
-    println!("{:<8} {:>5} {:>14} {:>14} {:>18} {:>17}", "sample", "n", "mean", "std dev", "reject (normal) %", "reject (seen) %");
+    println!(
+        "{:<8} {:>5} {:>14} {:>14} {:>18} {:>17}",
+        "sample", "n", "mean", "std dev", "reject (normal) %", "reject (seen) %"
+    );
     for (name, s) in [("before", &r.before), ("after", &r.after)] {
         println!(
             "{name:<8} {:>5} {:>14.6} {:>14.6} {:>18.3} {:>17.3}",
@@ -62,8 +67,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         r.t,
         r.dof,
         r.p_value,
-        if r.significant { "significant at 5 %" } else { "not significant at 5 %" }
+        if r.significant {
+            "significant at 5 %"
+        } else {
+            "not significant at 5 %"
+        }
     );
-    println!("variance ratio after/before {:.3} (a correction of systematic errors leaves it near 1)", r.variance_ratio);
+    println!(
+        "variance ratio after/before {:.3} (a correction of systematic errors leaves it near 1)",
+        r.variance_ratio
+    );
     Ok(())
 }

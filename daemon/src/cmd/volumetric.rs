@@ -48,13 +48,20 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mtext = std::fs::read_to_string(&args.machine).with_context(|| format!("reading {}", args.machine.display()))?;
-    let machine = Machine::from_toml(&mtext).with_context(|| format!("machine {}", args.machine.display()))?;
-    let etext = std::fs::read_to_string(&args.errors).with_context(|| format!("reading {}", args.errors.display()))?;
-    let errors = ComponentErrors::from_csv(&etext).with_context(|| format!("errors {}", args.errors.display()))?;
+    let mtext = std::fs::read_to_string(&args.machine)
+        .with_context(|| format!("reading {}", args.machine.display()))?;
+    let machine = Machine::from_toml(&mtext)
+        .with_context(|| format!("machine {}", args.machine.display()))?;
+    let etext = std::fs::read_to_string(&args.errors)
+        .with_context(|| format!("reading {}", args.errors.display()))?;
+    let errors = ComponentErrors::from_csv(&etext)
+        .with_context(|| format!("errors {}", args.errors.display()))?;
     let grid = GridSpec::parse(&args.grid)?;
     if grid.len() > 20_000_000 {
-        anyhow::bail!("grid of {} points is too large (limit 20 million)", grid.len());
+        anyhow::bail!(
+            "grid of {} points is too large (limit 20 million)",
+            grid.len()
+        );
     }
     let mut outside = Vec::new();
     for (name, curve) in &errors.motion {
@@ -73,13 +80,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let points = volumetric::volumetric_grid(&machine, &errors, &grid)?;
     let summary = volumetric::summarize(&points);
     if let Some(p) = &args.out {
-        std::fs::write(p, volumetric::compensation_csv(&points)).with_context(|| format!("writing {}", p.display()))?;
+        std::fs::write(p, volumetric::compensation_csv(&points))
+            .with_context(|| format!("writing {}", p.display()))?;
     }
     let mut cec_resid = None;
     if let Some(p) = &args.siemens {
         let names: Vec<&str> = args.axis_names.split(',').map(str::trim).collect();
         if names.len() != 3 || names.iter().any(|n| n.is_empty()) {
-            anyhow::bail!("--axis-names `{}`: give three machine axis names for X, Y, Z, e.g. AX1,AX2,AX3", args.axis_names);
+            anyhow::bail!(
+                "--axis-names `{}`: give three machine axis names for X, Y, Z, e.g. AX1,AX2,AX3",
+                args.axis_names
+            );
         }
         let cec = volumetric::siemens_cec(&points, &grid, [names[0], names[1], names[2]]);
         std::fs::write(p, &cec.ini).with_context(|| format!("writing {}", p.display()))?;
@@ -94,7 +105,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
-    println!("machine {} — {} grid points", machine.chain, summary.n_points);
+    println!(
+        "machine {} — {} grid points",
+        machine.chain, summary.n_points
+    );
     println!(
         "largest volumetric error {:.2} µm at ({:.1}, {:.1}, {:.1}) mm; RMS x {:.2} y {:.2} z {:.2} µm",
         summary.max_norm_um,
@@ -106,7 +120,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         summary.rms_um[2]
     );
     if !outside.is_empty() {
-        println!("warning: the grid goes beyond these tables (end values held): {}", outside.join(", "));
+        println!(
+            "warning: the grid goes beyond these tables (end values held): {}",
+            outside.join(", ")
+        );
     }
     if let Some(p) = &args.out {
         println!("compensation table (CSV): {}", p.display());

@@ -857,6 +857,12 @@ pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
     Ok(out)
 }
 
+/// Poses and measured errors of the records of one run, in file order: the inputs of
+/// [`CapballSetup::identify`] (an adapter from logged pose values produces the same pair).
+pub fn split_run(records: &[CapballRecord], run: u32) -> (Vec<Pose>, Vec<[f64; 3]>) {
+    records.iter().filter(|r| r.run == run).map(|r| (r.pose, r.e_um)).unzip()
+}
+
 /// Write a dataset in the format of [`parse_dataset`].
 pub fn write_dataset(records: &[CapballRecord]) -> String {
     let mut s = String::from("run,pose,time_s,x_mm,y_mm,z_mm,a_deg,c_deg,ex_um,ey_um,ez_um\n");

@@ -301,7 +301,7 @@ impl ErrorSource for ComponentErrors {
     }
 }
 
-/// First-order (small-angle) volumetric error, µm: paper 004 eq. 1 with A ≈ I + [ε]×.
+/// First-order (small-angle) volumetric error, µm: paper 004 eq. 1 with A ≈ I + ε× (eq. 7 without products of errors).
 pub fn small_angle_error_um(
     machine: &Machine,
     errors: &dyn ErrorSource,

@@ -309,10 +309,16 @@ impl CapballSetup {
     /// A setup from a machine description (TOML) and a ball position.
     pub fn new(cfg: &MachineConfig, ball_mm: Vector3<f64>) -> Result<Self, CapballError> {
         let machine = Machine::from_config(cfg)?;
-        for a in [AxisName::Y, AxisName::Z, AxisName::A, AxisName::C] {
+        for a in [
+            AxisName::X,
+            AxisName::Y,
+            AxisName::Z,
+            AxisName::A,
+            AxisName::C,
+        ] {
             if machine.joint(a).is_none() {
                 return Err(CapballError::Machine(KinematicsError::BadChain(format!(
-                    "{} (the CapBall model needs axes Y, Z, A and C)",
+                    "{} (the CapBall model needs axes X, Y, Z, A and C)",
                     machine.chain
                 ))));
             }
@@ -860,7 +866,80 @@ pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
 /// Poses and measured errors of the records of one run, in file order: the inputs of
 /// [`CapballSetup::identify`] (an adapter from logged pose values produces the same pair).
 pub fn split_run(records: &[CapballRecord], run: u32) -> (Vec<Pose>, Vec<[f64; 3]>) {
-    records.iter().filter(|r| r.run == run).map(|r| (r.pose, r.e_um)).unzip()
+    records
+        .iter()
+        .filter(|r| r.run == run)
+        .map(|r| (r.pose, r.e_um))
+        .unzip()
+}
+
+/// Parse a trajectory CSV (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`, `shared/instruments.md`);
+/// rows must be numbered 1, 2, 3, … in order.
+pub fn parse_trajectory(text: &str) -> Result<Vec<Pose>, CapballError> {
+    let err = |m: String| CapballError::Dataset(format!("trajectory: {m}"));
+    let mut rdr = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let h = rdr.headers().map_err(|e| err(e.to_string()))?.clone();
+    let col = |n: &str| h.iter().position(|x| x == n);
+    let need = |n: &str| col(n).ok_or_else(|| err(format!("missing column `{n}`")));
+    let (ip, ix, iy, iz) = (need("pose")?, need("x_mm")?, need("y_mm")?, need("z_mm")?);
+    let (ia, ic) = (col("a_deg"), col("c_deg"));
+    let mut out = Vec::new();
+    for (line, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| err(e.to_string()))?;
+        let row = line + 2;
+        let num = |i: usize| -> Result<f64, CapballError> {
+            let s = rec.get(i).unwrap_or("");
+            s.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| err(format!("row {row}: `{s}` is not a finite number")))
+        };
+        let idx = num(ip)?;
+        if idx != (out.len() + 1) as f64 {
+            return Err(err(format!(
+                "row {row}: pose {idx} out of order (expected {})",
+                out.len() + 1
+            )));
+        }
+        out.push(Pose {
+            x_mm: num(ix)?,
+            y_mm: num(iy)?,
+            z_mm: num(iz)?,
+            a_deg: ia.map(num).transpose()?.unwrap_or(0.0),
+            b_deg: 0.0,
+            c_deg: ic.map(num).transpose()?.unwrap_or(0.0),
+        });
+    }
+    Ok(out)
+}
+
+/// Join per-pose values (1-based pose index of the trajectory, `[ex, ey, ez]` µm, e.g. the
+/// steady values of a log's CapBall pose topic) with the trajectory's poses: the adapter from
+/// logged pose values to [`CapballSetup::identify`]. A pose index outside the trajectory is an
+/// error; poses without a value are skipped.
+pub fn join_pose_values(
+    trajectory: &[Pose],
+    values: &[(u32, [f64; 3])],
+) -> Result<(Vec<Pose>, Vec<[f64; 3]>), CapballError> {
+    let mut poses = Vec::with_capacity(values.len());
+    let mut meas = Vec::with_capacity(values.len());
+    for (k, e) in values {
+        let p = (*k as usize)
+            .checked_sub(1)
+            .and_then(|i| trajectory.get(i))
+            .ok_or_else(|| {
+                CapballError::Dataset(format!(
+                    "pose index {k} is not in the trajectory (1..{})",
+                    trajectory.len()
+                ))
+            })?;
+        poses.push(*p);
+        meas.push(*e);
+    }
+    Ok((poses, meas))
 }
 
 /// Write a dataset in the format of [`parse_dataset`].

@@ -278,3 +278,21 @@ pivot_mm = [5.0, 15.0, -40.0]
     let poses = s.trajectory(&TrajectorySpec::default());
     assert!(s.condition_number(&poses).is_finite());
 }
+
+#[test]
+fn trajectory_csv_and_pose_value_join() {
+    let s = CapballSetup::paper_default();
+    let poses = s.trajectory(&TrajectorySpec {
+        n_poses: 30,
+        ..Default::default()
+    });
+    let back = parse_trajectory(&write_trajectory(&poses)).unwrap();
+    assert_eq!(back.len(), 30);
+    assert!((back[12].c_deg - poses[12].c_deg).abs() < 1e-5);
+    let (p, m) = join_pose_values(&back, &[(3, [1.0, 2.0, 3.0]), (30, [0.0; 3])]).unwrap();
+    assert_eq!(p[0], back[2]);
+    assert_eq!(m[0], [1.0, 2.0, 3.0]);
+    assert!(join_pose_values(&back, &[(31, [0.0; 3])]).is_err());
+    assert!(join_pose_values(&back, &[(0, [0.0; 3])]).is_err());
+    assert!(parse_trajectory("pose,x_mm,y_mm,z_mm\n2,0,0,0\n").is_err());
+}

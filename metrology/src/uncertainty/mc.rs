@@ -419,8 +419,9 @@ mod tests {
 
     #[test]
     fn tolerance_per_clause_7_9_2() {
-        // JCGM 101 §7.9.2 example: u(y) = 1.02 (ndig 2) → δ = 0.005; u = 0.0754, ndig 2 → 0.0005.
-        assert!((numerical_tolerance(1.02, 2) - 0.005).abs() < 1e-15);
+        // JCGM 101 §7.9.2: u(y) = 1.02 with ndig = 2 is 10 × 10⁻¹, so δ = 0.05;
+        // u = 0.0754 with ndig = 2 is 75 × 10⁻³, so δ = 0.0005.
+        assert!((numerical_tolerance(1.02, 2) - 0.05).abs() < 1e-15);
         assert!((numerical_tolerance(0.0754, 2) - 0.0005).abs() < 1e-15);
         assert!((numerical_tolerance(0.0754, 1) - 0.005).abs() < 1e-15);
         assert!((numerical_tolerance(32.0, 2) - 0.5).abs() < 1e-15);

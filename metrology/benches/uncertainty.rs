@@ -3,7 +3,7 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use metrology::uncertainty::budget::Budget;
-use metrology::uncertainty::capball::StandInCase;
+use metrology::uncertainty::capball::Paper001Case;
 use metrology::uncertainty::mc::{self, BLOCK_TRIALS, McOptions, TrialSource};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -16,7 +16,7 @@ fn thread_cpu_s() -> Option<f64> {
 }
 
 fn capball(c: &mut Criterion) {
-    let case = StandInCase::paper001();
+    let case = Paper001Case::paper001();
     let model = case
         .monte_carlo_model(&case.p_true, &case.cyclic_sources())
         .unwrap();

@@ -8,7 +8,7 @@
 //! repeated identifications are simulated directly from the drift's time function.
 
 use metrology::uncertainty::capball::{
-    CapballSources, DriftModel, Source, StandInCase, coverage_check, simulate_identifications,
+    CapballSources, DriftModel, Source, Paper001Case, coverage_check, simulate_identifications,
 };
 use metrology::uncertainty::mc::{self, McOptions};
 use nalgebra::DMatrix;
@@ -23,7 +23,7 @@ fn quick() -> McOptions {
 
 #[test]
 fn gaussian_sources_match_the_closed_form_covariance() {
-    let case = StandInCase::paper001();
+    let case = Paper001Case::paper001();
     let sources = CapballSources {
         drift: DriftModel::None,
         ..case.cyclic_sources()
@@ -52,8 +52,8 @@ fn gaussian_sources_match_the_closed_form_covariance() {
 }
 
 #[test]
-fn stand_in_jacobian_identifies_all_parameters() {
-    let case = StandInCase::paper001();
+fn paper001_jacobian_identifies_all_parameters() {
+    let case = Paper001Case::paper001();
     let j: &DMatrix<f64> = &case.jacobian;
     assert_eq!((j.nrows(), j.ncols()), (2421, 14));
     let sv = j.clone().svd(false, false).singular_values;
@@ -71,7 +71,7 @@ fn stand_in_jacobian_identifies_all_parameters() {
 
 #[test]
 fn statistical_drift_is_too_narrow_cyclic_drift_covers_repeated_identifications() {
-    let case = StandInCase::paper001();
+    let case = Paper001Case::paper001();
     // 200 back-to-back identifications (the paper had 10; more runs measure the rate).
     let runs = simulate_identifications(
         &case.jacobian,
@@ -137,7 +137,7 @@ fn statistical_drift_is_too_narrow_cyclic_drift_covers_repeated_identifications(
 #[test]
 fn drift_dominates_the_contributions() {
     // Paper 001 Table 5: one source at a time; the drift is responsible for most of the total.
-    let case = StandInCase::paper001();
+    let case = Paper001Case::paper001();
     let all = case.cyclic_sources();
     let u_of = |s: &CapballSources| {
         let m = case.monte_carlo_model(&case.p_true, s).unwrap();
@@ -166,7 +166,7 @@ fn drift_dominates_the_contributions() {
 
 #[test]
 fn adaptive_run_converges_and_is_reproducible() {
-    let case = StandInCase::paper001();
+    let case = Paper001Case::paper001();
     let model = case
         .monte_carlo_model(&case.p_true, &case.cyclic_sources())
         .unwrap();

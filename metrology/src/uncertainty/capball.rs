@@ -11,10 +11,10 @@
 //! The per-point noise is generated in full (2421 normals per trial for 807 poses) and
 //! projected in batches with one matrix product.
 //!
-//! Any Jacobian plugs in ([`CapballMc::new`] takes `J` as a matrix); [`stand_in_jacobian`]
-//! builds one from a generic A/C rotary-table chain for tests and benchmarks.
+//! Any Jacobian plugs in ([`CapballMc::new`] takes `J` as a matrix); [`Paper001Case`] uses the
+//! machine's own (`crate::capball`, the WCAYFXZT machine of paper 001).
 
-use nalgebra::{DMatrix, Rotation3, Unit, Vector3};
+use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution as _, StandardNormal};
@@ -22,17 +22,6 @@ use serde::Serialize;
 
 use super::UncertaintyError;
 use super::mc::{McResult, TrialSource};
-
-/// Names of the 14 parameters of [`stand_in_jacobian`]: 8 machine errors — angular
-/// positioning (scale) errors of A and C (`EAA`, `ECC`, µrad per rad), the C axis location
-/// `EY0C` and orientation `EA0C`, `EB0C`, the A axis orientation `EB0A`, `EC0A`, the X/Y
-/// squareness `EC0Y` (µrad) — and 6 setup errors (ball position in the C frame `BX BY BZ`, tool
-/// offset `TX TY TZ`, µm). With a single ball on an A/C table the A axis location cannot be told
-/// from the setup errors, hence this identifiable set for the stand-in.
-pub const STAND_IN_NAMES: [&str; 14] = [
-    "EAA", "EY0C", "EA0C", "EB0C", "ECC", "EC0Y", "EB0A", "EC0A", "BX", "BY", "BZ", "TX", "TY",
-    "TZ",
-];
 
 /// One harmonic of a periodic drift: `cos_um·cos(kωt) + sin_um·sin(kωt)` per direction x, y, z.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -369,82 +358,6 @@ impl TrialSource for CapballMc {
     }
 }
 
-/// The stand-in identification Jacobian of a table-carried A/C rotary chain (A about X, C on A
-/// about its own Z), ball at `ball_mm` in the C frame, by central differences of the forward
-/// kinematics with the 14 parameters of [`STAND_IN_NAMES`] (lengths in µm, angles in µrad; the
-/// Jacobian in µm per unit). `poses` are (A, C) in radians.
-///
-/// It stands in for the machine's own Jacobian (metrology::capball) in tests and benchmarks.
-pub fn stand_in_jacobian(poses: &[(f64, f64)], ball_mm: [f64; 3]) -> DMatrix<f64> {
-    let mut j = DMatrix::zeros(3 * poses.len(), 14);
-    for (i, &(a, c)) in poses.iter().enumerate() {
-        for k in 0..14 {
-            let h = 1.0; // 1 µm or 1 µrad: the model is linear to ~1e-6 relative at this size
-            let mut pp = [0.0; 14];
-            pp[k] = h;
-            let plus = stand_in_fk(&pp, a, c, ball_mm);
-            pp[k] = -h;
-            let minus = stand_in_fk(&pp, a, c, ball_mm);
-            for r in 0..3 {
-                j[(3 * i + r, k)] = (plus[r] - minus[r]) / (2.0 * h);
-            }
-        }
-    }
-    j
-}
-
-/// Volumetric error (µm) of the stand-in chain at pose (a, c) for parameters `p`.
-fn stand_in_fk(p: &[f64; 14], a: f64, c: f64, ball_mm: [f64; 3]) -> [f64; 3] {
-    let um = 1e-3; // µm → mm
-    let urad = 1e-6;
-    let x: Vector3<f64> = Vector3::x();
-    let z: Vector3<f64> = Vector3::z();
-    let pos = |p: &[f64; 14]| -> Vector3<f64> {
-        // C axis: location EY0C, orientation (EA0C about X, EB0C about Y), scale ECC.
-        let q_c = Vector3::new(0.0, p[1] * um, 0.0);
-        let u_c = Rotation3::from_axis_angle(&Vector3::x_axis(), p[2] * urad)
-            * Rotation3::from_axis_angle(&Vector3::y_axis(), p[3] * urad)
-            * z;
-        let b = Vector3::new(ball_mm[0], ball_mm[1], ball_mm[2])
-            + Vector3::new(p[8] * um, p[9] * um, p[10] * um);
-        let c_actual = c * (1.0 + p[4] * urad);
-        let x1 = q_c + Rotation3::from_axis_angle(&Unit::new_normalize(u_c), c_actual) * (b - q_c);
-        // A axis: orientation (EB0A about Y, EC0A about Z), scale EAA.
-        let u_a = Rotation3::from_axis_angle(&Vector3::y_axis(), p[6] * urad)
-            * Rotation3::from_axis_angle(&Vector3::z_axis(), p[7] * urad)
-            * x;
-        Rotation3::from_axis_angle(&Unit::new_normalize(u_a), a * (1.0 + p[0] * urad)) * x1
-    };
-    let nominal = pos(&[0.0; 14]);
-    let actual = pos(p);
-    // The tool follows the nominal ball centre; the X/Y squareness EC0Y moves it by −EC0Y·Y in
-    // X, and the tool offset adds (TX, TY, TZ).
-    let tool = Vector3::new(
-        -p[5] * urad * nominal[1] + p[11] * um,
-        p[12] * um,
-        p[13] * um,
-    );
-    let d = (actual - nominal - tool) / um;
-    [d[0], d[1], d[2]]
-}
-
-/// The identification trajectory of the stand-in: A ramps from 0 to 90° while C makes
-/// `c_turns` turns, `n` poses `dt_s` apart (paper 001: 807 poses in about 10 minutes).
-pub fn stand_in_trajectory(n: usize, c_turns: f64, dt_s: f64) -> (Vec<(f64, f64)>, Vec<f64>) {
-    let last = (n.max(2) - 1) as f64;
-    let poses = (0..n)
-        .map(|i| {
-            let f = i as f64 / last;
-            (
-                f * std::f64::consts::FRAC_PI_2,
-                f * c_turns * std::f64::consts::TAU,
-            )
-        })
-        .collect();
-    let times = (0..n).map(|i| i as f64 * dt_s).collect();
-    (poses, times)
-}
-
 /// Simulated repeated identifications on a machine whose measuring loop drifts cyclically:
 /// run `r` starts at `first_start_s + r·run_period_s` (back-to-back trajectories, as the ten
 /// runs of paper 001 over about three hours), each with fresh sensor and frame noise.
@@ -517,11 +430,12 @@ pub fn coverage_check(mc: &McResult, runs: &[Vec<f64>]) -> CoverageCheck {
     }
 }
 
-/// A complete stand-in case shaped like paper 001 (807 poses about 0.75 s apart, sources of the
-/// magnitudes the paper describes), used by the tests, the benchmark and the report until the
-/// machine's own Jacobian is wired in.
+/// The case of paper 001 on our model of its machine: the identification Jacobian of the
+/// WCAYFXZT machine along the 807-pose trajectory (`crate::capball`), poses 0.75 s apart (about
+/// 10 minutes per trajectory), and sources of the magnitudes the paper describes (its exact
+/// values are not in the text we have). Used by the tests, the benchmark and the report.
 #[derive(Debug, Clone)]
-pub struct StandInCase {
+pub struct Paper001Case {
     pub jacobian: DMatrix<f64>,
     pub times_s: Vec<f64>,
     pub names: Vec<String>,
@@ -529,20 +443,24 @@ pub struct StandInCase {
     pub p_true: Vec<f64>,
     pub sensor_u_um: [f64; 3],
     pub frame_u_um: [f64; 3],
-    /// The measuring loop's real drift: a cooling cycle of 25 min, 2/2/6 µm peak to valley.
+    /// The measuring loop's real drift: a cooling cycle of 25 min, 2/2/6 µm peak to valley
+    /// (x, y, z; the paper saw a larger drift along z than along x and y).
     pub drift: CyclicDrift,
     /// Start-to-start time of back-to-back identification runs (18 min, paper 001: ten runs in
     /// about three hours).
     pub run_period_s: f64,
 }
 
-impl StandInCase {
-    pub fn paper001() -> StandInCase {
-        let (poses, times_s) = stand_in_trajectory(807, 8.0, 0.75);
-        StandInCase {
-            jacobian: stand_in_jacobian(&poses, [150.0, 50.0, 80.0]),
+impl Paper001Case {
+    pub fn paper001() -> Paper001Case {
+        use crate::capball::{CapballSetup, PARAM_NAMES, TrajectorySpec};
+        let setup = CapballSetup::paper_default();
+        let poses = setup.trajectory(&TrajectorySpec::default());
+        let times_s = (0..poses.len()).map(|i| i as f64 * 0.75).collect();
+        Paper001Case {
+            jacobian: setup.stacked_jacobian(&poses),
             times_s,
-            names: STAND_IN_NAMES.iter().map(|s| s.to_string()).collect(),
+            names: PARAM_NAMES.iter().map(|s| s.to_string()).collect(),
             p_true: vec![
                 12.0, -8.0, 25.0, -15.0, 20.0, -30.0, 18.0, 40.0, 5.0, -3.0, 7.0, 2.0, -4.0, 6.0,
             ],

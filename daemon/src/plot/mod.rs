@@ -1,0 +1,3 @@
+//! Plots of analysis results with `plotters` (SVG or PNG, chosen by the file extension).
+
+pub mod uncertainty;

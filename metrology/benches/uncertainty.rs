@@ -79,7 +79,8 @@ fn capball(c: &mut Criterion) {
 }
 
 fn budget(c: &mut Criterion) {
-    let b = Budget::from_toml(include_str!("../../examples/budgets/jcgm101_9_3_mass.toml")).unwrap();
+    let b =
+        Budget::from_toml(include_str!("../../examples/budgets/jcgm101_9_3_mass.toml")).unwrap();
     let mut g = c.benchmark_group("budget_mc");
     g.throughput(Throughput::Elements(BLOCK_TRIALS as u64));
     g.bench_function("mass_9_3_block_of_500_one_core", |bch| {

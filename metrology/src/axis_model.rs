@@ -97,7 +97,10 @@ impl AxisModel {
     pub fn noise_std_um(&self, index: usize) -> f64 {
         let mut s = self.noise_um;
         for e in &self.effects {
-            if let Effect::LocalAnomaly { index: i, std_ratio } = *e
+            if let Effect::LocalAnomaly {
+                index: i,
+                std_ratio,
+            } = *e
                 && i == index + 1
             {
                 s *= std_ratio;

@@ -115,7 +115,9 @@ pub enum DriftModel {
     None,
     /// ISO/TR 230-9 statistical treatment: a normal term of standard deviation `u_um` per
     /// direction, drawn independently for every point.
-    Statistical { u_um: [f64; 3] },
+    Statistical {
+        u_um: [f64; 3],
+    },
     /// Periodic function of time with a random start phase per trial.
     Cyclic(CyclicDrift),
 }
@@ -261,10 +263,8 @@ impl CapballMc {
         let sigma = (0..j.nrows())
             .map(|r| {
                 let a = r % 3;
-                (sources.sensor_u_um[a].powi(2)
-                    + sources.frame_u_um[a].powi(2)
-                    + stat[a].powi(2))
-                .sqrt()
+                (sources.sensor_u_um[a].powi(2) + sources.frame_u_um[a].powi(2) + stat[a].powi(2))
+                    .sqrt()
             })
             .collect();
         let mut drift_terms = Vec::new();

@@ -15,7 +15,9 @@
 use serde::Serialize;
 
 /// The instruments metrolog knows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Instrument {
     Interferometer,
@@ -49,7 +51,10 @@ impl HostClock {
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_nanos() as u64)
             .unwrap_or(0);
-        HostClock { start_mono: std::time::Instant::now(), start_unix_ns }
+        HostClock {
+            start_mono: std::time::Instant::now(),
+            start_unix_ns,
+        }
     }
     /// Now, ns since the Unix epoch along the monotonic clock.
     pub fn now_ns(&self) -> u64 {
@@ -84,13 +89,34 @@ pub struct Sample {
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum SampleValues {
     /// LI-80 `$POS`, with the compensated length.
-    Position { raw_nm: i64, position_um: f64, sig: u8, flags: u32 },
+    Position {
+        raw_nm: i64,
+        position_um: f64,
+        sig: u8,
+        flags: u32,
+    },
     /// LI-80 `$ENV`, with the refractive index computed from it.
-    Environment { air_c: f64, air_pa: f64, rh_pct: f64, material_c: Vec<f64>, n_air: f64 },
+    Environment {
+        air_c: f64,
+        air_pa: f64,
+        rh_pct: f64,
+        material_c: Vec<f64>,
+        n_air: f64,
+    },
     /// CB-3 sample: volts, distance changes (polynomial) and machine-frame error (transform).
-    Capball { volts: [f64; 3], d_um: [f64; 3], e_um: [f64; 3], flags: u8 },
+    Capball {
+        volts: [f64; 3],
+        d_um: [f64; 3],
+        e_um: [f64; 3],
+        flags: u8,
+    },
     /// PSD-2 sample: position, summed photocurrent, head temperature.
-    Psd { x_um: f64, y_um: f64, sum_pa: f64, head_c: f64 },
+    Psd {
+        x_um: f64,
+        y_um: f64,
+        sum_pa: f64,
+        head_c: f64,
+    },
 }
 
 /// A CNC trigger, from SocketCAN or SLCAN alike.
@@ -130,18 +156,34 @@ pub enum DriverEvent {
     Sample(Sample),
     Trigger(Trigger),
     /// The device was identified (after every (re)connect).
-    Connected { instrument: Instrument, port: String, identity: String },
+    Connected {
+        instrument: Instrument,
+        port: String,
+        identity: String,
+    },
     /// The port vanished or failed; the driver retries with backoff.
-    Disconnected { instrument: Instrument, port: String, reason: String },
+    Disconnected {
+        instrument: Instrument,
+        port: String,
+        reason: String,
+    },
     /// An error the operator must read (device answered ERR or nothing).
-    Error { instrument: Instrument, port: String, message: String },
+    Error {
+        instrument: Instrument,
+        port: String,
+        message: String,
+    },
     /// A snapshot of the counters (sent about once a second and on change of connection).
-    Counters { instrument: Instrument, counters: Counters },
+    Counters {
+        instrument: Instrument,
+        counters: Counters,
+    },
 }
 
 pub mod cb3;
 pub mod clock;
 pub mod li80;
+mod link;
 pub mod psd;
 pub mod trigger;
 

@@ -1,4 +1,20 @@
 //! PSD-2 transimpedance board driver.
+//!
+//! Session (SCPI, commands without `?` have no answer): `INIT:CONT OFF`, `*OPC?` (everything
+//! before its `1` belongs to the old stream), `SYST:ERR?` until the queue is empty, `*IDN?`,
+//! `CONF:RATE <hz>`, `SYST:ERR?` (must be `0,…`), `INIT:CONT ON`, `*OPC?`.
+//! Data lines become [`SampleValues::Psd`]: position from the photocurrents, the calibrated
+//! error map and the head thermal correction applied; a sample whose `x1+x2` or `y1+y2` is
+//! below the configured minimum is invalid.
+
+use std::time::Duration;
+
+use protocol::Decoded;
+use protocol::convert::{ErrorMap, PsdReading, head_thermal_um, psd_position};
+use protocol::psd::{DataLine, Decoder, Line};
+
+use crate::link::{Acq, Device, Handler, Link, SessionError};
+use crate::{Instrument, Sample, SampleValues};
 
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
 pub struct Config {
@@ -7,13 +23,252 @@ pub struct Config {
     pub rate_hz: u32,
     /// Below this summed photocurrent (x1+x2 or y1+y2), pA, a sample is invalid.
     pub min_sum_pa: f64,
+    /// Calibrated error map, its interpolated correction added to the position (none: no
+    /// correction). A spot outside the map makes the sample invalid unless the map says
+    /// `outside = "clamp"`.
+    #[serde(default)]
+    pub error_map: Option<ErrorMap>,
+    /// Head thermal correction (none: no correction).
+    #[serde(default)]
+    pub head: Option<HeadCorrection>,
+}
+
+/// Which PSD axis reads along the spindle axis, i.e. which reading the head's thermal
+/// growth shifts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PsdAxis {
+    X,
+    Y,
+}
+
+/// Head thermal correction `Δl = l0 · α · (T − T_ref)` (instruments.md §3, `l0` = 193 mm,
+/// invar), subtracted from the reading of `axis`.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+pub struct HeadCorrection {
+    pub axis: PsdAxis,
+    pub t_ref_c: f64,
+}
+
+impl Config {
+    /// Position (µm), total photocurrent of the four electrodes (pA), validity.
+    pub fn convert(&self, d: &DataLine) -> (f64, f64, f64, bool) {
+        let sum_pa = (d.x1_pa as f64 + d.x2_pa as f64) + (d.y1_pa as f64 + d.y2_pa as f64);
+        // Sums are integers: `sum ≥ min` ⇔ `sum ≥ ⌈min⌉`.
+        let min = if self.min_sum_pa.is_finite() {
+            self.min_sum_pa.max(0.0).ceil() as u64
+        } else {
+            u64::MAX
+        };
+        let (mut x, mut y) = match psd_position(d, min) {
+            PsdReading::Valid { x_um, y_um } => (x_um, y_um),
+            PsdReading::LowIntensity { .. } => return (f64::NAN, f64::NAN, sum_pa, false),
+        };
+        if let Some(m) = &self.error_map {
+            match m.apply(x, y) {
+                Ok([cx, cy]) => (x, y) = (cx, cy),
+                Err(_) => return (x, y, sum_pa, false),
+            }
+        }
+        if let Some(h) = &self.head {
+            let dl = head_thermal_um(d.head_mc, h.t_ref_c);
+            match h.axis {
+                PsdAxis::X => x -= dl,
+                PsdAxis::Y => y -= dl,
+            }
+        }
+        (x, y, sum_pa, true)
+    }
+}
+
+struct Psd {
+    cfg: Config,
+    acq: Acq,
+}
+
+impl Handler for Psd {
+    type Dec = Decoder;
+
+    fn on_item(&mut self, item: Decoded<Line>, host_ns: u64) -> Option<String> {
+        match item {
+            Decoded::Reject(r) => self.acq.reject(r.kind, r.bytes),
+            Decoded::Frame(Line::Answer(a)) => {
+                self.acq.counters.answers += 1;
+                return Some(a);
+            }
+            Decoded::Frame(Line::Data(d)) => {
+                if !self.acq.accepting {
+                    return None;
+                }
+                let (seq, device_t_us, fitted_ns) = self.acq.stamp(d.seq as u64, d.t_us, host_ns);
+                let (x_um, y_um, sum_pa, valid) = self.cfg.convert(&d);
+                self.acq.emit_sample(Sample {
+                    instrument: Instrument::Psd,
+                    seq,
+                    device_t_us,
+                    host_ns,
+                    fitted_ns,
+                    valid,
+                    values: SampleValues::Psd {
+                        x_um,
+                        y_um,
+                        sum_pa,
+                        head_c: d.head_mc as f64 * 1e-3,
+                    },
+                });
+            }
+        }
+        None
+    }
+}
+
+/// `SYST:ERR?` answer code (`0,"No error"` → 0).
+fn syst_err_code(a: &str) -> Option<i32> {
+    a.split(',').next()?.trim().parse().ok()
+}
+
+impl Device for Psd {
+    fn acq(&mut self) -> &mut Acq {
+        &mut self.acq
+    }
+    fn baud(&self) -> u32 {
+        self.cfg.baud
+    }
+    fn new_decoder(&self) -> Decoder {
+        Decoder::new()
+    }
+    fn idle_timeout(&self) -> Duration {
+        crate::li80::idle_timeout(self.cfg.rate_hz)
+    }
+    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
+        link.send("INIT:CONT OFF\n").await?;
+        link.expect(self, "*OPC?\n", |a| a.trim() == "1")
+            .await
+            .map(drop)
+    }
+
+    async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
+        if let Some(m) = &self.cfg.error_map
+            && let Err(e) = m.validate()
+        {
+            return Err(SessionError::Device(format!(
+                "port {}: PSD error map: {e}",
+                self.acq.port
+            )));
+        }
+        self.acq.set_rate(self.cfg.rate_hz);
+        link.send("INIT:CONT OFF\n").await?;
+        link.expect(self, "*OPC?\n", |a| a.trim() == "1").await?;
+        link.reset_decoder();
+        // Empty the error queue of whatever came before us.
+        for _ in 0..16 {
+            let a = link
+                .expect(self, "SYST:ERR?\n", |a| syst_err_code(a).is_some())
+                .await?;
+            if syst_err_code(&a) == Some(0) {
+                break;
+            }
+        }
+        let idn = link
+            .expect(self, "*IDN?\n", |a| a.starts_with("PSD-2,"))
+            .await?;
+        let rate = format!("CONF:RATE {}\n", self.cfg.rate_hz);
+        link.send(&rate).await?;
+        let err = link.command(self, "SYST:ERR?\n").await?;
+        if syst_err_code(&err) != Some(0) {
+            return Err(SessionError::Device(format!(
+                "port {}: command `{}` failed: SYST:ERR? answered `{}`",
+                link.path,
+                rate.trim(),
+                err.escape_debug()
+            )));
+        }
+        self.acq.accepting = true;
+        link.send("INIT:CONT ON\n").await?;
+        link.expect(self, "*OPC?\n", |a| a.trim() == "1").await?;
+        Ok(idn.trim().to_string())
+    }
 }
 
 pub fn spawn(
-    _cfg: Config,
-    _clock: crate::HostClock,
-    _tx: crate::EventSender,
-    _cancel: tokio_util::sync::CancellationToken,
+    cfg: Config,
+    clock: crate::HostClock,
+    tx: crate::EventSender,
+    cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
-    todo!()
+    let acq = Acq::new(Instrument::Psd, &cfg.port, 32, 64, clock, tx);
+    tokio::spawn(crate::link::run(Psd { cfg, acq }, cancel))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::convert::OutsideMap;
+
+    fn cfg() -> Config {
+        Config {
+            port: String::new(),
+            baud: 921_600,
+            rate_hz: 100,
+            min_sum_pa: 1000.0,
+            error_map: None,
+            head: None,
+        }
+    }
+
+    fn line(x1: u64, x2: u64, y1: u64, y2: u64, head_mc: i32) -> DataLine {
+        DataLine {
+            seq: 0,
+            t_us: 0,
+            x1_pa: x1,
+            x2_pa: x2,
+            y1_pa: y1,
+            y2_pa: y2,
+            head_mc,
+        }
+    }
+
+    #[test]
+    fn position_gating_by_hand() {
+        // x = 5000 µm · (3000 − 1000) / 4000 = 2500 µm; y = 5000 · (−2000)/4000 = −2500 µm.
+        let (x, y, sum, ok) = cfg().convert(&line(1000, 3000, 3000, 1000, 20_000));
+        assert_eq!((x, y, sum, ok), (2500.0, -2500.0, 8000.0, true));
+        // y pair below 1000 pA: blocked beam, invalid.
+        assert!(!cfg().convert(&line(1000, 3000, 400, 500, 20_000)).3);
+        // A fractional minimum: 999.5 pA lets a sum of 1000 pA pass, 999 not.
+        let mut c = cfg();
+        c.min_sum_pa = 999.5;
+        assert!(c.convert(&line(500, 500, 500, 500, 0)).3);
+        assert!(!c.convert(&line(499, 500, 500, 500, 0)).3);
+        let (x, _, _, ok) = cfg().convert(&line(0, 0, 0, 0, 0));
+        assert!(!ok && x.is_nan());
+    }
+
+    #[test]
+    fn error_map_and_head_correction_by_hand() {
+        let mut c = cfg();
+        // 2×2 grid over [0, 1000]²: dx grows with x (0 → 10 µm), dy with y (0 → 4 µm).
+        c.error_map = Some(ErrorMap {
+            x0_um: 0.0,
+            y0_um: 0.0,
+            dx_um: 1000.0,
+            dy_um: 1000.0,
+            nx: 2,
+            ny: 2,
+            corrections_um: vec![[0.0, 0.0], [10.0, 0.0], [0.0, 4.0], [10.0, 4.0]],
+            outside: OutsideMap::Error,
+        });
+        // 193 mm · 1.7 µm/(m·K) · 2 K = 0.6562 µm, subtracted along y.
+        c.head = Some(HeadCorrection {
+            axis: PsdAxis::Y,
+            t_ref_c: 20.0,
+        });
+        // x = 5000·(2200−1800)/4000 = 500 → +5; y = 5000·(2300−1700)/4000 = 750 → +3 − 0.6562.
+        let (x, y, _, ok) = c.convert(&line(1800, 2200, 1700, 2300, 22_000));
+        assert!(ok);
+        assert!((x - 505.0).abs() < 1e-9, "{x}");
+        assert!((y - (753.0 - 0.6562)).abs() < 1e-9, "{y}");
+        // x = 1250 µm lies outside the map: invalid.
+        assert!(!c.convert(&line(1500, 2500, 1800, 2200, 22_000)).3);
+    }
 }

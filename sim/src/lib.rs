@@ -262,7 +262,9 @@ impl Sim {
     /// Start the four simulated devices with their links in `dir` (created if missing), using
     /// the scenario's default CapBall model. Must be called inside a tokio runtime.
     pub fn start(scenario: Scenario, dir: &Path) -> Result<SimHandle, SimError> {
-        let truth: Arc<dyn CapballTruth> = Arc::new(scenario.capball.truth.clone());
+        let truth: Arc<dyn CapballTruth> = Arc::new(physics::CachedCapballModel::new(
+            scenario.capball.truth.clone(),
+        ));
         Sim::start_with(scenario, dir, truth)
     }
 

@@ -98,6 +98,25 @@ pub fn metrology_pose(c: &Coords) -> Pose {
     Pose::new(c.x_mm, c.y_mm, c.z_mm, c.a_deg, c.c_deg)
 }
 
+/// metrology's forward chain at the sim's axis positions, ball under the tool, µm.
+fn chain_error_um(errors: &metrology::capball::CapballErrors, pose: &Coords) -> [f64; 3] {
+    let e = capball_setup()
+        .machine
+        .volumetric_error_um(&metrology_pose(pose), errors, None);
+    [e.x, e.y, e.z]
+}
+
+impl CapballModel {
+    fn add_drift(&self, e: [f64; 3], t_s: f64) -> [f64; 3] {
+        let h = t_s / 3600.0;
+        [
+            e[0] + self.drift_um_per_h[0] * h,
+            e[1] + self.drift_um_per_h[1] * h,
+            e[2] + self.drift_um_per_h[2] * h,
+        ]
+    }
+}
+
 impl CapballTruth for CapballModel {
     /// metrology's exact forward model ([`metrology::capball::forward_um`]: the rigid-body
     /// chain of [`CapballSetup::paper_default`] with these link and setup errors), plus drift.
@@ -109,16 +128,55 @@ impl CapballTruth for CapballModel {
     /// volumetric error as if a ball sat under the tool instead of going over range: the
     /// simulator's convention that every instrument streams valid values all program long.
     fn error_um(&self, pose: &Coords, t_s: f64) -> [f64; 3] {
-        let s = capball_setup();
-        let e = s
-            .machine
-            .volumetric_error_um(&metrology_pose(pose), &self.errors(), None);
-        let h = t_s / 3600.0;
-        [
-            e.x + self.drift_um_per_h[0] * h,
-            e.y + self.drift_um_per_h[1] * h,
-            e.z + self.drift_um_per_h[2] * h,
-        ]
+        self.add_drift(chain_error_um(&self.errors(), pose), t_s)
+    }
+}
+
+/// [`CapballModel`] with its forward chain memoised per pose: the chain costs ~0.2 ms per
+/// evaluation in debug builds, too slow for a 20 kHz stream, while the CapBall stands still
+/// (or moves between two poses, see [`World::capball_error_um`]) almost all the time. Same
+/// values as the model (the drift is added per call).
+pub struct CachedCapballModel {
+    model: CapballModel,
+    errors: metrology::capball::CapballErrors,
+    /// The last few (pose, chain error) pairs; a move needs its two end poses.
+    cache: std::sync::Mutex<Vec<([f64; 5], [f64; 3])>>,
+}
+
+impl CachedCapballModel {
+    const ENTRIES: usize = 4;
+
+    pub fn new(model: CapballModel) -> Self {
+        CachedCapballModel {
+            errors: model.errors(),
+            model,
+            cache: std::sync::Mutex::new(Vec::with_capacity(Self::ENTRIES)),
+        }
+    }
+}
+
+impl CapballTruth for CachedCapballModel {
+    fn error_um(&self, pose: &Coords, t_s: f64) -> [f64; 3] {
+        let key = [pose.x_mm, pose.y_mm, pose.z_mm, pose.a_deg, pose.c_deg];
+        let hit = self
+            .cache
+            .lock()
+            .ok()
+            .and_then(|c| c.iter().find(|(k, _)| *k == key).map(|(_, e)| *e));
+        let e = match hit {
+            Some(e) => e,
+            None => {
+                let e = chain_error_um(&self.errors, pose);
+                if let Ok(mut c) = self.cache.lock() {
+                    if c.len() >= Self::ENTRIES {
+                        c.remove(0);
+                    }
+                    c.push((key, e));
+                }
+                e
+            }
+        };
+        self.model.add_drift(e, t_s)
     }
 }
 
@@ -275,7 +333,7 @@ impl World {
             Phase::Moving { to, frac } => {
                 let a = self.previous(to);
                 let b = self.pose(to);
-                let k = 0.5 - 0.5 * (std::f64::consts::PI * frac.clamp(0.0, 1.0)).cos();
+                let k = s_curve(frac);
                 let l = |x: f64, y: f64| x + (y - x) * k;
                 Coords {
                     x_mm: l(a.x_mm, b.x_mm),
@@ -285,6 +343,22 @@ impl World {
                     c_deg: l(a.c_deg, b.c_deg),
                 }
             }
+        }
+    }
+
+    /// The CapBall's true volumetric error at a phase, µm: the truth model at the pose, and
+    /// during a move the two end poses' errors blended along the motion profile. Nothing is
+    /// measured during a move (the host drops those samples); the blend keeps the stream
+    /// moving smoothly at two model evaluations per move instead of one per sample.
+    pub fn capball_error_um(&self, ph: Phase, t_s: f64) -> [f64; 3] {
+        match ph {
+            Phase::Moving { to, frac } => {
+                let a = self.capball_truth.error_um(&self.previous(to), t_s);
+                let b = self.capball_truth.error_um(&self.pose(to), t_s);
+                let k = s_curve(frac);
+                [0, 1, 2].map(|i| a[i] + (b[i] - a[i]) * k)
+            }
+            _ => self.capball_truth.error_um(&self.coords(ph), t_s),
         }
     }
 
@@ -423,6 +497,11 @@ impl World {
     }
 }
 
+/// Fraction of a move done at `frac` of its time: the smooth S-shaped profile of every axis.
+fn s_curve(frac: f64) -> f64 {
+    0.5 - 0.5 * (std::f64::consts::PI * frac.clamp(0.0, 1.0)).cos()
+}
+
 fn nearest_target(m: &AxisModel, x_mm: f64) -> usize {
     let mut best = 0;
     for (i, t) in m.targets_mm.iter().enumerate() {
@@ -519,7 +598,10 @@ mod tests {
             ..Coords::default()
         };
         let e = m.error_um(&p, 0.0);
-        assert!((e[0] - 5.0).abs() < 1e-9 && e[1].abs() < 1e-9 && e[2].abs() < 1e-9, "{e:?}");
+        assert!(
+            (e[0] - 5.0).abs() < 1e-9 && e[1].abs() < 1e-9 && e[2].abs() < 1e-9,
+            "{e:?}"
+        );
         // Ball offset +3 µm along table X; C = 90° turns the table by −90° about Z (ISO 841:
         // C moves the tool relative to the table), so the ball sits at (0, −3, 0) µm and
         // e = p_tool − p_ball = (0, +3, 0).
@@ -532,7 +614,10 @@ mod tests {
             ..Coords::default()
         };
         let e = m.error_um(&p, 0.0);
-        assert!(e[0].abs() < 1e-9 && (e[1] - 3.0).abs() < 1e-9 && e[2].abs() < 1e-9, "{e:?}");
+        assert!(
+            e[0].abs() < 1e-9 && (e[1] - 3.0).abs() < 1e-9 && e[2].abs() < 1e-9,
+            "{e:?}"
+        );
     }
 
     #[test]
@@ -551,5 +636,26 @@ mod tests {
         let e = m.error_um(&p, 1800.0);
         assert!((e[0] - 2.0).abs() < 1e-6 && e[1].abs() < 1e-9, "{e:?}");
         assert!((e[2] - 0.5).abs() < 1e-9, "drift of half an hour: {e:?}");
+    }
+
+    #[test]
+    fn cached_model_gives_the_model_values() {
+        let m = CapballModel {
+            drift_um_per_h: [1.0, -2.0, 0.5],
+            ..CapballModel::default()
+        };
+        let cached = CachedCapballModel::new(m.clone());
+        // More poses than cache entries, each asked twice at different times.
+        for i in 0..7 {
+            let p = Coords {
+                x_mm: 10.0 * i as f64,
+                a_deg: -5.0 * i as f64,
+                c_deg: 40.0 * i as f64,
+                ..Coords::default()
+            };
+            for t in [0.0, 900.0 * i as f64] {
+                assert_eq!(cached.error_um(&p, t), m.error_um(&p, t));
+            }
+        }
     }
 }

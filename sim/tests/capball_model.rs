@@ -43,8 +43,8 @@ fn demo_capball_poses_hold_the_tool_on_the_ball() {
     assert_eq!(idx, (37..=56).collect::<Vec<u16>>());
     // What `metrolog identify capball` does: find the ball from the poses on the paper machine.
     let poses: Vec<Pose> = cb.iter().map(|t| pose_of(t)).collect();
-    let s = CapballSetup::with_ball_from_poses(CapballSetup::paper_default().machine, &poses)
-        .unwrap();
+    let s =
+        CapballSetup::with_ball_from_poses(CapballSetup::paper_default().machine, &poses).unwrap();
     let b = s.ball_mm;
     assert!(
         (b.x - 120.0).abs() < 1e-6 && (b.y - 80.0).abs() < 1e-6 && (b.z - 100.0).abs() < 1e-6,

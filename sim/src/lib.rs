@@ -50,8 +50,9 @@
 //! exact stop, the X axis deviation from `metrology::axis_model::AxisModel` (one random draw
 //! per visit, since repeatability belongs to the positioning), the LI-80's reading in air
 //! (`raw = n·L20/(1 − α(T_mat − 20))`, so the host's `raw/n` and material compensation give
-//! the 20 °C length back), the CapBall error from a [`CapballTruth`] through the sensors'
-//! directions, offsets and inverse polynomials to 24-bit codes, and the PSD spot from
+//! the 20 °C length back), the CapBall error from a [`CapballTruth`] (by default
+//! [`scenario::CapballModel`]: metrology's CapBall model of paper 001, the same geometry the
+//! identification uses) through the sensors' directions, offsets and inverse polynomials to 24-bit codes, and the PSD spot from
 //! straightness polynomials to photocurrents. Slow effects run `time_scale` times faster.
 //! The true values per pose are in [`Record::truth`].
 //!

@@ -772,6 +772,25 @@ impl Scenario {
                 ));
             }
         }
+        let truth = self.capball.truth.errors().to_vector();
+        for (name, v) in metrology::capball::PARAM_NAMES.iter().zip(truth) {
+            // The sensors read ±100 µm: errors beyond a millimetre are a typo (mm for µm).
+            if !(v.is_finite() && v.abs() <= 1000.0) {
+                return bad(format!(
+                    "capball.truth.{}: {v} is not a plausible error (finite, |value| ≤ 1000)",
+                    name.to_lowercase()
+                ));
+            }
+        }
+        if self
+            .capball
+            .truth
+            .drift_um_per_h
+            .iter()
+            .any(|v| !v.is_finite())
+        {
+            return bad("capball.truth.drift_um_per_h must be finite numbers".into());
+        }
         if !finite_pos(self.psd.sum_pa) {
             return bad("psd.sum_pa must be > 0".into());
         }
@@ -897,6 +916,12 @@ mod tests {
         let mut s = Scenario::demo();
         s.program.poses.clear();
         assert!(s.validate().unwrap_err().to_string().contains("poses"));
+        let mut s = Scenario::demo();
+        s.capball.truth.ey0c_um = 4000.0;
+        assert!(s.validate().unwrap_err().to_string().contains("ey0c_um"));
+        let mut s = Scenario::demo();
+        s.capball.truth.drift_um_per_h[1] = f64::NAN;
+        assert!(s.validate().is_err());
     }
 
     #[test]

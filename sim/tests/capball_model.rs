@@ -61,13 +61,11 @@ fn sim_truth_is_metrology_forward_model_on_the_ball() {
     let e = sc.capball.truth.errors();
     for t in capball_poses(&truth_of(&sc)) {
         let f = capball::forward_um(&e.link, &e.setup, &pose_of(t));
-        for k in 0..3 {
+        for (k, (sim_um, model_um)) in t.capball_e_um.iter().zip(f).enumerate() {
             assert!(
-                (t.capball_e_um[k] - f[k]).abs() < 1e-6,
-                "pose {} e{k}: sim {} vs forward_um {}",
-                t.pose,
-                t.capball_e_um[k],
-                f[k]
+                (sim_um - model_um).abs() < 1e-6,
+                "pose {} e{k}: sim {sim_um} vs forward_um {model_um}",
+                t.pose
             );
         }
     }

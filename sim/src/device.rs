@@ -206,6 +206,8 @@ pub(crate) trait Model: Send + 'static {
     /// Also called while unplugged, so time-driven state (a beam interruption, the CNC's
     /// trigger events) advances without a port.
     fn tick_unplugged(&mut self, _ctx: &mut Ctx) {}
+    /// Streaming (the SLCAN adapter: channel open), and at what rate.
+    fn activity(&self) -> (bool, u32);
     /// Bytes ending a command line.
     fn is_terminator(b: u8) -> bool {
         b == b'\n'
@@ -423,7 +425,29 @@ impl<M: Model> Runner<M> {
             self.pending.extend_from_slice(&out);
             self.flush();
         }
+        self.publish();
         got
+    }
+
+    /// Publish the device's state for [`crate::SimHandle::state`].
+    pub(crate) fn publish(&self) {
+        let (active, rate_hz) = self.model.activity();
+        let st = crate::DeviceState {
+            plugged: self.pty.is_some(),
+            host_connected: self.connected,
+            active: active && self.pty.is_some(),
+            rate_hz,
+            power_ups: self.power_up,
+        };
+        self.shared.states.send_if_modified(|all| {
+            let slot = &mut all[M::DEVICE as usize];
+            if *slot != st {
+                *slot = st;
+                true
+            } else {
+                false
+            }
+        });
     }
 
     fn flush(&mut self) {
@@ -464,11 +488,14 @@ impl<M: Model> Runner<M> {
             match ev {
                 Ev::Ctl(Some(Control::Unplug(ack))) => {
                     self.unplug();
+                    self.publish();
                     let _ = ack.send(());
                 }
                 Ev::Ctl(Some(Control::Replug(ack))) => {
                     self.unplug_silently();
-                    let _ = ack.send(self.plug());
+                    let r = self.plug();
+                    self.publish();
+                    let _ = ack.send(r);
                 }
                 Ev::Ctl(Some(Control::Shutdown(ack))) => {
                     self.unplug_silently();

@@ -30,6 +30,7 @@ fn start<M: Model>(
 ) -> Result<tokio::task::JoinHandle<()>, SimError> {
     let mut r = Runner::new(model, shared, link, rng, ppm, start_us);
     r.plug()?;
+    r.publish();
     Ok(rt.spawn(r.run(ctl)))
 }
 

@@ -397,11 +397,19 @@ async fn clock_fit_recovers_the_simulated_drift_within_5_ppm() {
                 Instrument::Capball => Device::Capball,
                 _ => Device::Psd,
             };
-            let true_s: BTreeMap<u64, f64> = rec.device(dev).samples.iter().map(|s| (s.seq, s.true_s)).collect();
+            let true_s: BTreeMap<u64, f64> = rec
+                .device(dev)
+                .samples
+                .iter()
+                .map(|s| (s.seq, s.true_s))
+                .collect();
             let mut out = String::new();
             for s in c.stream() {
                 let t = true_s.get(&s.seq).copied().unwrap_or(f64::NAN);
-                out.push_str(&format!("{},{},{t},{}\n", s.device_t_us, s.host_ns, s.fitted_ns));
+                out.push_str(&format!(
+                    "{},{},{t},{}\n",
+                    s.device_t_us, s.host_ns, s.fitted_ns
+                ));
             }
             let _ = std::fs::write(format!("{d}/{}.csv", i.name()), out);
         }

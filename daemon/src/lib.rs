@@ -3,3 +3,8 @@
 
 pub mod cli;
 pub mod cmd;
+pub mod config;
+pub mod log;
+pub mod pipeline;
+pub mod plot;
+pub mod service;

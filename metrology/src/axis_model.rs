@@ -75,12 +75,15 @@ impl AxisModel {
         for e in &self.effects {
             d += match *e {
                 Effect::LinearDrift { rate_um_per_h } => rate_um_per_h * t_s / 3600.0,
-                Effect::ExponentialWarmup { amplitude_um, tau_s } => {
-                    amplitude_um * (1.0 - (-t_s / tau_s).exp())
-                }
-                Effect::CyclicDrift { period_s, amplitude_um, phase_rad } => {
-                    amplitude_um * (std::f64::consts::TAU * t_s / period_s + phase_rad).sin()
-                }
+                Effect::ExponentialWarmup {
+                    amplitude_um,
+                    tau_s,
+                } => amplitude_um * (1.0 - (-t_s / tau_s).exp()),
+                Effect::CyclicDrift {
+                    period_s,
+                    amplitude_um,
+                    phase_rad,
+                } => amplitude_um * (std::f64::consts::TAU * t_s / period_s + phase_rad).sin(),
                 Effect::ThermalExpansion { scale_ppm, tau_s } => {
                     scale_ppm * 1e-6 * x_mm * 1e3 * (1.0 - (-t_s / tau_s).exp())
                 }
@@ -94,10 +97,13 @@ impl AxisModel {
     pub fn noise_std_um(&self, index: usize) -> f64 {
         let mut s = self.noise_um;
         for e in &self.effects {
-            if let Effect::LocalAnomaly { index: i, std_ratio } = *e {
-                if i == index + 1 {
-                    s *= std_ratio;
-                }
+            if let Effect::LocalAnomaly {
+                index: i,
+                std_ratio,
+            } = *e
+                && i == index + 1
+            {
+                s *= std_ratio;
             }
         }
         s
@@ -125,8 +131,14 @@ mod tests {
             noise_um: 0.5,
             effects: vec![
                 Effect::LinearDrift { rate_um_per_h: 3.6 },
-                Effect::ThermalExpansion { scale_ppm: 10.0, tau_s: 1.0e-9 },
-                Effect::LocalAnomaly { index: 2, std_ratio: 4.0 },
+                Effect::ThermalExpansion {
+                    scale_ppm: 10.0,
+                    tau_s: 1.0e-9,
+                },
+                Effect::LocalAnomaly {
+                    index: 2,
+                    std_ratio: 4.0,
+                },
             ],
         }
     }

@@ -1,8 +1,244 @@
-//! `metrolog info` (not written yet).
+//! `metrolog info LOG.mcap`: what a log holds — run metadata, topics with counts and rates,
+//! pose values by status, the counters of the last `/status`, attachments, and whether the
+//! file was closed cleanly (or how much of a damaged one could be read).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde::Serialize;
+
+use crate::log::topics::{self, Decoded, PoseMsg, StatusMsg, TopicMessage};
+use crate::log::{self, LogItem, RUN_METADATA, ReadSummary};
 
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The log file (.mcap).
+    pub log: PathBuf,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`metrolog info` is not implemented yet")
+/// Messages of one topic.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct TopicInfo {
+    pub messages: u64,
+    pub first_ns: Option<u64>,
+    pub last_ns: Option<u64>,
+    /// Mean message rate between the first and the last message, Hz.
+    pub rate_hz: Option<f64>,
+}
+
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct AttachmentInfo {
+    pub name: String,
+    pub media_type: String,
+    pub bytes: u64,
+}
+
+/// Everything `info` reports.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct InfoReport {
+    pub path: PathBuf,
+    pub read: ReadSummary,
+    /// The run metadata record (key → value).
+    pub run: BTreeMap<String, String>,
+    /// Identities of instruments that connected during the run.
+    pub instruments: Vec<BTreeMap<String, String>>,
+    pub topics: BTreeMap<String, TopicInfo>,
+    /// Pose values by instrument, then status.
+    pub poses: BTreeMap<String, BTreeMap<String, u64>>,
+    /// Distinct poses (any instrument).
+    pub distinct_poses: u64,
+    /// The last `/status` message.
+    pub last_status: Option<StatusMsg>,
+    pub attachments: Vec<AttachmentInfo>,
+    /// `/pose` and `/status` messages that did not decode as their topic's type.
+    pub undecodable: u64,
+}
+
+/// Reads a log and builds the report (damage in the file is reported, not an error).
+pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
+    let mut run = BTreeMap::new();
+    let mut instruments = Vec::new();
+    let mut tops: BTreeMap<String, TopicInfo> = BTreeMap::new();
+    let mut poses: BTreeMap<String, BTreeMap<String, u64>> = BTreeMap::new();
+    let mut pose_ids = std::collections::BTreeSet::new();
+    let mut last_status = None;
+    let mut attachments = Vec::new();
+    let mut undecodable = 0;
+    let read = log::read_log(path, |item| match item {
+        LogItem::Message {
+            topic,
+            log_ns,
+            data,
+        } => {
+            let t = tops.entry(topic.to_string()).or_default();
+            t.messages += 1;
+            t.first_ns.get_or_insert(log_ns);
+            t.last_ns = Some(log_ns);
+            // Only the topics the report reads are decoded: an hour of raw samples is millions.
+            if topic != PoseMsg::TOPIC && topic != StatusMsg::TOPIC {
+                return;
+            }
+            match topics::decode(topic, data) {
+                Ok(Some(Decoded::Pose(p))) => {
+                    *poses
+                        .entry(p.instrument.name().to_string())
+                        .or_default()
+                        .entry(p.status.name().to_string())
+                        .or_default() += 1;
+                    pose_ids.insert(p.pose);
+                }
+                Ok(Some(Decoded::Status(s))) => last_status = Some(s),
+                Ok(_) => {}
+                Err(_) => undecodable += 1,
+            }
+        }
+        LogItem::Attachment {
+            name,
+            media_type,
+            data,
+            ..
+        } => attachments.push(AttachmentInfo {
+            name: name.into(),
+            media_type: media_type.into(),
+            bytes: data.len() as u64,
+        }),
+        LogItem::Metadata { name, map } => {
+            if name == RUN_METADATA {
+                run = map.clone();
+            } else if name == log::INSTRUMENT_METADATA {
+                instruments.push(map.clone());
+            }
+        }
+    })
+    .with_context(|| format!("cannot inspect {}", path.display()))?;
+    for t in tops.values_mut() {
+        if let (Some(a), Some(b)) = (t.first_ns, t.last_ns)
+            && b > a
+            && t.messages > 1
+        {
+            t.rate_hz = Some((t.messages - 1) as f64 / ((b - a) as f64 * 1e-9));
+        }
+    }
+    Ok(InfoReport {
+        path: path.to_path_buf(),
+        read,
+        run,
+        instruments,
+        topics: tops,
+        poses,
+        distinct_poses: pose_ids.len() as u64,
+        last_status,
+        attachments,
+        undecodable,
+    })
+}
+
+fn print_text(r: &InfoReport) {
+    println!("log        {}", r.path.display());
+    let rd = &r.read;
+    if rd.clean_close {
+        println!("closed     cleanly ({} bytes)", rd.file_bytes);
+    } else {
+        println!(
+            "closed     NOT cleanly — recovered {} messages from {} bytes{}",
+            rd.messages,
+            rd.file_bytes,
+            rd.last_log_ns
+                .map(|t| format!(", up to {}", log::rfc3339(t)))
+                .unwrap_or_default()
+        );
+    }
+    if let Some(e) = &rd.error {
+        println!("           reading stopped: {e}");
+    }
+    if let (Some(a), Some(b)) = (rd.first_log_ns, rd.last_log_ns) {
+        println!(
+            "span       {} .. {} ({:.1} s)",
+            log::rfc3339(a),
+            log::rfc3339(b),
+            (b.saturating_sub(a)) as f64 * 1e-9
+        );
+    }
+    println!("\nrun");
+    for (k, v) in &r.run {
+        println!("  {k:<22} {v}");
+    }
+    for i in &r.instruments {
+        println!(
+            "  connected: {} on {}: {}",
+            i.get("instrument").map_or("?", |s| s),
+            i.get("port").map_or("?", |s| s),
+            i.get("identity").map_or("?", |s| s)
+        );
+    }
+    println!("\ntopics{:>34} {:>12}", "messages", "rate");
+    for (name, t) in &r.topics {
+        let rate = t
+            .rate_hz
+            .map(|h| format!("{h:.1} Hz"))
+            .unwrap_or_else(|| "-".into());
+        println!("  {name:<30} {:>10} {rate:>12}", t.messages);
+    }
+    println!("\nposes ({} distinct)", r.distinct_poses);
+    if r.poses.is_empty() {
+        println!("  none");
+    }
+    for (inst, by) in &r.poses {
+        let s: Vec<String> = by.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        println!("  {inst:<16} {}", s.join(", "));
+    }
+    println!("\ncounters (last /status)");
+    match &r.last_status {
+        None => println!("  no /status record"),
+        Some(st) => {
+            println!("  log messages {}", st.log_messages);
+            for (inst, c) in &st.instruments {
+                let rej: u64 = c.rejections.values().sum();
+                println!(
+                    "  {inst:<16} samples {} gaps {} ({} samples) rejections {rej} resyncs {} reconnects {} disconnects {} dropped {} invalid {} device errors {} clock drift {}",
+                    c.samples,
+                    c.gaps,
+                    c.gap_samples,
+                    c.resyncs,
+                    c.reconnects,
+                    c.disconnects,
+                    c.dropped,
+                    c.invalid,
+                    c.device_errors,
+                    c.clock_drift_ppm
+                        .map(|d| format!("{d:.3} ppm"))
+                        .unwrap_or_else(|| "-".into())
+                );
+                for (k, v) in &c.rejections {
+                    println!("  {:<16}   rejected {k}: {v}", "");
+                }
+            }
+        }
+    }
+    if !r.attachments.is_empty() {
+        println!("\nattachments");
+        for a in &r.attachments {
+            println!("  {} ({}, {} bytes)", a.name, a.media_type, a.bytes);
+        }
+    }
+    if r.undecodable > 0 {
+        println!(
+            "\n{} messages did not decode as their topic's type",
+            r.undecodable
+        );
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let r = inspect(&args.log)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print_text(&r);
+    }
+    Ok(())
 }

@@ -1,8 +1,271 @@
-//! `metrolog run` (not written yet).
+//! `metrolog run --config FILE`: the acquisition service (what systemd starts).
+//!
+//! Starts the configured drivers, one bounded queue to the pipeline, a steady-value detector per
+//! instrument and the MCAP writer (one file per run in `[run] output_dir`); writes `/status` once
+//! a second; tells systemd READY, STATUS, WATCHDOG and STOPPING. Ends cleanly on SIGTERM/SIGINT,
+//! and at the CNC's program end when `[run] stop_at_program_end = true`.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use drivers::{DriverEvent, HostClock};
+use tokio::sync::{mpsc, watch};
+use tokio_util::sync::CancellationToken;
+
+use crate::config::{Config, TriggerConfig};
+use crate::pipeline::{self, Outcome, Pipeline, PipelineConfig, Status, StopReason};
+use crate::service::{self, Notifier};
 
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The configuration file (see deploy/metrolog.toml for every key).
+    #[arg(long, short, value_name = "FILE")]
+    pub config: PathBuf,
+    /// Only check the configuration and say what would run.
+    #[arg(long)]
+    pub check: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`metrolog run` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    service::init_tracing();
+    let cfg = Config::load(&args.config)?;
+    if args.check {
+        println!("{}: valid; {}", cfg.path.display(), describe(&cfg));
+        return Ok(());
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    let notifier = Notifier::from_env();
+    let report = rt.block_on(acquire(
+        &cfg,
+        Acquire {
+            notifier: notifier.clone(),
+            stop: CancellationToken::new(),
+            progress: None,
+            keep_poses: false,
+            handle_signals: true,
+        },
+    ))?;
+    tracing::info!(
+        "run ended ({}); log {}; {}",
+        report.reason_text(),
+        report.log_path.display(),
+        report.outcome.status.summary()
+    );
+    Ok(())
+}
+
+/// One line on what a config runs.
+pub fn describe(cfg: &Config) -> String {
+    let mut parts = Vec::new();
+    if let Some(c) = &cfg.interferometer {
+        parts.push(format!("LI-80 on {} at {} Hz", c.port, c.rate_hz));
+    }
+    if let Some(c) = &cfg.capball {
+        parts.push(format!(
+            "CB-3 on {} at {} Hz",
+            c.driver.port, c.driver.rate_hz
+        ));
+    }
+    if let Some(c) = &cfg.psd {
+        parts.push(format!(
+            "PSD-2 on {} at {} Hz ({} baud)",
+            c.port, c.rate_hz, c.baud
+        ));
+    }
+    match &cfg.trigger {
+        Some(TriggerConfig::Slcan(s)) => parts.push(format!(
+            "triggers via SLCAN on {} (id {:#x})",
+            s.port, s.can_id
+        )),
+        Some(TriggerConfig::SocketCan(s)) => parts.push(format!(
+            "triggers via SocketCAN {} (id {:#x})",
+            s.interface, s.can_id
+        )),
+        None => parts.push("no triggers (plateau detection)".into()),
+    }
+    format!(
+        "machine {}, logs to {}, {}",
+        cfg.run.machine,
+        cfg.run.output_dir.display(),
+        parts.join(", ")
+    )
+}
+
+/// How an acquisition is run (the service and the demo differ only here).
+pub struct Acquire {
+    pub notifier: Notifier,
+    /// Cancel to end the run from outside (demo).
+    pub stop: CancellationToken,
+    /// Receives the status after every pose value and every second.
+    pub progress: Option<watch::Sender<Status>>,
+    /// Keep every pose value for the report.
+    pub keep_poses: bool,
+    /// End on SIGTERM / SIGINT.
+    pub handle_signals: bool,
+}
+
+/// What a finished acquisition hands back.
+#[derive(Debug)]
+pub struct RunReport {
+    pub log_path: PathBuf,
+    pub outcome: Outcome,
+    /// The signal that ended the run, if one did.
+    pub signal: Option<&'static str>,
+}
+
+impl RunReport {
+    pub fn reason_text(&self) -> String {
+        match (&self.outcome.reason, self.signal) {
+            (_, Some(sig)) => sig.to_string(),
+            (StopReason::ProgramEnd, _) => "program end".into(),
+            (StopReason::Cancelled, _) => "stopped".into(),
+            (StopReason::DriversGone, _) => "every driver ended".into(),
+        }
+    }
+}
+
+/// How long stopping drivers may take before the pipeline closes the log without them.
+const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// Run one acquisition from a validated config until stopped.
+pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
+    let clock = HostClock::new();
+    let mut recorder = crate::pipeline::open_log(cfg, &clock)?;
+    let log_path = recorder.writer().path().to_path_buf();
+    tracing::info!("logging to {}", log_path.display());
+
+    let (tx, rx) = mpsc::channel::<DriverEvent>(pipeline::QUEUE_CAPACITY);
+    let drivers_cancel = CancellationToken::new();
+    let pipeline_cancel = CancellationToken::new();
+
+    let pl = Pipeline::new(
+        PipelineConfig {
+            instruments: cfg.instruments(),
+            stop_at_program_end: cfg.run.stop_at_program_end,
+            keep_poses: opts.keep_poses,
+        },
+        clock,
+        Box::new(recorder),
+    );
+    let progress = opts
+        .progress
+        .unwrap_or_else(|| watch::channel(Status::default()).0);
+    let pipeline_thread = pipeline::spawn(
+        pl,
+        rx,
+        pipeline_cancel.clone(),
+        opts.notifier.clone(),
+        progress,
+    )
+    .context("cannot start the pipeline thread")?;
+
+    let mut handles = Vec::new();
+    if let Some(c) = &cfg.interferometer {
+        handles.push(drivers::li80::spawn(
+            c.clone(),
+            clock,
+            tx.clone(),
+            drivers_cancel.child_token(),
+        ));
+    }
+    if let Some(c) = &cfg.capball {
+        handles.push(drivers::cb3::spawn(
+            c.driver.clone(),
+            clock,
+            tx.clone(),
+            drivers_cancel.child_token(),
+        ));
+    }
+    if let Some(c) = &cfg.psd {
+        handles.push(drivers::psd::spawn(
+            c.clone(),
+            clock,
+            tx.clone(),
+            drivers_cancel.child_token(),
+        ));
+    }
+    match &cfg.trigger {
+        Some(TriggerConfig::Slcan(c)) => handles.push(drivers::trigger::spawn_slcan(
+            c.clone(),
+            clock,
+            tx.clone(),
+            drivers_cancel.child_token(),
+        )),
+        Some(TriggerConfig::SocketCan(c)) => handles.push(drivers::trigger::spawn_socketcan(
+            c.clone(),
+            clock,
+            tx.clone(),
+            drivers_cancel.child_token(),
+        )),
+        None => {}
+    }
+    // Only the drivers hold senders now: when they all end, the pipeline sees it.
+    drop(tx);
+    opts.notifier
+        .ready(&format!("acquiring: {}", describe(cfg)));
+    tracing::info!("acquiring: {}", describe(cfg));
+
+    let (done_tx, mut done_rx) = tokio::sync::oneshot::channel();
+    std::thread::Builder::new()
+        .name("pipeline-join".into())
+        .spawn(move || {
+            let r = pipeline_thread.join();
+            let _ = done_tx.send(r);
+        })
+        .context("cannot start a thread")?;
+
+    let signals = async {
+        if opts.handle_signals {
+            service::shutdown_signal().await
+        } else {
+            std::future::pending().await
+        }
+    };
+    let mut signal = None;
+    let mut early = None;
+    tokio::select! {
+        s = signals => {
+            tracing::info!("{s}: stopping");
+            signal = Some(s);
+        }
+        _ = opts.stop.cancelled() => {}
+        r = &mut done_rx => { early = Some(r); }
+    }
+    opts.notifier.stopping();
+    drivers_cancel.cancel();
+    // Let the drivers put their last samples in the queue, but do not wait on a stuck one.
+    let stop_drivers = async {
+        for h in handles {
+            let _ = h.await;
+        }
+    };
+    if tokio::time::timeout(DRIVER_STOP_TIMEOUT, stop_drivers)
+        .await
+        .is_err()
+    {
+        tracing::warn!(
+            "a driver did not stop within {DRIVER_STOP_TIMEOUT:?}; closing the log without it"
+        );
+    }
+    pipeline_cancel.cancel();
+    let joined = match early {
+        Some(r) => r,
+        None => done_rx.await,
+    };
+    let outcome = match joined {
+        Ok(Ok(r)) => r?,
+        Ok(Err(_)) | Err(_) => {
+            anyhow::bail!("the pipeline thread panicked; the log may be incomplete")
+        }
+    };
+    Ok(RunReport {
+        log_path,
+        outcome,
+        signal,
+    })
 }

@@ -1,8 +1,177 @@
-//! `metrolog sim` (not written yet).
+//! `metrolog sim [--config SCENARIO]`: only the simulated instruments, on pseudo-terminals.
+//! Prints their port paths and a metrolog.toml that reads them, and runs until Ctrl-C.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use sim::{Device, ProgramStart, Scenario, SimHandle};
 
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Scenario file (sim/scenarios/demo.toml documents every key); the built-in demo scenario
+    /// when absent.
+    #[arg(long, short, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Directory for the port links (li80, cb3, psd2, slcan), the trajectory and the transform
+    /// files.
+    #[arg(long, value_name = "DIR", default_value = "./metrolog-sim")]
+    pub dir: PathBuf,
+    /// Seconds from the host opening the CAN channel to the CNC program start (used when the
+    /// scenario starts its program manually, which only a caller in the same process can do).
+    #[arg(long, default_value_t = 3.0)]
+    pub start_delay_s: f64,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`metrolog sim` is not implemented yet")
+/// Device rates the generated daemon config asks for, within each data sheet. The LI-80 runs at
+/// its full 10 kHz: the demo scenario compresses an hour of thermal drift into 30 s (about
+/// 0.6 µm/s on the axis), and a window of 150 samples must be short (15 ms) for that drift to
+/// stay below the noise, or the steady test rightly refuses it.
+pub const SIM_LI80_RATE_HZ: u32 = 10_000;
+pub const SIM_CB3_RATE_HZ: u32 = 1000;
+pub const SIM_PSD_RATE_HZ: u32 = 1000;
+
+/// Write the trajectory and CapBall transform of a running simulation into `dir` and return a
+/// metrolog.toml that reads its ports.
+pub fn write_daemon_config(
+    sim: &SimHandle,
+    dir: &Path,
+    output_dir: &Path,
+    stop_at_program_end: bool,
+) -> anyhow::Result<String> {
+    let sc = sim.scenario();
+    let trajectory = dir.join("trajectory.csv");
+    std::fs::write(&trajectory, sc.trajectory_csv())
+        .with_context(|| format!("cannot write {}", trajectory.display()))?;
+    let t = sc.capball_transform();
+    let transform = dir.join("capball-T.csv");
+    let text: String = t
+        .iter()
+        .map(|r| format!("{:.12e},{:.12e},{:.12e},{:.12e}\n", r[0], r[1], r[2], r[3]))
+        .collect();
+    std::fs::write(
+        &transform,
+        format!("# sensor-to-machine transform of the simulated CapBall\n{text}"),
+    )
+    .with_context(|| format!("cannot write {}", transform.display()))?;
+    let poly = sc.capball.poly;
+    let poly = format!(
+        "[[{:?}, {:?}, {:?}], [{:?}, {:?}, {:?}], [{:?}, {:?}, {:?}]]",
+        poly[0][0],
+        poly[0][1],
+        poly[0][2],
+        poly[1][0],
+        poly[1][1],
+        poly[1][2],
+        poly[2][0],
+        poly[2][1],
+        poly[2][2]
+    );
+    let q = |p: &Path| format!("{:?}", p.display().to_string());
+    Ok(format!(
+        r#"# metrolog.toml for the simulated instruments of `metrolog sim` ({dir})
+[run]
+machine = "sim"
+output_dir = {out}
+trajectory = {traj}
+stop_at_program_end = {stop}
+
+[detector]
+samples = 150
+
+[interferometer]
+port = {li80}
+rate_hz = {li80_rate}
+alpha_um_per_m_k = {alpha:?}
+
+[capball]
+port = {cb3}
+rate_hz = {cb3_rate}
+poly = {poly}
+transform = {tf}
+
+[psd]
+port = {psd}
+baud = 921600
+rate_hz = {psd_rate}
+min_sum_pa = 100000
+
+[trigger]
+slcan = {slcan}
+can_id = {can_id:#x}
+"#,
+        dir = dir.display(),
+        out = q(output_dir),
+        traj = q(&trajectory),
+        stop = stop_at_program_end,
+        li80 = q(&sim.port(Device::Interferometer)),
+        li80_rate = SIM_LI80_RATE_HZ,
+        alpha = sc.interferometer.alpha_um_per_m_k,
+        cb3 = q(&sim.port(Device::Capball)),
+        cb3_rate = SIM_CB3_RATE_HZ,
+        tf = q(&transform),
+        psd = q(&sim.port(Device::Psd)),
+        psd_rate = SIM_PSD_RATE_HZ,
+        slcan = q(&sim.port(Device::Trigger)),
+        can_id = sc.trigger.can_id,
+    ))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    crate::service::init_tracing();
+    let mut scenario = match &args.config {
+        Some(p) => Scenario::load(p)?,
+        None => Scenario::demo(),
+    };
+    if scenario.program.start == ProgramStart::Manual {
+        // Nobody in this process can press start: start when the daemon opens the CAN channel.
+        scenario.program.start = ProgramStart::OnCanOpen;
+        scenario.program.start_delay_s = args.start_delay_s;
+    }
+    std::fs::create_dir_all(&args.dir)
+        .with_context(|| format!("cannot create {}", args.dir.display()))?;
+    let dir = std::fs::canonicalize(&args.dir)
+        .with_context(|| format!("cannot resolve {}", args.dir.display()))?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    rt.block_on(async move {
+        let sim = sim::Sim::start(scenario, &dir)?;
+        println!("simulated instruments running:");
+        for d in [Device::Interferometer, Device::Capball, Device::Psd, Device::Trigger] {
+            println!("  {:<15} {}", d.name(), sim.port(d).display());
+        }
+        let toml = write_daemon_config(&sim, &dir, &dir.join("logs"), false)?;
+        let cfg_path = dir.join("metrolog.toml");
+        std::fs::write(&cfg_path, &toml).with_context(|| format!("cannot write {}", cfg_path.display()))?;
+        println!("\na metrolog config for them ({}):\n\n{toml}", cfg_path.display());
+        println!(
+            "run the daemon with:  metrolog run --config {}\nthe CNC program ({:.0} s) starts {:.0} s after the daemon opens the CAN channel. Ctrl-C stops.",
+            cfg_path.display(),
+            sim.program_duration_s(),
+            sim.scenario().program.start_delay_s
+        );
+        {
+        let signal = crate::service::shutdown_signal();
+        tokio::pin!(signal);
+        let done = sim.program_done();
+        tokio::pin!(done);
+        let mut finished = false;
+        loop {
+            tokio::select! {
+                s = &mut signal => {
+                    println!("{s}: stopping the simulated instruments");
+                    break;
+                }
+                _ = &mut done, if !finished => {
+                    finished = true;
+                    println!("the CNC program has ended (program-end trigger sent); Ctrl-C stops the instruments");
+                }
+            }
+        }
+        }
+        sim.shutdown().await;
+        anyhow::Ok(())
+    })
 }

@@ -1,0 +1,711 @@
+//! The daemon's configuration file (TOML): parsing, validation against the instruments' data
+//! sheets (`shared/instruments.md`), and loading of the files it points to (CapBall transform,
+//! trajectory).
+//!
+//! Every error names the file, the line and column, and says in one sentence what is wrong;
+//! unknown keys are rejected (a misspelt key must never silently fall back to a default).
+//! Relative paths in the file are relative to the directory of the config file.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+/// Defaults, shared with the example config `deploy/metrolog.toml`.
+pub const DEFAULT_DETECTOR_SAMPLES: usize = 150;
+pub const DEFAULT_LI80_RATE_HZ: u32 = 1000;
+/// Steel (instruments.md §1).
+pub const DEFAULT_ALPHA_UM_PER_M_K: f64 = 11.7;
+pub const DEFAULT_CB3_RATE_HZ: u32 = 1000;
+/// Nominal sensor sensitivity, 10 µm/V (instruments.md §2).
+pub const DEFAULT_CB3_POLY: [[f64; 3]; 3] = [[10.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 0.0]];
+pub const DEFAULT_PSD_BAUD: u32 = 921_600;
+pub const DEFAULT_PSD_RATE_HZ: u32 = 100;
+pub const DEFAULT_PSD_MIN_SUM_PA: f64 = 100_000.0;
+
+/// Data-sheet limits (instruments.md).
+pub const LI80_RATE_HZ: (u32, u32) = (1, 10_000);
+pub const CB3_RATE_HZ: (u32, u32) = (100, 20_000);
+pub const PSD_RATE_HZ: (u32, u32) = (1, 1000);
+/// A PSD-2 data line is about 55 bytes of 10 bits on the wire (8N1).
+pub const PSD_LINE_BITS: u32 = 55 * 10;
+/// Baud rates a PSD-2 link can be set to.
+pub const PSD_BAUDS: [u32; 8] = [
+    9600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 921_600,
+];
+/// CAN 2.0A identifiers are 11 bits.
+pub const CAN_ID_MAX: u32 = 0x7FF;
+/// The steady test needs a variance of successive differences (metrology::steady): 3 at least.
+pub const DETECTOR_SAMPLES: (usize, usize) = (3, 1_000_000);
+
+/// A configuration error. Each message says which file and line and what to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The configuration file could not be read.
+    #[error("cannot read config file {}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// The configuration file is not what it should be, at a given place.
+    #[error("{}:{line}:{column}: {message}", path.display())]
+    Invalid {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+}
+
+impl ConfigError {
+    /// Line (1-based) of an [`ConfigError::Invalid`].
+    pub fn line(&self) -> Option<usize> {
+        match self {
+            ConfigError::Invalid { line, .. } => Some(*line),
+            ConfigError::Read { .. } => None,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The file as written (spans kept for the error messages).
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    run: Spanned<RawRun>,
+    detector: Option<Spanned<RawDetector>>,
+    interferometer: Option<Spanned<RawInterferometer>>,
+    capball: Option<Spanned<RawCapball>>,
+    psd: Option<Spanned<RawPsd>>,
+    trigger: Option<Spanned<RawTrigger>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRun {
+    machine: Spanned<String>,
+    output_dir: Spanned<String>,
+    trajectory: Option<Spanned<String>>,
+    #[serde(default)]
+    stop_at_program_end: bool,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDetector {
+    samples: Option<Spanned<i64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInterferometer {
+    port: Spanned<String>,
+    rate_hz: Option<Spanned<i64>>,
+    alpha_um_per_m_k: Option<Spanned<f64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCapball {
+    port: Spanned<String>,
+    rate_hz: Option<Spanned<i64>>,
+    poly: Option<Spanned<Vec<Vec<f64>>>>,
+    transform: Option<Spanned<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPsd {
+    port: Spanned<String>,
+    baud: Option<Spanned<i64>>,
+    rate_hz: Option<Spanned<i64>>,
+    min_sum_pa: Option<Spanned<f64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTrigger {
+    slcan: Option<Spanned<String>>,
+    socketcan: Option<Spanned<String>>,
+    can_id: Option<Spanned<i64>>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// The validated configuration.
+
+/// A validated configuration, with the files it points to already read.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// The file as written (stored in the log).
+    pub text: String,
+    pub run: RunConfig,
+    pub detector: DetectorConfig,
+    pub interferometer: Option<drivers::li80::Config>,
+    pub capball: Option<CapballConfig>,
+    pub psd: Option<drivers::psd::Config>,
+    pub trigger: Option<TriggerConfig>,
+}
+
+#[derive(Debug, Clone)]
+pub struct RunConfig {
+    /// Machine name; also the prefix of the log file names.
+    pub machine: String,
+    pub output_dir: PathBuf,
+    pub trajectory: Option<Trajectory>,
+    /// End the run when the CNC sends program end.
+    pub stop_at_program_end: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetectorConfig {
+    /// Samples averaged per steady value.
+    pub samples: usize,
+}
+
+#[derive(Debug, Clone)]
+pub struct CapballConfig {
+    pub driver: drivers::cb3::Config,
+    /// The transform file (path and text as read), stored in the log; `None` = identity.
+    pub transform_file: Option<(PathBuf, String)>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum TriggerConfig {
+    Slcan(drivers::trigger::SlcanConfig),
+    SocketCan(drivers::trigger::SocketCanConfig),
+}
+
+/// One programmed pose of the trajectory (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct TrajectoryRow {
+    pub pose: u32,
+    pub x_mm: f64,
+    pub y_mm: f64,
+    pub z_mm: f64,
+    pub a_deg: Option<f64>,
+    pub c_deg: Option<f64>,
+}
+
+/// The trajectory (pose table) of a run.
+#[derive(Debug, Clone)]
+pub struct Trajectory {
+    pub path: PathBuf,
+    /// The file as read (stored in the log as an attachment).
+    pub text: String,
+    pub rows: Vec<TrajectoryRow>,
+}
+
+impl Config {
+    /// Read and validate a config file.
+    pub fn load(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Config::parse(path, &text)
+    }
+
+    /// Validate config text; `path` names it in errors and anchors its relative paths.
+    pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
+        let ctx = Ctx { path, text };
+        let raw: RawConfig = toml::from_str(text).map_err(|e| {
+            let span = e.span().unwrap_or(0..0);
+            ctx.err(span, first_sentence(e.message()))
+        })?;
+        ctx.validate(raw)
+    }
+
+    /// The instruments configured, in a fixed order.
+    pub fn instruments(&self) -> Vec<drivers::Instrument> {
+        let mut v = Vec::new();
+        if self.interferometer.is_some() {
+            v.push(drivers::Instrument::Interferometer);
+        }
+        if self.capball.is_some() {
+            v.push(drivers::Instrument::Capball);
+        }
+        if self.psd.is_some() {
+            v.push(drivers::Instrument::Psd);
+        }
+        if self.trigger.is_some() {
+            v.push(drivers::Instrument::Trigger);
+        }
+        v
+    }
+}
+
+/// toml's messages are sometimes several lines; the first says what is wrong.
+fn first_sentence(m: &str) -> String {
+    m.lines().next().unwrap_or(m).trim().to_string()
+}
+
+struct Ctx<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, span: Range<usize>, message: impl Into<String>) -> ConfigError {
+        let (line, column) = line_col(self.text, span.start);
+        ConfigError::Invalid {
+            path: self.path.to_path_buf(),
+            line,
+            column,
+            message: message.into(),
+        }
+    }
+
+    /// A path in the config, relative to the config file's directory.
+    fn resolve(&self, p: &str) -> PathBuf {
+        let p = Path::new(p);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.path.parent().unwrap_or_else(|| Path::new(".")).join(p)
+        }
+    }
+
+    fn rate(
+        &self,
+        v: Option<Spanned<i64>>,
+        default: u32,
+        (lo, hi): (u32, u32),
+        what: &str,
+    ) -> Result<u32, ConfigError> {
+        let Some(v) = v else { return Ok(default) };
+        let x = *v.get_ref();
+        if x < lo as i64 || x > hi as i64 {
+            return Err(self.err(
+                v.span(),
+                format!("rate_hz = {x} is outside what the {what} supports ({lo} to {hi} Hz)"),
+            ));
+        }
+        Ok(x as u32)
+    }
+
+    fn port(&self, v: Spanned<String>) -> Result<String, ConfigError> {
+        if v.get_ref().trim().is_empty() {
+            return Err(self.err(
+                v.span(),
+                "port is empty; give the device path, e.g. /dev/metrolog-li80",
+            ));
+        }
+        Ok(v.into_inner())
+    }
+
+    fn validate(&self, raw: RawConfig) -> Result<Config, ConfigError> {
+        let run = self.validate_run(raw.run.into_inner())?;
+
+        let detector = match raw.detector.and_then(|d| d.into_inner().samples) {
+            None => DetectorConfig {
+                samples: DEFAULT_DETECTOR_SAMPLES,
+            },
+            Some(s) => {
+                let n = *s.get_ref();
+                let (lo, hi) = DETECTOR_SAMPLES;
+                if n < lo as i64 || n > hi as i64 {
+                    return Err(self.err(
+                        s.span(),
+                        format!("samples = {n} is impossible; a steady value averages {lo} to {hi} samples"),
+                    ));
+                }
+                DetectorConfig {
+                    samples: n as usize,
+                }
+            }
+        };
+
+        let interferometer = match raw.interferometer {
+            None => None,
+            Some(s) => {
+                let r = s.into_inner();
+                let rate_hz = self.rate(r.rate_hz, DEFAULT_LI80_RATE_HZ, LI80_RATE_HZ, "LI-80")?;
+                let alpha = match r.alpha_um_per_m_k {
+                    None => DEFAULT_ALPHA_UM_PER_M_K,
+                    Some(a) => {
+                        let x = *a.get_ref();
+                        // Machine-tool materials lie within about -1 (invar, Zerodur) to 30
+                        // (aluminium, polymer concrete is lower); 100 leaves room and still
+                        // catches a value typed in the wrong unit (e.g. 1/K: 1.17e-5).
+                        if !x.is_finite() || x.abs() > 100.0 {
+                            return Err(self.err(
+                                a.span(),
+                                format!("alpha_um_per_m_k = {x} is not a plausible expansion coefficient; give it in µm/(m·K), e.g. 11.7 for steel"),
+                            ));
+                        }
+                        x
+                    }
+                };
+                Some(drivers::li80::Config {
+                    port: self.port(r.port)?,
+                    rate_hz,
+                    alpha_um_per_m_k: alpha,
+                })
+            }
+        };
+
+        let capball = match raw.capball {
+            None => None,
+            Some(s) => Some(self.validate_capball(s.into_inner())?),
+        };
+
+        let psd = match raw.psd {
+            None => None,
+            Some(s) => {
+                let r = s.into_inner();
+                let baud = match r.baud {
+                    None => DEFAULT_PSD_BAUD,
+                    Some(b) => {
+                        let x = *b.get_ref();
+                        if !PSD_BAUDS.iter().any(|&p| p as i64 == x) {
+                            return Err(self.err(
+                                b.span(),
+                                format!("baud = {x} is not a baud rate the PSD-2 supports ({PSD_BAUDS:?})"),
+                            ));
+                        }
+                        x as u32
+                    }
+                };
+                let rate_span = r.rate_hz.as_ref().map(|v| v.span()).unwrap_or(0..0);
+                let rate_hz = self.rate(r.rate_hz, DEFAULT_PSD_RATE_HZ, PSD_RATE_HZ, "PSD-2")?;
+                let max_lines = baud / PSD_LINE_BITS;
+                if rate_hz > max_lines {
+                    return Err(self.err(
+                        rate_span,
+                        format!("rate_hz = {rate_hz} is more than a {baud} baud link carries (about {max_lines} lines/s); lower rate_hz or raise baud"),
+                    ));
+                }
+                let min_sum_pa = match r.min_sum_pa {
+                    None => DEFAULT_PSD_MIN_SUM_PA,
+                    Some(m) => {
+                        let x = *m.get_ref();
+                        if !x.is_finite() || x < 0.0 {
+                            return Err(self.err(
+                                m.span(),
+                                format!("min_sum_pa = {x} is impossible; a photocurrent threshold is a finite number of pA ≥ 0"),
+                            ));
+                        }
+                        x
+                    }
+                };
+                Some(drivers::psd::Config {
+                    port: self.port(r.port)?,
+                    baud,
+                    rate_hz,
+                    min_sum_pa,
+                    // Not part of the config file (yet): no error map, no head correction.
+                    error_map: None,
+                    head: None,
+                })
+            }
+        };
+
+        let trigger = match raw.trigger {
+            None => None,
+            Some(s) => {
+                let span = s.span();
+                let r = s.into_inner();
+                let can_id = match r.can_id {
+                    None => protocol::can::DEFAULT_CAN_ID,
+                    Some(c) => {
+                        let x = *c.get_ref();
+                        if !(0..=CAN_ID_MAX as i64).contains(&x) {
+                            return Err(self.err(
+                                c.span(),
+                                format!("can_id = {x:#x} is not a CAN 2.0A (11-bit) identifier; it must be 0x000 to 0x7FF"),
+                            ));
+                        }
+                        x as u32
+                    }
+                };
+                match (r.slcan, r.socketcan) {
+                    (Some(p), None) => Some(TriggerConfig::Slcan(drivers::trigger::SlcanConfig {
+                        port: self.port(p)?,
+                        can_id,
+                    })),
+                    (None, Some(i)) => {
+                        let name = i.get_ref();
+                        // Linux interface names are at most 15 bytes (IFNAMSIZ - 1).
+                        if name.is_empty() || name.len() > 15 || name.contains(['/', ' ']) {
+                            return Err(self.err(
+                                i.span(),
+                                format!("socketcan = {name:?} is not a network interface name (e.g. \"can0\")"),
+                            ));
+                        }
+                        Some(TriggerConfig::SocketCan(
+                            drivers::trigger::SocketCanConfig {
+                                interface: i.into_inner(),
+                                can_id,
+                            },
+                        ))
+                    }
+                    (Some(_), Some(s)) => {
+                        return Err(self.err(
+                            s.span(),
+                            "[trigger] has both slcan and socketcan; keep the one the CNC is wired to",
+                        ));
+                    }
+                    (None, None) => {
+                        return Err(self.err(
+                            span,
+                            "[trigger] needs slcan = \"/dev/...\" or socketcan = \"can0\"",
+                        ));
+                    }
+                }
+            }
+        };
+
+        Ok(Config {
+            path: self.path.to_path_buf(),
+            text: self.text.to_string(),
+            run,
+            detector,
+            interferometer,
+            capball,
+            psd,
+            trigger,
+        })
+    }
+
+    fn validate_run(&self, r: RawRun) -> Result<RunConfig, ConfigError> {
+        let machine = r.machine.get_ref();
+        if machine.is_empty()
+            || !machine
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+        {
+            return Err(self.err(
+                r.machine.span(),
+                format!("machine = {machine:?} must be a non-empty name of letters, digits, '-', '_' or '.' (it names the log files)"),
+            ));
+        }
+        if r.output_dir.get_ref().trim().is_empty() {
+            return Err(self.err(
+                r.output_dir.span(),
+                "output_dir is empty; give the directory the logs go to",
+            ));
+        }
+        let output_dir = self.resolve(r.output_dir.get_ref());
+        let trajectory = match r.trajectory {
+            None => None,
+            Some(t) => {
+                let path = self.resolve(t.get_ref());
+                let text = std::fs::read_to_string(&path).map_err(|e| {
+                    self.err(
+                        t.span(),
+                        format!("trajectory file {} cannot be read: {e}", path.display()),
+                    )
+                })?;
+                let rows = parse_trajectory(&text).map_err(|m| {
+                    self.err(t.span(), format!("trajectory file {}: {m}", path.display()))
+                })?;
+                Some(Trajectory { path, text, rows })
+            }
+        };
+        Ok(RunConfig {
+            machine: r.machine.into_inner(),
+            output_dir,
+            trajectory,
+            stop_at_program_end: r.stop_at_program_end,
+        })
+    }
+
+    fn validate_capball(&self, r: RawCapball) -> Result<CapballConfig, ConfigError> {
+        let rate_hz = self.rate(r.rate_hz, DEFAULT_CB3_RATE_HZ, CB3_RATE_HZ, "CB-3")?;
+        let poly = match r.poly {
+            None => DEFAULT_CB3_POLY,
+            Some(p) => {
+                let v = p.get_ref();
+                let shape_ok = v.len() == 3 && v.iter().all(|row| row.len() == 3);
+                if !shape_ok {
+                    return Err(self.err(
+                        p.span(),
+                        "poly must be three rows (one per channel) of three coefficients [c1, c2, c3]",
+                    ));
+                }
+                if v.iter().flatten().any(|c| !c.is_finite()) {
+                    return Err(self.err(
+                        p.span(),
+                        "poly has a coefficient that is not a finite number",
+                    ));
+                }
+                if v.iter().any(|row| row[0] == 0.0) {
+                    return Err(self.err(
+                        p.span(),
+                        "poly has a channel with c1 = 0, which reads every distance as zero; nominal c1 is 10 µm/V",
+                    ));
+                }
+                let mut out = [[0.0; 3]; 3];
+                for (o, row) in out.iter_mut().zip(v) {
+                    o.copy_from_slice(row);
+                }
+                out
+            }
+        };
+        let (transform, transform_file) = match r.transform {
+            None => (identity4(), None),
+            Some(t) => {
+                let path = self.resolve(t.get_ref());
+                let text = std::fs::read_to_string(&path).map_err(|e| {
+                    self.err(
+                        t.span(),
+                        format!("transform file {} cannot be read: {e}", path.display()),
+                    )
+                })?;
+                let m = parse_transform(&text).map_err(|m| {
+                    self.err(t.span(), format!("transform file {}: {m}", path.display()))
+                })?;
+                (m, Some((path, text)))
+            }
+        };
+        Ok(CapballConfig {
+            driver: drivers::cb3::Config {
+                port: self.port(r.port)?,
+                rate_hz,
+                poly,
+                transform,
+            },
+            transform_file,
+        })
+    }
+}
+
+fn identity4() -> [[f64; 4]; 4] {
+    let mut m = [[0.0; 4]; 4];
+    for (i, row) in m.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    m
+}
+
+/// 1-based line and column of a byte offset.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+/// A 4×4 homogeneous transform as CSV: four rows of four numbers (comma or whitespace
+/// separated; `#` comments and blank lines ignored).
+pub fn parse_transform(text: &str) -> Result<[[f64; 4]; 4], String> {
+    let mut rows = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let cells: Vec<&str> = line
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|s| !s.is_empty())
+            .collect();
+        if cells.len() != 4 {
+            return Err(format!(
+                "line {} has {} numbers, a 4×4 transform needs 4 per row",
+                i + 1,
+                cells.len()
+            ));
+        }
+        let mut row = [0.0; 4];
+        for (r, c) in row.iter_mut().zip(&cells) {
+            *r = c
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("line {}: {c:?} is not a finite number", i + 1))?;
+        }
+        rows.push(row);
+    }
+    if rows.len() != 4 {
+        return Err(format!("has {} rows, a 4×4 transform needs 4", rows.len()));
+    }
+    // A homogeneous transform maps [d; 1] to [v; 1]: its last row is [0 0 0 1]. T = M·S⁺ from
+    // the cube calibration has that row exactly up to rounding when M and S carry the row of ones.
+    let last = rows[3];
+    if (last[0].abs() + last[1].abs() + last[2].abs() + (last[3] - 1.0).abs()) > 1e-6 {
+        return Err(format!(
+            "last row is {last:?}; a homogeneous transform ends with 0, 0, 0, 1"
+        ));
+    }
+    Ok([rows[0], rows[1], rows[2], rows[3]])
+}
+
+/// The trajectory CSV: header `pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`, poses from 1 and increasing.
+pub fn parse_trajectory(text: &str) -> Result<Vec<TrajectoryRow>, String> {
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(text.as_bytes());
+    let headers = rdr
+        .headers()
+        .map_err(|e| format!("bad header: {e}"))?
+        .clone();
+    let h: Vec<&str> = headers.iter().collect();
+    let rotary = match h.as_slice() {
+        ["pose", "x_mm", "y_mm", "z_mm"] => false,
+        ["pose", "x_mm", "y_mm", "z_mm", "a_deg", "c_deg"] => true,
+        _ => {
+            return Err(format!(
+                "header is {h:?}; expected pose,x_mm,y_mm,z_mm or pose,x_mm,y_mm,z_mm,a_deg,c_deg"
+            ));
+        }
+    };
+    let mut rows: Vec<TrajectoryRow> = Vec::new();
+    for rec in rdr.records() {
+        let rec = rec.map_err(|e| format!("{e}"))?;
+        let line = rec.position().map_or(0, |p| p.line());
+        let num = |i: usize| -> Result<f64, String> {
+            let s = rec.get(i).unwrap_or("");
+            s.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("line {line}: {} = {s:?} is not a finite number", h[i]))
+        };
+        let pose: u32 = rec.get(0).unwrap_or("").parse().map_err(|_| {
+            format!(
+                "line {line}: pose {:?} is not a whole number",
+                rec.get(0).unwrap_or("")
+            )
+        })?;
+        let expected = rows.last().map_or(1, |r| r.pose + 1);
+        if pose != expected {
+            return Err(format!(
+                "line {line}: pose {pose} should be {expected} (poses count up from 1)"
+            ));
+        }
+        rows.push(TrajectoryRow {
+            pose,
+            x_mm: num(1)?,
+            y_mm: num(2)?,
+            z_mm: num(3)?,
+            a_deg: if rotary { Some(num(4)?) } else { None },
+            c_deg: if rotary { Some(num(5)?) } else { None },
+        });
+    }
+    if rows.is_empty() {
+        return Err("has no poses".into());
+    }
+    Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_col_counts_from_one() {
+        assert_eq!(line_col("a\nbc\n", 0), (1, 1));
+        assert_eq!(line_col("a\nbc\n", 3), (2, 2));
+    }
+
+    #[test]
+    fn transform_rejects_non_homogeneous() {
+        let t = "1,0,0,0\n0,1,0,0\n0,0,1,0\n0,0,0,2\n";
+        assert!(parse_transform(t).unwrap_err().contains("0, 0, 0, 1"));
+    }
+}

@@ -1,0 +1,155 @@
+//! Streaming MCAP reader that survives a damaged end.
+//!
+//! It walks the file front to back with the `mcap` crate's sans-IO linear reader (reading the
+//! file in pieces, never all at once) and hands out every message, attachment and metadata
+//! record in file order. At the first error — a file cut mid-chunk by SIGKILL or a power loss,
+//! a bad CRC — it stops and reports the error with what it read until then: the intact prefix.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+use mcap::records::Record;
+use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+
+use super::LogError;
+
+/// One record of a log, in file order.
+#[derive(Debug)]
+pub enum LogItem<'a> {
+    Message {
+        topic: &'a str,
+        log_ns: u64,
+        data: &'a [u8],
+    },
+    Attachment {
+        name: &'a str,
+        media_type: &'a str,
+        log_ns: u64,
+        data: &'a [u8],
+    },
+    Metadata {
+        name: &'a str,
+        map: &'a BTreeMap<String, String>,
+    },
+}
+
+/// What reading a log found.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct ReadSummary {
+    /// Size of the file, bytes.
+    pub file_bytes: u64,
+    /// Bytes handed to the decoder before it stopped.
+    pub bytes_read: u64,
+    /// Footer and end magic read: the writer closed the file.
+    pub clean_close: bool,
+    /// Why reading stopped early (None when the whole file was read).
+    pub error: Option<String>,
+    pub messages: u64,
+    pub first_log_ns: Option<u64>,
+    pub last_log_ns: Option<u64>,
+}
+
+/// Reads `path`, calling `on` for every record, until the end or the first damage.
+///
+/// `Err` only when the file cannot be opened or read at all; damage inside the file is
+/// reported in [`ReadSummary::error`].
+pub fn read_log(path: &Path, mut on: impl FnMut(LogItem<'_>)) -> Result<ReadSummary, LogError> {
+    let open_err = |source| LogError::Open {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut file = File::open(path).map_err(open_err)?;
+    let file_bytes = file.metadata().map_err(open_err)?.len();
+    let mut summary = ReadSummary {
+        file_bytes,
+        ..ReadSummary::default()
+    };
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_validate_chunk_crcs(true)
+            // A damaged record must not make the reader allocate without bound.
+            .with_record_length_limit(1 << 30),
+    );
+    let mut topics: BTreeMap<u16, String> = BTreeMap::new();
+    let mut saw_footer = false;
+    loop {
+        let ev = match reader.next_event() {
+            None => {
+                summary.clean_close = saw_footer;
+                if !saw_footer {
+                    summary.error = Some("the file ends without a footer".into());
+                }
+                break;
+            }
+            Some(Err(e)) => {
+                summary.error = Some(match e {
+                    mcap::McapError::UnexpectedEof => format!(
+                        "the file ends inside a record after {} of {} bytes (the writer did not close it)",
+                        summary.bytes_read, file_bytes
+                    ),
+                    e => e.to_string(),
+                });
+                break;
+            }
+            Some(Ok(ev)) => ev,
+        };
+        match ev {
+            LinearReadEvent::ReadRequest(n) => {
+                let buf = reader.insert(n.max(64 * 1024));
+                let got = loop {
+                    match file.read(buf) {
+                        Ok(k) => break k,
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                        Err(e) => return Err(open_err(e)),
+                    }
+                };
+                reader.notify_read(got);
+                summary.bytes_read += got as u64;
+            }
+            LinearReadEvent::Record { data, opcode } => {
+                let rec = match mcap::parse_record(opcode, data) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        summary.error = Some(format!("damaged record (opcode {opcode:#04x}): {e}"));
+                        break;
+                    }
+                };
+                match rec {
+                    Record::Channel(c) => {
+                        topics.insert(c.id, c.topic.clone());
+                    }
+                    Record::Message { header, data } => {
+                        let Some(topic) = topics.get(&header.channel_id) else {
+                            summary.error =
+                                Some(format!("message on unknown channel {}", header.channel_id));
+                            break;
+                        };
+                        summary.messages += 1;
+                        summary.first_log_ns.get_or_insert(header.log_time);
+                        summary.last_log_ns = Some(header.log_time);
+                        on(LogItem::Message {
+                            topic,
+                            log_ns: header.log_time,
+                            data: &data,
+                        });
+                    }
+                    Record::Attachment { header, data, .. } => on(LogItem::Attachment {
+                        name: &header.name,
+                        media_type: &header.media_type,
+                        log_ns: header.log_time,
+                        data: &data,
+                    }),
+                    Record::Metadata(m) => on(LogItem::Metadata {
+                        name: &m.name,
+                        map: &m.metadata,
+                    }),
+                    Record::Footer(_) => saw_footer = true,
+                    _ => {}
+                }
+            }
+        }
+    }
+    Ok(summary)
+}

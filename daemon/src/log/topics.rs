@@ -1,0 +1,634 @@
+//! The messages of each MCAP topic: JSON-encoded, with a JSON schema generated from these
+//! types (`schemars`), so Foxglove/Lichtblick can plot every field and any reader can validate.
+//!
+//! Every raw message carries the device's `seq` and `device_t_us` and the clock-fitted time
+//! `fitted_ns`; the MCAP log time is the host arrival time (`Sample::host_ns`), so a log holds
+//! everything replay needs to re-run the steady-value detection exactly.
+
+use std::collections::BTreeMap;
+
+use drivers::{Counters, Instrument, Sample, SampleValues, Trigger};
+use metrology::steady::{PoseStatus, PoseValue, TriggerKind};
+use protocol::can::TriggerEvent;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize, de::DeserializeOwned};
+
+/// A message type bound to one topic.
+pub trait TopicMessage: Serialize + DeserializeOwned + JsonSchema {
+    const TOPIC: &'static str;
+    /// Schema name in the MCAP schema record.
+    const SCHEMA_NAME: &'static str;
+}
+
+macro_rules! topic {
+    ($t:ty, $topic:literal, $schema:literal) => {
+        impl TopicMessage for $t {
+            const TOPIC: &'static str = $topic;
+            const SCHEMA_NAME: &'static str = $schema;
+        }
+    };
+}
+
+/// Non-finite numbers (a PSD sample with no light divides by zero) are written as JSON `null`
+/// — JSON has no NaN — and read back as NaN; the schema says `number` or `null`.
+mod nullable {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f64(*v)
+        } else {
+            s.serialize_none()
+        }
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+
+    pub mod array3 {
+        use serde::ser::SerializeTuple;
+        use serde::{Deserialize, Deserializer, Serializer};
+
+        pub fn serialize<S: Serializer>(v: &[f64; 3], s: S) -> Result<S::Ok, S::Error> {
+            let mut t = s.serialize_tuple(3)?;
+            for x in v {
+                t.serialize_element(&x.is_finite().then_some(*x))?;
+            }
+            t.end()
+        }
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
+            let a = <[Option<f64>; 3]>::deserialize(d)?;
+            Ok(a.map(|x| x.unwrap_or(f64::NAN)))
+        }
+    }
+
+    pub mod vec {
+        use serde::{Deserialize, Deserializer, Serializer};
+
+        pub fn serialize<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+            s.collect_seq(v.iter().map(|x| x.is_finite().then_some(*x)))
+        }
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+            let v = Vec::<Option<f64>>::deserialize(d)?;
+            Ok(v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
+        }
+    }
+}
+
+/// `/interferometer/position`: one LI-80 `$POS` record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct PositionMsg {
+    pub seq: u64,
+    pub device_t_us: u64,
+    /// Device time on the host axis (clock fit), ns since the Unix epoch.
+    pub fitted_ns: u64,
+    pub raw_nm: i64,
+    /// Compensated length, µm.
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub position_um: f64,
+    /// Signal strength, %.
+    pub sig: u8,
+    pub flags: u32,
+    pub valid: bool,
+}
+topic!(PositionMsg, "/interferometer/position", "metrolog.Position");
+
+/// `/interferometer/environment`: one LI-80 `$ENV` record and the refractive index from it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct EnvironmentMsg {
+    pub seq: u64,
+    pub device_t_us: u64,
+    pub fitted_ns: u64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub air_c: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub air_pa: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub rh_pct: f64,
+    #[serde(with = "nullable::vec")]
+    #[schemars(with = "Vec<Option<f64>>")]
+    pub material_c: Vec<f64>,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub n_air: f64,
+    pub valid: bool,
+}
+topic!(
+    EnvironmentMsg,
+    "/interferometer/environment",
+    "metrolog.Environment"
+);
+
+/// `/capball/sample`: one CB-3 sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct CapballMsg {
+    pub seq: u64,
+    pub device_t_us: u64,
+    pub fitted_ns: u64,
+    /// Sensor voltages, V.
+    #[serde(with = "nullable::array3")]
+    #[schemars(with = "[Option<f64>; 3]")]
+    pub volts: [f64; 3],
+    /// Distance changes of the three sensors, µm.
+    #[serde(with = "nullable::array3")]
+    #[schemars(with = "[Option<f64>; 3]")]
+    pub d_um: [f64; 3],
+    /// Ball-centre error in the machine frame (x, y, z), µm.
+    #[serde(with = "nullable::array3")]
+    #[schemars(with = "[Option<f64>; 3]")]
+    pub e_um: [f64; 3],
+    pub flags: u8,
+    pub valid: bool,
+}
+topic!(CapballMsg, "/capball/sample", "metrolog.Capball");
+
+/// `/psd/sample`: one PSD-2 sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct PsdMsg {
+    pub seq: u64,
+    pub device_t_us: u64,
+    pub fitted_ns: u64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub x_um: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub y_um: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub sum_pa: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
+    pub head_c: f64,
+    pub valid: bool,
+}
+topic!(PsdMsg, "/psd/sample", "metrolog.Psd");
+
+/// CNC trigger event names (instruments.md §4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum TriggerEventName {
+    MotionStart,
+    ExactStop,
+    DwellEnd,
+    ProgramStart,
+    ProgramEnd,
+    FeedHold,
+}
+
+impl From<TriggerEvent> for TriggerEventName {
+    fn from(e: TriggerEvent) -> Self {
+        match e {
+            TriggerEvent::MotionStart => TriggerEventName::MotionStart,
+            TriggerEvent::ExactStop => TriggerEventName::ExactStop,
+            TriggerEvent::DwellEnd => TriggerEventName::DwellEnd,
+            TriggerEvent::ProgramStart => TriggerEventName::ProgramStart,
+            TriggerEvent::ProgramEnd => TriggerEventName::ProgramEnd,
+            TriggerEvent::FeedHold => TriggerEventName::FeedHold,
+        }
+    }
+}
+
+impl From<TriggerEventName> for TriggerEvent {
+    fn from(e: TriggerEventName) -> Self {
+        match e {
+            TriggerEventName::MotionStart => TriggerEvent::MotionStart,
+            TriggerEventName::ExactStop => TriggerEvent::ExactStop,
+            TriggerEventName::DwellEnd => TriggerEvent::DwellEnd,
+            TriggerEventName::ProgramStart => TriggerEvent::ProgramStart,
+            TriggerEventName::ProgramEnd => TriggerEvent::ProgramEnd,
+            TriggerEventName::FeedHold => TriggerEvent::FeedHold,
+        }
+    }
+}
+
+impl From<TriggerEventName> for TriggerKind {
+    fn from(e: TriggerEventName) -> Self {
+        match e {
+            TriggerEventName::MotionStart => TriggerKind::MotionStart,
+            TriggerEventName::ExactStop => TriggerKind::ExactStop,
+            TriggerEventName::DwellEnd => TriggerKind::DwellEnd,
+            TriggerEventName::ProgramStart => TriggerKind::ProgramStart,
+            TriggerEventName::ProgramEnd => TriggerKind::ProgramEnd,
+            TriggerEventName::FeedHold => TriggerKind::FeedHold,
+        }
+    }
+}
+
+/// `/cnc/trigger`: one CNC trigger frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TriggerMsg {
+    pub event: TriggerEventName,
+    pub pose: u16,
+    /// NC clock, ms (wraps).
+    pub nc_ms: u32,
+}
+topic!(TriggerMsg, "/cnc/trigger", "metrolog.Trigger");
+
+/// The instruments that give pose values.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseInstrument {
+    Interferometer,
+    Capball,
+    Psd,
+}
+
+impl PoseInstrument {
+    pub const ALL: [PoseInstrument; 3] = [
+        PoseInstrument::Interferometer,
+        PoseInstrument::Capball,
+        PoseInstrument::Psd,
+    ];
+    pub fn name(self) -> &'static str {
+        match self {
+            PoseInstrument::Interferometer => "interferometer",
+            PoseInstrument::Capball => "capball",
+            PoseInstrument::Psd => "psd",
+        }
+    }
+    /// Names of the detector's channels, in order.
+    pub fn channels(self) -> &'static [&'static str] {
+        match self {
+            PoseInstrument::Interferometer => &["position_um"],
+            PoseInstrument::Capball => &["ex_um", "ey_um", "ez_um"],
+            PoseInstrument::Psd => &["x_um", "y_um"],
+        }
+    }
+    pub fn instrument(self) -> Instrument {
+        match self {
+            PoseInstrument::Interferometer => Instrument::Interferometer,
+            PoseInstrument::Capball => Instrument::Capball,
+            PoseInstrument::Psd => Instrument::Psd,
+        }
+    }
+}
+
+/// Status of a pose value: `ok` or why it could not be measured.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseStatusName {
+    Ok,
+    NeverSteady,
+    BeamInvalid,
+    DeviceAway,
+    TriggerMissing,
+}
+
+impl From<PoseStatus> for PoseStatusName {
+    fn from(s: PoseStatus) -> Self {
+        match s {
+            PoseStatus::Ok => PoseStatusName::Ok,
+            PoseStatus::NeverSteady => PoseStatusName::NeverSteady,
+            PoseStatus::BeamInvalid => PoseStatusName::BeamInvalid,
+            PoseStatus::DeviceAway => PoseStatusName::DeviceAway,
+            PoseStatus::TriggerMissing => PoseStatusName::TriggerMissing,
+        }
+    }
+}
+
+impl PoseStatusName {
+    pub fn name(self) -> &'static str {
+        PoseStatus::from(self).name()
+    }
+}
+
+impl From<PoseStatusName> for PoseStatus {
+    fn from(s: PoseStatusName) -> Self {
+        match s {
+            PoseStatusName::Ok => PoseStatus::Ok,
+            PoseStatusName::NeverSteady => PoseStatus::NeverSteady,
+            PoseStatusName::BeamInvalid => PoseStatus::BeamInvalid,
+            PoseStatusName::DeviceAway => PoseStatus::DeviceAway,
+            PoseStatusName::TriggerMissing => PoseStatus::TriggerMissing,
+        }
+    }
+}
+
+/// `/pose`: the steady value of one instrument at one pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct PoseMsg {
+    pub instrument: PoseInstrument,
+    pub pose: u32,
+    pub status: PoseStatusName,
+    /// Samples averaged (0 when no value).
+    pub n: u64,
+    /// Mean per channel, by channel name (`position_um`; `ex_um`, `ey_um`, `ez_um`; `x_um`,
+    /// `y_um`); empty when no value.
+    pub mean: BTreeMap<String, f64>,
+    /// Sample standard deviation per channel.
+    pub std: BTreeMap<String, f64>,
+    /// First and last averaged sample (or the dwell bounds), ns since the Unix epoch.
+    pub t_first_ns: u64,
+    pub t_last_ns: u64,
+}
+topic!(PoseMsg, "/pose", "metrolog.Pose");
+
+impl PoseMsg {
+    pub fn from_value(instrument: PoseInstrument, v: &PoseValue) -> PoseMsg {
+        let names = instrument.channels();
+        let map = |xs: &[f64]| {
+            names
+                .iter()
+                .zip(xs)
+                .map(|(n, x)| (n.to_string(), *x))
+                .collect::<BTreeMap<_, _>>()
+        };
+        PoseMsg {
+            instrument,
+            pose: v.pose,
+            status: v.status.into(),
+            n: v.n as u64,
+            mean: map(&v.mean),
+            std: map(&v.std),
+            t_first_ns: v.t_first_ns,
+            t_last_ns: v.t_last_ns,
+        }
+    }
+}
+
+/// Counters of one instrument (see `drivers::Counters`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct CountersMsg {
+    pub samples: u64,
+    pub gap_samples: u64,
+    pub gaps: u64,
+    /// Rejected records by kind (`bad_checksum`, `bad_crc`, ...).
+    pub rejections: BTreeMap<String, u64>,
+    pub resyncs: u64,
+    pub reconnects: u64,
+    pub disconnects: u64,
+    pub dropped: u64,
+    pub invalid: u64,
+    pub device_errors: u64,
+    pub answers: u64,
+    /// Fitted drift of the device clock against the host clock, ppm.
+    pub clock_drift_ppm: Option<f64>,
+}
+
+impl From<&Counters> for CountersMsg {
+    fn from(c: &Counters) -> Self {
+        CountersMsg {
+            samples: c.samples,
+            gap_samples: c.gap_samples,
+            gaps: c.gaps,
+            rejections: c
+                .rejections
+                .iter()
+                .map(|(k, v)| (k.name().to_string(), *v))
+                .collect(),
+            resyncs: c.resyncs,
+            reconnects: c.reconnects,
+            disconnects: c.disconnects,
+            dropped: c.dropped,
+            invalid: c.invalid,
+            device_errors: c.device_errors,
+            answers: c.answers,
+            clock_drift_ppm: c.clock_drift_ppm.filter(|d| d.is_finite()),
+        }
+    }
+}
+
+/// `/status`, about once a second: every instrument's counters and the log's own.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct StatusMsg {
+    /// Counters by instrument name (`interferometer`, `capball`, `psd`, `trigger`).
+    pub instruments: BTreeMap<String, CountersMsg>,
+    /// Messages written to this log so far.
+    pub log_messages: u64,
+    /// Pose values emitted so far, by status.
+    pub poses: BTreeMap<String, u64>,
+}
+topic!(StatusMsg, "/status", "metrolog.Status");
+
+/// What happened to a device connection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum EventKind {
+    Connected,
+    Disconnected,
+    Error,
+}
+
+/// `/event`: connections, disconnections and device errors, as text.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct EventMsg {
+    pub instrument: String,
+    pub kind: EventKind,
+    pub port: String,
+    /// Identity (connected), reason (disconnected) or message (error).
+    pub text: String,
+}
+topic!(EventMsg, "/event", "metrolog.Event");
+
+/// A raw sample as the message of its topic.
+pub enum RawMsg {
+    Position(PositionMsg),
+    Environment(EnvironmentMsg),
+    Capball(CapballMsg),
+    Psd(PsdMsg),
+}
+
+impl RawMsg {
+    pub fn from_sample(s: &Sample) -> RawMsg {
+        let (seq, device_t_us, fitted_ns, valid) = (s.seq, s.device_t_us, s.fitted_ns, s.valid);
+        match &s.values {
+            SampleValues::Position {
+                raw_nm,
+                position_um,
+                sig,
+                flags,
+            } => RawMsg::Position(PositionMsg {
+                seq,
+                device_t_us,
+                fitted_ns,
+                raw_nm: *raw_nm,
+                position_um: *position_um,
+                sig: *sig,
+                flags: *flags,
+                valid,
+            }),
+            SampleValues::Environment {
+                air_c,
+                air_pa,
+                rh_pct,
+                material_c,
+                n_air,
+            } => RawMsg::Environment(EnvironmentMsg {
+                seq,
+                device_t_us,
+                fitted_ns,
+                air_c: *air_c,
+                air_pa: *air_pa,
+                rh_pct: *rh_pct,
+                material_c: material_c.clone(),
+                n_air: *n_air,
+                valid,
+            }),
+            SampleValues::Capball {
+                volts,
+                d_um,
+                e_um,
+                flags,
+            } => RawMsg::Capball(CapballMsg {
+                seq,
+                device_t_us,
+                fitted_ns,
+                volts: *volts,
+                d_um: *d_um,
+                e_um: *e_um,
+                flags: *flags,
+                valid,
+            }),
+            SampleValues::Psd {
+                x_um,
+                y_um,
+                sum_pa,
+                head_c,
+            } => RawMsg::Psd(PsdMsg {
+                seq,
+                device_t_us,
+                fitted_ns,
+                x_um: *x_um,
+                y_um: *y_um,
+                sum_pa: *sum_pa,
+                head_c: *head_c,
+                valid,
+            }),
+        }
+    }
+
+    /// The sample back, with `host_ns` = the message's log time.
+    pub fn to_sample(&self, host_ns: u64) -> Sample {
+        match self {
+            RawMsg::Position(m) => Sample {
+                instrument: Instrument::Interferometer,
+                seq: m.seq,
+                device_t_us: m.device_t_us,
+                host_ns,
+                fitted_ns: m.fitted_ns,
+                valid: m.valid,
+                values: SampleValues::Position {
+                    raw_nm: m.raw_nm,
+                    position_um: m.position_um,
+                    sig: m.sig,
+                    flags: m.flags,
+                },
+            },
+            RawMsg::Environment(m) => Sample {
+                instrument: Instrument::Interferometer,
+                seq: m.seq,
+                device_t_us: m.device_t_us,
+                host_ns,
+                fitted_ns: m.fitted_ns,
+                valid: m.valid,
+                values: SampleValues::Environment {
+                    air_c: m.air_c,
+                    air_pa: m.air_pa,
+                    rh_pct: m.rh_pct,
+                    material_c: m.material_c.clone(),
+                    n_air: m.n_air,
+                },
+            },
+            RawMsg::Capball(m) => Sample {
+                instrument: Instrument::Capball,
+                seq: m.seq,
+                device_t_us: m.device_t_us,
+                host_ns,
+                fitted_ns: m.fitted_ns,
+                valid: m.valid,
+                values: SampleValues::Capball {
+                    volts: m.volts,
+                    d_um: m.d_um,
+                    e_um: m.e_um,
+                    flags: m.flags,
+                },
+            },
+            RawMsg::Psd(m) => Sample {
+                instrument: Instrument::Psd,
+                seq: m.seq,
+                device_t_us: m.device_t_us,
+                host_ns,
+                fitted_ns: m.fitted_ns,
+                valid: m.valid,
+                values: SampleValues::Psd {
+                    x_um: m.x_um,
+                    y_um: m.y_um,
+                    sum_pa: m.sum_pa,
+                    head_c: m.head_c,
+                },
+            },
+        }
+    }
+}
+
+impl TriggerMsg {
+    pub fn from_trigger(t: &Trigger) -> TriggerMsg {
+        TriggerMsg {
+            event: t.event.into(),
+            pose: t.pose,
+            nc_ms: t.nc_ms,
+        }
+    }
+    pub fn to_trigger(&self, host_ns: u64) -> Trigger {
+        Trigger {
+            event: self.event.into(),
+            pose: self.pose,
+            nc_ms: self.nc_ms,
+            host_ns,
+        }
+    }
+}
+
+/// Any message of a known topic, decoded.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Decoded {
+    Position(PositionMsg),
+    Environment(EnvironmentMsg),
+    Capball(CapballMsg),
+    Psd(PsdMsg),
+    Trigger(TriggerMsg),
+    Pose(PoseMsg),
+    Status(StatusMsg),
+    Event(EventMsg),
+}
+
+/// Decodes a message of one of metrolog's topics; `Ok(None)` for a topic it does not know.
+pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Decoded>, serde_json::Error> {
+    Ok(Some(match topic {
+        PositionMsg::TOPIC => Decoded::Position(serde_json::from_slice(data)?),
+        EnvironmentMsg::TOPIC => Decoded::Environment(serde_json::from_slice(data)?),
+        CapballMsg::TOPIC => Decoded::Capball(serde_json::from_slice(data)?),
+        PsdMsg::TOPIC => Decoded::Psd(serde_json::from_slice(data)?),
+        TriggerMsg::TOPIC => Decoded::Trigger(serde_json::from_slice(data)?),
+        PoseMsg::TOPIC => Decoded::Pose(serde_json::from_slice(data)?),
+        StatusMsg::TOPIC => Decoded::Status(serde_json::from_slice(data)?),
+        EventMsg::TOPIC => Decoded::Event(serde_json::from_slice(data)?),
+        _ => return Ok(None),
+    }))
+}
+
+/// The topics metrolog writes, with their schema names and JSON schemas.
+pub fn all_topics() -> Vec<(&'static str, &'static str, schemars::Schema)> {
+    fn one<T: TopicMessage>() -> (&'static str, &'static str, schemars::Schema) {
+        (T::TOPIC, T::SCHEMA_NAME, schemars::schema_for!(T))
+    }
+    vec![
+        one::<PositionMsg>(),
+        one::<EnvironmentMsg>(),
+        one::<CapballMsg>(),
+        one::<PsdMsg>(),
+        one::<TriggerMsg>(),
+        one::<PoseMsg>(),
+        one::<StatusMsg>(),
+        one::<EventMsg>(),
+    ]
+}

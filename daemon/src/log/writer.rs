@@ -1,0 +1,414 @@
+//! MCAP writer of a run.
+//!
+//! Durability: the open chunk is closed, written and `fsync`ed at least every
+//! `LogOptions::flush_interval` (1 s) — checked on every write and by
+//! [`LogWriter::flush_if_due`], which the pipeline calls on a timer — so a power loss or
+//! SIGKILL costs at most about one second of data; a closed chunk is never rewritten.
+
+use std::collections::BTreeMap;
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use drivers::{Sample, Trigger};
+use mcap::records::{MessageHeader, Metadata};
+use mcap::{Attachment, Compression, McapError, WriteOptions};
+
+use super::topics::{self, PoseMsg, RawMsg, StatusMsg, TopicMessage, TriggerMsg};
+use super::{LogError, RUN_METADATA, RunMetadata};
+
+/// Writer settings.
+#[derive(Debug, Clone)]
+pub struct LogOptions {
+    /// Longest time a message stays in an open chunk.
+    pub flush_interval: Duration,
+    /// Chunk size that closes a chunk early (uncompressed bytes).
+    pub chunk_size: u64,
+    /// zstd level.
+    pub zstd_level: u32,
+    /// `fsync` the file on every flush (off only in benchmarks of the encoder).
+    pub fsync: bool,
+}
+
+impl Default for LogOptions {
+    fn default() -> Self {
+        LogOptions {
+            flush_interval: Duration::from_secs(1),
+            chunk_size: 4 << 20,
+            zstd_level: 3,
+            fsync: true,
+        }
+    }
+}
+
+/// The file under the MCAP writer: buffered, and its `flush` reaches the disk.
+struct SyncFile {
+    inner: BufWriter<File>,
+    fsync: bool,
+}
+
+impl Write for SyncFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.inner.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()?;
+        if self.fsync {
+            self.inner.get_ref().sync_data()?;
+        }
+        Ok(())
+    }
+}
+
+impl Seek for SyncFile {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        self.inner.seek(pos)
+    }
+}
+
+/// Writes one run to one MCAP file.
+pub struct LogWriter {
+    mcap: Option<mcap::Writer<SyncFile>>,
+    path: PathBuf,
+    channels: BTreeMap<&'static str, u16>,
+    sequence: u32,
+    messages: u64,
+    last_flush: Instant,
+    opts: LogOptions,
+    /// The first write error: after it, every write returns it again.
+    failed: Option<(String, &'static str)>,
+}
+
+/// The error with its causes (the mcap crate's message alone hides the OS error).
+fn describe(e: &McapError) -> String {
+    let mut s = e.to_string();
+    let mut src = std::error::Error::source(e);
+    while let Some(c) = src {
+        s.push_str(&format!(": {c}"));
+        src = c.source();
+    }
+    s
+}
+
+fn hint_for(e: &McapError) -> &'static str {
+    let io = match e {
+        McapError::Io(io) => Some(io),
+        _ => None,
+    };
+    match io.map(|e| e.kind()) {
+        Some(std::io::ErrorKind::StorageFull) => {
+            "the disk is full: free space or choose another log directory; the file holds everything up to the last flush (at most about 1 s earlier)"
+        }
+        Some(std::io::ErrorKind::PermissionDenied)
+        | Some(std::io::ErrorKind::ReadOnlyFilesystem) => {
+            "the file system refused the write: check that it is mounted read-write and writable by the metrolog user"
+        }
+        _ => {
+            "the file holds everything up to the last flush (at most about 1 s earlier); check the disk"
+        }
+    }
+}
+
+impl LogWriter {
+    /// Creates `path` (which must not exist) and writes the header, schemas, channels and the
+    /// run metadata.
+    pub fn create(
+        path: &Path,
+        meta: &RunMetadata,
+        opts: LogOptions,
+    ) -> Result<LogWriter, LogError> {
+        let file = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .map_err(|source| LogError::Create {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        let sink = SyncFile {
+            inner: BufWriter::with_capacity(1 << 20, file),
+            fsync: opts.fsync,
+        };
+        let wopts = WriteOptions::new()
+            .compression(Some(Compression::Zstd))
+            .compression_level(opts.zstd_level)
+            .chunk_size(Some(opts.chunk_size))
+            .profile("")
+            .library(concat!("metrolog ", env!("CARGO_PKG_VERSION")));
+        let werr = |e: McapError| LogError::Write {
+            path: path.to_path_buf(),
+            hint: hint_for(&e),
+            reason: describe(&e),
+        };
+        let mut mcap = wopts.create(sink).map_err(werr)?;
+        let mut channels = BTreeMap::new();
+        for (topic, schema_name, schema) in topics::all_topics() {
+            let data = serde_json::to_vec(&schema).unwrap_or_default();
+            let sid = mcap
+                .add_schema(schema_name, "jsonschema", &data)
+                .map_err(werr)?;
+            let cid = mcap
+                .add_channel(sid, topic, "json", &BTreeMap::new())
+                .map_err(werr)?;
+            channels.insert(topic, cid);
+        }
+        mcap.write_metadata(&Metadata {
+            name: RUN_METADATA.into(),
+            metadata: meta.to_map(),
+        })
+        .map_err(werr)?;
+        let mut w = LogWriter {
+            mcap: Some(mcap),
+            path: path.to_path_buf(),
+            channels,
+            sequence: 0,
+            messages: 0,
+            last_flush: Instant::now(),
+            opts,
+            failed: None,
+        };
+        w.flush()?;
+        Ok(w)
+    }
+
+    /// Creates a new file in `dir`, named `metrolog-<machine>-<UTC start>.mcap` (with `-2`,
+    /// `-3`, … when that name exists).
+    pub fn create_in_dir(
+        dir: &Path,
+        meta: &RunMetadata,
+        opts: LogOptions,
+    ) -> Result<LogWriter, LogError> {
+        let machine: String = meta
+            .machine
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let stamp: String = super::rfc3339(meta.started_ns)
+            .chars()
+            .filter(|c| c.is_ascii_digit() || *c == 'T')
+            .take(15)
+            .collect();
+        let base = if machine.is_empty() {
+            format!("metrolog-{stamp}Z")
+        } else {
+            format!("metrolog-{machine}-{stamp}Z")
+        };
+        let mut k = 1;
+        loop {
+            let name = if k == 1 {
+                format!("{base}.mcap")
+            } else {
+                format!("{base}-{k}.mcap")
+            };
+            let path = dir.join(name);
+            match LogWriter::create(&path, meta, opts.clone()) {
+                Err(LogError::Create { source, .. })
+                    if source.kind() == std::io::ErrorKind::AlreadyExists && k < 1000 =>
+                {
+                    k += 1
+                }
+                r => return r,
+            }
+        }
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Messages written so far.
+    pub fn messages(&self) -> u64 {
+        self.messages
+    }
+
+    fn fail(&mut self, e: McapError) -> LogError {
+        let hint = hint_for(&e);
+        if self.failed.is_none() {
+            self.failed = Some((describe(&e), hint));
+        }
+        self.failed_error()
+    }
+
+    fn failed_error(&self) -> LogError {
+        let (reason, hint) = self.failed.clone().unwrap_or_default();
+        LogError::Write {
+            path: self.path.clone(),
+            reason,
+            hint,
+        }
+    }
+
+    fn writer(&mut self) -> Result<&mut mcap::Writer<SyncFile>, LogError> {
+        if self.failed.is_some() {
+            return Err(self.failed_error());
+        }
+        match self.mcap.as_mut() {
+            Some(w) => Ok(w),
+            None => Err(LogError::Write {
+                path: self.path.clone(),
+                reason: "the log is already closed".into(),
+                hint: "",
+            }),
+        }
+    }
+
+    /// Writes a message of topic `T` with log time `log_ns` (host arrival time).
+    pub fn write<T: TopicMessage>(&mut self, log_ns: u64, msg: &T) -> Result<(), LogError> {
+        let data = serde_json::to_vec(msg).map_err(|e| LogError::Write {
+            path: self.path.clone(),
+            reason: format!("cannot encode a {} message: {e}", T::TOPIC),
+            hint: "",
+        })?;
+        self.write_raw(T::TOPIC, log_ns, &data)
+    }
+
+    /// Writes an already encoded message of one of metrolog's topics.
+    pub fn write_raw(&mut self, topic: &str, log_ns: u64, data: &[u8]) -> Result<(), LogError> {
+        let Some(&channel_id) = self.channels.get(topic) else {
+            return Err(LogError::Write {
+                path: self.path.clone(),
+                reason: format!("unknown topic {topic}"),
+                hint: "",
+            });
+        };
+        let header = MessageHeader {
+            channel_id,
+            sequence: self.sequence,
+            log_time: log_ns,
+            publish_time: log_ns,
+        };
+        let r = self.writer()?.write_to_known_channel(&header, data);
+        if let Err(e) = r {
+            return Err(self.fail(e));
+        }
+        self.sequence = self.sequence.wrapping_add(1);
+        self.messages += 1;
+        self.flush_if_due()?;
+        Ok(())
+    }
+
+    /// A raw sample on its topic, log time = `host_ns`.
+    pub fn write_sample(&mut self, s: &Sample) -> Result<(), LogError> {
+        match RawMsg::from_sample(s) {
+            RawMsg::Position(m) => self.write(s.host_ns, &m),
+            RawMsg::Environment(m) => self.write(s.host_ns, &m),
+            RawMsg::Capball(m) => self.write(s.host_ns, &m),
+            RawMsg::Psd(m) => self.write(s.host_ns, &m),
+        }
+    }
+
+    pub fn write_trigger(&mut self, t: &Trigger) -> Result<(), LogError> {
+        self.write(t.host_ns, &TriggerMsg::from_trigger(t))
+    }
+
+    pub fn write_pose(&mut self, log_ns: u64, p: &PoseMsg) -> Result<(), LogError> {
+        self.write(log_ns, p)
+    }
+
+    pub fn write_status(&mut self, log_ns: u64, s: &StatusMsg) -> Result<(), LogError> {
+        self.write(log_ns, s)
+    }
+
+    /// A metadata record (written at once, outside chunks).
+    pub fn write_metadata(
+        &mut self,
+        name: &str,
+        map: BTreeMap<String, String>,
+    ) -> Result<(), LogError> {
+        let r = self.writer()?.write_metadata(&Metadata {
+            name: name.into(),
+            metadata: map,
+        });
+        r.map_err(|e| self.fail(e))
+    }
+
+    /// An attachment (config, trajectory, calibration file ...).
+    pub fn attach(
+        &mut self,
+        name: &str,
+        media_type: &str,
+        data: &[u8],
+        log_ns: u64,
+    ) -> Result<(), LogError> {
+        let att = Attachment {
+            log_time: log_ns,
+            create_time: log_ns,
+            name: name.into(),
+            media_type: media_type.into(),
+            data: std::borrow::Cow::Borrowed(data),
+        };
+        let r = self.writer()?.attach(&att);
+        r.map_err(|e| self.fail(e))
+    }
+
+    /// Attaches a file under its file name.
+    pub fn attach_file(
+        &mut self,
+        path: &Path,
+        media_type: &str,
+        log_ns: u64,
+    ) -> Result<(), LogError> {
+        let data = std::fs::read(path).map_err(|source| LogError::Attachment {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        self.attach(&name, media_type, &data, log_ns)
+    }
+
+    /// Closes the open chunk and writes it through to the disk.
+    pub fn flush(&mut self) -> Result<(), LogError> {
+        let r = self.writer()?.flush();
+        self.last_flush = Instant::now();
+        r.map_err(|e| self.fail(e))
+    }
+
+    /// Flushes when the flush interval has passed since the last flush; true if it did.
+    pub fn flush_if_due(&mut self) -> Result<bool, LogError> {
+        if self.last_flush.elapsed() >= self.opts.flush_interval {
+            self.flush()?;
+            return Ok(true);
+        }
+        Ok(false)
+    }
+
+    /// Writes the summary, footer and end magic and syncs: a cleanly closed log.
+    pub fn finish(mut self) -> Result<PathBuf, LogError> {
+        self.close()?;
+        Ok(self.path.clone())
+    }
+
+    fn close(&mut self) -> Result<(), LogError> {
+        if self.failed.is_some() {
+            return Err(self.failed_error());
+        }
+        let Some(mut w) = self.mcap.take() else {
+            return Ok(());
+        };
+        if let Err(e) = w.finish() {
+            return Err(self.fail(e));
+        }
+        let mut sink = w.into_inner();
+        sink.fsync = true;
+        sink.flush().map_err(|e| self.fail(McapError::Io(e)))
+    }
+}
+
+impl Drop for LogWriter {
+    /// Closes the file as well as possible (a failed writer leaves what was flushed).
+    fn drop(&mut self) {
+        if self.failed.is_none() && self.mcap.is_some() {
+            let _ = self.close();
+        }
+    }
+}

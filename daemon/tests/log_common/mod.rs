@@ -1,0 +1,78 @@
+//! Shared by the log tests: write a synthetic run through the recorder.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use drivers::DriverEvent;
+use metrolog::log::synthetic::SyntheticRun;
+use metrolog::log::topics::PoseMsg;
+use metrolog::log::{DetectorSettings, LogOptions, LogWriter, Recorder, RunMetadata};
+
+pub const CONFIG_TOML: &str = "machine = \"test-mill\"\n[log]\ndir = \"/var/lib/metrolog\"\n";
+pub const TRAJECTORY_CSV: &str =
+    "pose,x_mm,y_mm,z_mm\n1,0,0,0\n2,50,0,0\n3,100,0,0\n4,150,0,0\n5,200,0,0\n";
+
+pub struct Written {
+    pub path: PathBuf,
+    pub events: Vec<DriverEvent>,
+    pub poses: Vec<PoseMsg>,
+    pub meta: RunMetadata,
+}
+
+pub fn meta(run: &SyntheticRun) -> RunMetadata {
+    let mut m = RunMetadata {
+        machine: "test-mill".into(),
+        started_ns: run.start_ns,
+        detector: DetectorSettings::default(),
+        ..RunMetadata::default()
+    };
+    m.instruments
+        .insert("interferometer".into(), "LI-80,SN1234,FW2.1".into());
+    m.extra.insert("operator".into(), "tester".into());
+    m
+}
+
+/// Writes `run` to `dir/name` through a [`Recorder`], closing it cleanly.
+pub fn write_run(dir: &Path, name: &str, run: &SyntheticRun) -> Written {
+    write_run_with(dir, name, run, LogOptions::default())
+}
+
+pub fn write_run_with(dir: &Path, name: &str, run: &SyntheticRun, opts: LogOptions) -> Written {
+    let path = dir.join(name);
+    let meta = meta(run);
+    let mut w = LogWriter::create(&path, &meta, opts).unwrap();
+    w.attach(
+        "config.toml",
+        "application/toml",
+        CONFIG_TOML.as_bytes(),
+        run.start_ns,
+    )
+    .unwrap();
+    w.attach(
+        "trajectory.csv",
+        "text/csv",
+        TRAJECTORY_CSV.as_bytes(),
+        run.start_ns,
+    )
+    .unwrap();
+    let mut rec = Recorder::new(w, &meta.detector).unwrap();
+    let events: Vec<DriverEvent> = run.events().collect();
+    let mut poses = Vec::new();
+    let mut now = run.start_ns;
+    for ev in &events {
+        now = match ev {
+            DriverEvent::Sample(s) => now.max(s.host_ns),
+            DriverEvent::Trigger(t) => now.max(t.host_ns),
+            _ => now,
+        };
+        poses.extend(rec.record(ev, now).unwrap());
+    }
+    let end = now + 1_000_000;
+    poses.extend(rec.finish(end).unwrap().1);
+    Written {
+        path,
+        events,
+        poses,
+        meta,
+    }
+}

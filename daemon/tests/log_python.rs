@@ -1,0 +1,101 @@
+//! An independent reader: the Python `mcap` package reads a log and `jsonschema` validates
+//! every message against its topic's schema (both pip packages; CI installs them).
+
+mod log_common;
+
+use std::collections::BTreeMap;
+use std::process::Command;
+
+use metrolog::log::synthetic::SyntheticRun;
+
+const SCRIPT: &str = r#"
+import json, sys
+from mcap.reader import make_reader
+from jsonschema import validators
+
+counts = {}
+errors = []
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f, validate_crcs=True)
+    summary = reader.get_summary()
+    validators_by_schema = {}
+    for schema, channel, message in reader.iter_messages():
+        assert schema.encoding == "jsonschema", schema.encoding
+        assert channel.message_encoding == "json", channel.message_encoding
+        v = validators_by_schema.get(schema.id)
+        if v is None:
+            doc = json.loads(schema.data)
+            cls = validators.validator_for(doc)
+            cls.check_schema(doc)
+            v = validators_by_schema[schema.id] = cls(doc)
+        msg = json.loads(message.data)
+        for e in v.iter_errors(msg):
+            errors.append(f"{channel.topic} @ {message.log_time}: {e.message}")
+        counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    attachments = {a.name: len(a.data) for a in reader.iter_attachments()}
+    metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+print(json.dumps({
+    "counts": counts,
+    "errors": errors[:20],
+    "n_errors": len(errors),
+    "attachments": attachments,
+    "run": metadata.get("metrolog.run", {}),
+    "summary_counts": {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()},
+}))
+"#;
+
+#[test]
+fn python_reads_the_log_and_every_message_matches_its_schema() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = SyntheticRun {
+        targets_mm: vec![0.0, 10.0, 20.0],
+        ..SyntheticRun::default()
+    };
+    let w = log_common::write_run(dir.path(), "run.mcap", &run);
+    let script = dir.path().join("check.py");
+    std::fs::write(&script, SCRIPT).unwrap();
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(&w.path)
+        .output()
+        .expect("python3 is needed for this test (with pip packages mcap and jsonschema)");
+    assert!(
+        out.status.success(),
+        "python failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["n_errors"], 0, "schema violations: {}", r["errors"]);
+
+    // Counts by topic, from the events written (independently of the Rust reader).
+    let mut want: BTreeMap<&str, u64> = BTreeMap::new();
+    for e in &w.events {
+        let topic = match e {
+            drivers::DriverEvent::Sample(s) => match s.values {
+                drivers::SampleValues::Position { .. } => "/interferometer/position",
+                drivers::SampleValues::Environment { .. } => "/interferometer/environment",
+                drivers::SampleValues::Capball { .. } => "/capball/sample",
+                drivers::SampleValues::Psd { .. } => "/psd/sample",
+            },
+            drivers::DriverEvent::Trigger(_) => "/cnc/trigger",
+            drivers::DriverEvent::Connected { .. } => "/event",
+            _ => continue,
+        };
+        *want.entry(topic).or_default() += 1;
+    }
+    want.insert("/pose", w.poses.len() as u64);
+    for (topic, n) in &want {
+        assert_eq!(r["counts"][topic], *n, "{topic}");
+        assert_eq!(
+            r["summary_counts"][topic], *n,
+            "{topic} in the summary statistics"
+        );
+    }
+    assert!(r["counts"]["/status"].as_u64().unwrap() >= 9);
+    assert_eq!(w.poses.len(), 9);
+    assert_eq!(
+        r["attachments"]["config.toml"],
+        log_common::CONFIG_TOML.len()
+    );
+    assert_eq!(r["run"]["machine"], "test-mill");
+}

@@ -1,0 +1,398 @@
+//! Round trip of every topic through the MCAP writer and reader, and exact replay.
+
+mod log_common;
+
+use std::collections::BTreeMap;
+
+use drivers::{DriverEvent, Instrument};
+use metrolog::cmd::replay::{ReplayOptions, replay};
+use metrolog::log::synthetic::SyntheticRun;
+use metrolog::log::topics::{Decoded, PoseInstrument, PoseStatusName, RawMsg, decode};
+use metrolog::log::{LogItem, RUN_METADATA, RunMetadata, read_log};
+
+#[test]
+fn every_topic_round_trips() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = SyntheticRun::default();
+    let w = log_common::write_run(dir.path(), "run.mcap", &run);
+
+    let mut samples = Vec::new();
+    let mut triggers = Vec::new();
+    let mut poses = Vec::new();
+    let mut statuses = Vec::new();
+    let mut events = Vec::new();
+    let mut attachments = BTreeMap::new();
+    let mut run_meta = None;
+    let mut inst_meta = Vec::new();
+    let summary = read_log(&w.path, |item| match item {
+        LogItem::Message {
+            topic,
+            log_ns,
+            data,
+        } => match decode(topic, data).unwrap().unwrap() {
+            Decoded::Position(m) => samples.push(RawMsg::Position(m).to_sample(log_ns)),
+            Decoded::Environment(m) => samples.push(RawMsg::Environment(m).to_sample(log_ns)),
+            Decoded::Capball(m) => samples.push(RawMsg::Capball(m).to_sample(log_ns)),
+            Decoded::Psd(m) => samples.push(RawMsg::Psd(m).to_sample(log_ns)),
+            Decoded::Trigger(t) => triggers.push(t.to_trigger(log_ns)),
+            Decoded::Pose(p) => poses.push(p),
+            Decoded::Status(s) => statuses.push((log_ns, s)),
+            Decoded::Event(e) => events.push(e),
+        },
+        LogItem::Attachment {
+            name,
+            data,
+            media_type,
+            ..
+        } => {
+            attachments.insert(name.to_string(), (media_type.to_string(), data.to_vec()));
+        }
+        LogItem::Metadata { name, map } => {
+            if name == RUN_METADATA {
+                run_meta = Some(RunMetadata::from_map(map).unwrap());
+            } else {
+                inst_meta.push(map.clone());
+            }
+        }
+    })
+    .unwrap();
+    assert!(summary.clean_close, "{summary:?}");
+    assert_eq!(summary.error, None);
+
+    // Raw samples and triggers: every field back, in the order written.
+    let want_samples: Vec<_> = w
+        .events
+        .iter()
+        .filter_map(|e| {
+            if let DriverEvent::Sample(s) = e {
+                Some(s.clone())
+            } else {
+                None
+            }
+        })
+        .collect();
+    let want_triggers: Vec<_> = w
+        .events
+        .iter()
+        .filter_map(|e| {
+            if let DriverEvent::Trigger(t) = e {
+                Some(t.clone())
+            } else {
+                None
+            }
+        })
+        .collect();
+    assert_eq!(samples.len(), want_samples.len());
+    assert!(samples == want_samples, "samples differ");
+    assert_eq!(triggers, want_triggers);
+    // Expected counts from the run's shape: 17.5 s at 1 kHz / 1 kHz / 100 Hz / 1 Hz.
+    let count = |i: Instrument, env: bool| {
+        samples
+            .iter()
+            .filter(|s| {
+                s.instrument == i
+                    && matches!(s.values, drivers::SampleValues::Environment { .. }) == env
+            })
+            .count()
+    };
+    let d = run.duration_s();
+    assert_eq!(
+        count(Instrument::Interferometer, false),
+        (d * 1000.0).ceil() as usize
+    );
+    assert_eq!(
+        count(Instrument::Capball, false),
+        (d * 1000.0).ceil() as usize
+    );
+    assert_eq!(count(Instrument::Psd, false), (d * 100.0).ceil() as usize);
+    assert_eq!(count(Instrument::Interferometer, true), d.ceil() as usize);
+    // 5 poses × (motion start, exact stop, dwell end) + program start and end.
+    assert_eq!(triggers.len(), 17);
+
+    // Poses: what the recorder returned, and close to the synthetic truth.
+    assert_eq!(poses, w.poses);
+    assert_eq!(poses.len(), 15);
+    for p in &poses {
+        assert_eq!(p.status, PoseStatusName::Ok, "{p:?}");
+        assert_eq!(p.n, 150);
+        let k = p.pose as usize - 1;
+        let tol = 4.0 * run.noise_um / 150f64.sqrt();
+        let want: Vec<(&str, f64)> = match p.instrument {
+            PoseInstrument::Interferometer => vec![("position_um", run.targets_mm[k] * 1000.0)],
+            PoseInstrument::Capball => {
+                let e = SyntheticRun::capball_error_um(k);
+                vec![("ex_um", e[0]), ("ey_um", e[1]), ("ez_um", e[2])]
+            }
+            PoseInstrument::Psd => {
+                let e = SyntheticRun::psd_error_um(k);
+                vec![("x_um", e[0]), ("y_um", e[1])]
+            }
+        };
+        assert_eq!(p.mean.len(), want.len());
+        for (name, v) in want {
+            assert!((p.mean[name] - v).abs() < tol, "{p:?}: {name} expected {v}");
+        }
+    }
+
+    // Status: once a second, and the last one holds the last counters.
+    assert!(
+        statuses.len() as f64 >= d - 1.0,
+        "{} status records",
+        statuses.len()
+    );
+    for w2 in statuses.windows(2) {
+        assert!(w2[1].0 >= w2[0].0);
+    }
+    let last = &statuses.last().unwrap().1;
+    let last_counters = w
+        .events
+        .iter()
+        .rev()
+        .find_map(|e| match e {
+            DriverEvent::Counters {
+                instrument: Instrument::Capball,
+                counters,
+            } => Some(counters),
+            _ => None,
+        })
+        .unwrap();
+    let c = &last.instruments["capball"];
+    assert_eq!(c.samples, last_counters.samples);
+    assert_eq!(
+        c.rejections["bad_checksum"],
+        last_counters.rejections[&protocol::RejectKind::BadChecksum]
+    );
+    assert_eq!(c.clock_drift_ppm, Some(1.5));
+    assert_eq!(last.poses["ok"], 15);
+
+    // Events, metadata and attachments.
+    assert_eq!(events.len(), 4);
+    assert_eq!(inst_meta.len(), 4);
+    assert_eq!(run_meta.unwrap().machine, "test-mill");
+    let rm = RunMetadata::from_map(&w.meta.to_map()).unwrap();
+    assert_eq!(rm.detector, w.meta.detector);
+    assert_eq!(rm.instruments, w.meta.instruments);
+    assert_eq!(
+        attachments["config.toml"].1,
+        log_common::CONFIG_TOML.as_bytes()
+    );
+    assert_eq!(attachments["trajectory.csv"].0, "text/csv");
+    assert_eq!(
+        attachments["trajectory.csv"].1,
+        log_common::TRAJECTORY_CSV.as_bytes()
+    );
+}
+
+#[test]
+fn replay_reproduces_logged_poses_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = SyntheticRun {
+        seed: 7,
+        ..SyntheticRun::default()
+    };
+    let w = log_common::write_run(dir.path(), "run.mcap", &run);
+    let out = replay(&w.path, &ReplayOptions::default()).unwrap();
+    assert!(out.same_settings);
+    assert_eq!(out.logged.len(), 15);
+    assert!(
+        out.reproduces_log(),
+        "{} of {} identical",
+        out.identical,
+        out.logged.len()
+    );
+    for ((_, a), (_, b)) in out.logged.iter().zip(&out.replayed) {
+        for (k, v) in &a.mean {
+            assert_eq!(v.to_bits(), b.mean[k].to_bits());
+        }
+    }
+
+    // -o: a new log with the raw topics and new poses; it replays exactly too.
+    let o = dir.path().join("replayed.mcap");
+    let out2 = replay(
+        &w.path,
+        &ReplayOptions {
+            output: Some(o.clone()),
+            detector_samples: None,
+        },
+    )
+    .unwrap();
+    assert!(out2.reproduces_log());
+    let again = replay(&o, &ReplayOptions::default()).unwrap();
+    assert!(again.read.clean_close);
+    assert!(again.reproduces_log());
+    let logged: Vec<_> = again.logged.iter().map(|x| &x.1).collect();
+    let orig: Vec<_> = out.logged.iter().map(|x| &x.1).collect();
+    assert_eq!(logged, orig);
+    // Refuses to overwrite.
+    assert!(
+        replay(
+            &w.path,
+            &ReplayOptions {
+                output: Some(o),
+                detector_samples: None
+            }
+        )
+        .is_err()
+    );
+
+    // Other settings: other windows, still the right plateau.
+    let out3 = replay(
+        &w.path,
+        &ReplayOptions {
+            output: None,
+            detector_samples: Some(100),
+        },
+    )
+    .unwrap();
+    assert!(!out3.same_settings);
+    assert_eq!(out3.replayed.len(), 15);
+    assert!(
+        out3.replayed
+            .iter()
+            .all(|(_, p)| p.n == 100 && p.status == PoseStatusName::Ok)
+    );
+    assert!(!out3.reproduces_log());
+}
+
+#[test]
+fn trigger_free_run_finds_the_plateaus() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = SyntheticRun {
+        triggers: false,
+        ..SyntheticRun::default()
+    };
+    let w = log_common::write_run(dir.path(), "free.mcap", &run);
+    // With trigger-driven settings nothing is measured (no triggers came).
+    assert!(w.poses.is_empty(), "{:?}", w.poses);
+    // Replay in plateau mode through the library: the interferometer finds the 5 stops.
+    let mut settings = metrolog::log::DetectorSettings::default();
+    settings.interferometer.mode = metrology::steady::DetectorMode::Plateaus;
+    let mut engine = metrolog::log::PoseEngine::new(&settings).unwrap();
+    let mut found = Vec::new();
+    for e in &w.events {
+        if let DriverEvent::Sample(s) = e {
+            found.extend(engine.on_sample(s));
+        }
+    }
+    let interf: Vec<_> = found
+        .iter()
+        .filter(|p| p.instrument == PoseInstrument::Interferometer)
+        .collect();
+    assert_eq!(interf.len(), 5, "{interf:?}");
+    for (k, p) in interf.iter().enumerate() {
+        assert_eq!(p.pose as usize, k + 1);
+        assert!((p.mean["position_um"] - run.targets_mm[k] * 1000.0).abs() < 0.01);
+    }
+}
+
+#[test]
+fn info_and_replay_commands() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = SyntheticRun {
+        targets_mm: vec![0.0, 10.0],
+        ..SyntheticRun::default()
+    };
+    let w = log_common::write_run(dir.path(), "run.mcap", &run);
+    let bin = env!("CARGO_BIN_EXE_metrolog");
+    let out = std::process::Command::new(bin)
+        .arg("info")
+        .arg(&w.path)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("closed     cleanly"), "{text}");
+    assert!(text.contains("/interferometer/position"), "{text}");
+    assert!(text.contains("interferometer   ok 2"), "{text}");
+    assert!(text.contains("config.toml"), "{text}");
+
+    let out = std::process::Command::new(bin)
+        .args(["info", "--json"])
+        .arg(&w.path)
+        .output()
+        .unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["read"]["clean_close"], true);
+    assert_eq!(j["poses"]["capball"]["ok"], 2);
+    assert_eq!(
+        j["last_status"]["instruments"]["psd"]["clock_drift_ppm"],
+        1.5
+    );
+    let rate = j["topics"]["/interferometer/position"]["rate_hz"]
+        .as_f64()
+        .unwrap();
+    assert!((rate - 1000.0).abs() < 1.0, "{rate}");
+
+    let out = std::process::Command::new(bin)
+        .arg("replay")
+        .arg(&w.path)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("all 6 logged pose values reproduced exactly"),
+        "{text}"
+    );
+
+    let out = std::process::Command::new(bin)
+        .arg("info")
+        .arg(dir.path().join("nope.mcap"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("nope.mcap") && err.contains("No such file"),
+        "{err}"
+    );
+}
+
+#[test]
+fn dark_psd_samples_round_trip_as_nan_and_replay_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    // Every 40th PSD sample is dark: the 150-sample windows must avoid them, so with
+    // 100 Hz the PSD never has 150 consecutive valid samples: beam_invalid, in replay too.
+    let run = SyntheticRun {
+        targets_mm: vec![0.0, 10.0],
+        psd_dark_every: 40,
+        ..SyntheticRun::default()
+    };
+    let w = log_common::write_run(dir.path(), "dark.mcap", &run);
+    let mut dark = 0;
+    read_log(&w.path, |item| {
+        if let LogItem::Message {
+            topic: "/psd/sample",
+            data,
+            ..
+        } = item
+        {
+            let text = std::str::from_utf8(data).unwrap();
+            if let Some(Decoded::Psd(m)) = decode("/psd/sample", data).unwrap()
+                && !m.valid
+            {
+                assert!(m.x_um.is_nan() && m.y_um.is_nan(), "{text}");
+                assert!(text.contains("\"x_um\":null"), "{text}");
+                dark += 1;
+            }
+        }
+    })
+    .unwrap();
+    assert!(dark > 10);
+    let psd: Vec<_> = w
+        .poses
+        .iter()
+        .filter(|p| p.instrument == PoseInstrument::Psd)
+        .collect();
+    assert_eq!(psd.len(), 2);
+    assert!(
+        psd.iter().all(|p| p.status == PoseStatusName::BeamInvalid),
+        "{psd:?}"
+    );
+    let out = replay(&w.path, &ReplayOptions::default()).unwrap();
+    assert!(out.reproduces_log());
+}

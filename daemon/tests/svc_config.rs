@@ -1,0 +1,250 @@
+//! Config file validation: the example config loads, and every kind of mistake is reported with
+//! the file, the line of the mistake and a sentence naming it.
+
+use std::path::{Path, PathBuf};
+
+use metrolog::config::{Config, ConfigError, TriggerConfig};
+
+const GOOD: &str = r#"[run]
+machine = "mill-01"
+output_dir = "/var/lib/metrolog"
+stop_at_program_end = false
+[detector]
+samples = 150
+[interferometer]
+port = "/dev/metrolog-li80"
+rate_hz = 1000
+alpha_um_per_m_k = 11.7
+[capball]
+port = "/dev/metrolog-cb3"
+rate_hz = 1000
+poly = [[10.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 0.0]]
+[psd]
+port = "/dev/metrolog-psd2"
+baud = 921600
+rate_hz = 100
+min_sum_pa = 100000
+[trigger]
+slcan = "/dev/metrolog-slcan"
+can_id = 0x181
+"#;
+
+fn parse(text: &str) -> Result<Config, ConfigError> {
+    Config::parse(Path::new("/etc/metrolog/metrolog.toml"), text)
+}
+
+/// Parse `text` expecting an error; return (line, message).
+fn error(text: &str) -> (usize, String) {
+    match parse(text) {
+        Ok(_) => panic!("accepted a bad config:\n{text}"),
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(
+                msg.starts_with("/etc/metrolog/metrolog.toml:"),
+                "no file name in {msg:?}"
+            );
+            (e.line().expect("a line"), msg)
+        }
+    }
+}
+
+fn line_of(text: &str, needle: &str) -> usize {
+    text.lines()
+        .position(|l| l.contains(needle))
+        .expect("needle in text")
+        + 1
+}
+
+#[test]
+fn good_config_loads_with_the_values_written() {
+    let c = parse(GOOD).unwrap();
+    assert_eq!(c.run.machine, "mill-01");
+    assert_eq!(c.run.output_dir, PathBuf::from("/var/lib/metrolog"));
+    assert_eq!(c.detector.samples, 150);
+    let li = c.interferometer.as_ref().unwrap();
+    assert_eq!((li.rate_hz, li.alpha_um_per_m_k), (1000, 11.7));
+    let cb = c.capball.as_ref().unwrap();
+    assert_eq!(cb.driver.poly[2], [10.0, 0.0, 0.0]);
+    // No transform file: identity.
+    assert_eq!(cb.driver.transform[3], [0.0, 0.0, 0.0, 1.0]);
+    assert_eq!(cb.driver.transform[1], [0.0, 1.0, 0.0, 0.0]);
+    assert_eq!(c.psd.as_ref().unwrap().baud, 921_600);
+    match c.trigger.as_ref().unwrap() {
+        TriggerConfig::Slcan(s) => {
+            assert_eq!((s.port.as_str(), s.can_id), ("/dev/metrolog-slcan", 0x181))
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn example_config_in_deploy_is_valid() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/metrolog.toml");
+    let text = std::fs::read_to_string(&p).unwrap();
+    // The example points at files relative to /etc/metrolog; check it from a copy beside them.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("poses.csv"),
+        "pose,x_mm,y_mm,z_mm\n1,0,0,0\n2,100,0,0\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("capball-T.csv"),
+        "1,0,0,0\n0,1,0,0\n0,0,1,0\n0,0,0,1\n",
+    )
+    .unwrap();
+    let c = Config::parse(&dir.path().join("metrolog.toml"), &text).unwrap();
+    assert_eq!(c.run.trajectory.as_ref().unwrap().rows.len(), 2);
+    assert_eq!(c.instruments().len(), 4);
+}
+
+#[test]
+fn every_section_but_run_is_optional() {
+    let c = parse("[run]\nmachine = \"m\"\noutput_dir = \"out\"\n").unwrap();
+    assert!(c.instruments().is_empty());
+    assert_eq!(c.detector.samples, 150);
+    // Relative to the config file's directory.
+    assert_eq!(c.run.output_dir, PathBuf::from("/etc/metrolog/out"));
+}
+
+#[test]
+fn unknown_key_is_rejected_with_its_line() {
+    let text = GOOD.replace("rate_hz = 100\n", "rate_hz = 100\nrate_Hz = 10\n");
+    let (line, msg) = error(&text);
+    assert_eq!(line, line_of(&text, "rate_Hz"), "{msg}");
+    assert!(
+        msg.contains("unknown field") && msg.contains("rate_Hz"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn unknown_section_is_rejected() {
+    let text = format!("{GOOD}[laser]\nport = \"x\"\n");
+    let (line, msg) = error(&text);
+    assert_eq!(line, line_of(&text, "[laser]"), "{msg}");
+    assert!(msg.contains("laser"), "{msg}");
+}
+
+#[test]
+fn rates_outside_the_data_sheet_are_rejected() {
+    // LI-80: 1..10000 Hz.
+    let text = GOOD.replace("rate_hz = 1000\nalpha", "rate_hz = 20000\nalpha");
+    let (line, msg) = error(&text);
+    assert_eq!(line, line_of(&text, "rate_hz = 20000"));
+    assert!(
+        msg.contains("20000") && msg.contains("1 to 10000 Hz"),
+        "{msg}"
+    );
+    // CB-3: 100..20000 Hz, so 50 is too slow.
+    let text = GOOD.replace("rate_hz = 1000\npoly", "rate_hz = 50\npoly");
+    let (line, msg) = error(&text);
+    assert_eq!(line, line_of(&text, "rate_hz = 50"));
+    assert!(msg.contains("100 to 20000 Hz"), "{msg}");
+    // PSD-2 at 115200 baud carries about 200 lines/s of 55 bytes: 500 Hz does not fit.
+    let text = GOOD.replace(
+        "baud = 921600\nrate_hz = 100",
+        "baud = 115200\nrate_hz = 500",
+    );
+    let (line, msg) = error(&text);
+    assert_eq!(line, line_of(&text, "rate_hz = 500"));
+    assert!(msg.contains("lines/s"), "{msg}");
+    // Negative: not even a u32.
+    let text = GOOD.replace("rate_hz = 100\n", "rate_hz = -3\n");
+    let (line, _) = error(&text);
+    assert_eq!(line, line_of(&text, "rate_hz = -3"));
+}
+
+#[test]
+fn impossible_values_are_rejected() {
+    for (from, to, needle) in [
+        ("samples = 150", "samples = 2", "samples = 2"),
+        ("can_id = 0x181", "can_id = 0x800", "can_id = 0x800"),
+        (
+            "alpha_um_per_m_k = 11.7",
+            "alpha_um_per_m_k = nan",
+            "alpha_um_per_m_k",
+        ),
+        ("min_sum_pa = 100000", "min_sum_pa = -1", "min_sum_pa"),
+        ("baud = 921600", "baud = 1000", "baud = 1000"),
+        (
+            "[[10.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 0.0]]",
+            "[[10.0, 0.0, 0.0], [10.0, 0.0, inf], [10.0, 0.0, 0.0]]",
+            "poly",
+        ),
+        (
+            "[[10.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 0.0]]",
+            "[[10.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 0.0]]",
+            "poly",
+        ),
+        (
+            "machine = \"mill-01\"",
+            "machine = \"mill 01/a\"",
+            "machine",
+        ),
+        (
+            "slcan = \"/dev/metrolog-slcan\"",
+            "slcan = \"/dev/metrolog-slcan\"\nsocketcan = \"can0\"",
+            "socketcan",
+        ),
+    ] {
+        let text = GOOD.replace(from, to);
+        assert_ne!(text, GOOD, "{from}");
+        let (line, msg) = error(&text);
+        assert_eq!(line, line_of(&text, needle), "{to}: {msg}");
+    }
+}
+
+#[test]
+fn missing_or_bad_referenced_files_are_reported_at_their_key() {
+    let text = GOOD.replace("[psd]", "transform = \"no-such-T.csv\"\n[psd]");
+    let (line, msg) = error(&text);
+    assert_eq!(line, line_of(&text, "no-such-T.csv"));
+    assert!(msg.contains("cannot be read"), "{msg}");
+
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("T.csv"),
+        "1,0,0\n0,1,0,0\n0,0,1,0\n0,0,0,1\n",
+    )
+    .unwrap();
+    let text = GOOD.replace("[psd]", "transform = \"T.csv\"\n[psd]");
+    let e = Config::parse(&dir.path().join("m.toml"), &text)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("line 1 has 3 numbers"), "{e}");
+
+    std::fs::write(
+        dir.path().join("p.csv"),
+        "pose,x_mm,y_mm,z_mm\n1,0,0,0\n3,1,0,0\n",
+    )
+    .unwrap();
+    let text = GOOD.replace("stop_at", "trajectory = \"p.csv\"\nstop_at");
+    let e = Config::parse(&dir.path().join("m.toml"), &text)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("pose 3 should be 2"), "{e}");
+}
+
+#[test]
+fn transform_file_is_loaded_row_major() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("T.csv"),
+        "# cube calibration\n1,0,0,5\n0,2,0,6\n0,0,3,7\n0,0,0,1\n",
+    )
+    .unwrap();
+    let text = GOOD.replace("[psd]", "transform = \"T.csv\"\n[psd]");
+    let c = Config::parse(&dir.path().join("m.toml"), &text).unwrap();
+    let t = c.capball.unwrap().driver.transform;
+    assert_eq!(t[0], [1.0, 0.0, 0.0, 5.0]);
+    assert_eq!(t[2], [0.0, 0.0, 3.0, 7.0]);
+}
+
+#[test]
+fn unreadable_file_names_the_path() {
+    let e = Config::load(Path::new("/nonexistent/metrolog.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("/nonexistent/metrolog.toml"), "{e}");
+}

@@ -173,6 +173,7 @@ fn faults() -> StreamFaults {
         truncated_rate: 0.003,
         drop_rate: 0.003,
         max_each: 8,
+        ..Default::default()
     }
 }
 
@@ -598,4 +599,93 @@ async fn triggers_from_the_simulated_slcan_adapter() {
         assert_eq!((g.event, g.pose, g.nc_ms), (s.event, s.pose, s.nc_ms));
     }
     sim.shutdown().await;
+}
+
+/// A device still streaming from an earlier host (which went away without stopping it) is
+/// opened mid-frame: the driver stops it, discards what it sent, configures it and streams;
+/// nothing of the old stream is counted as a fault.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn device_found_streaming_mid_frame_is_taken_over_cleanly() {
+    let mut sc = Scenario::demo();
+    sc.faults = Default::default();
+    sc.faults.interferometer.mid_frame_on_open = true;
+    sc.faults.capball.mid_frame_on_open = true;
+    let which = [Instrument::Interferometer, Instrument::Capball];
+    let rates = Rates {
+        li80: 2000,
+        cb3: 5000,
+        psd: 100,
+    };
+    let mut first = Rig::start(sc.clone(), &which, rates).await;
+    first.all_connected().await;
+    first.run_for(Duration::from_millis(500)).await;
+    // The first host vanishes without stopping the streams.
+    for t in std::mem::take(&mut first.tasks) {
+        t.abort();
+        let _ = t.await;
+    }
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    // A second host on the same devices.
+    let (tx, mut rx) = tokio::sync::mpsc::channel(200_000);
+    let cancel = CancellationToken::new();
+    let clock = HostClock::new();
+    let t1 = drivers::li80::spawn(
+        drivers::li80::Config {
+            port: first.sim.port(Device::Interferometer).display().to_string(),
+            rate_hz: 1000,
+            alpha_um_per_m_k: 11.7,
+        },
+        clock,
+        tx.clone(),
+        cancel.clone(),
+    );
+    let t2 = drivers::cb3::spawn(
+        drivers::cb3::Config {
+            port: first.sim.port(Device::Capball).display().to_string(),
+            rate_hz: 1000,
+            poly: sc.capball.poly,
+            transform: IDENTITY,
+        },
+        clock,
+        tx,
+        cancel.clone(),
+    );
+    let mut by: BTreeMap<Instrument, Collected> = BTreeMap::new();
+    let deadline = tokio::time::Instant::now() + Duration::from_millis(2500);
+    while let Ok(Some(ev)) = tokio::time::timeout_at(deadline, rx.recv()).await {
+        let i = match &ev {
+            DriverEvent::Sample(s) => s.instrument,
+            DriverEvent::Connected { instrument, .. }
+            | DriverEvent::Disconnected { instrument, .. }
+            | DriverEvent::Error { instrument, .. }
+            | DriverEvent::Counters { instrument, .. } => *instrument,
+            DriverEvent::Trigger(_) => Instrument::Trigger,
+        };
+        by.entry(i).or_default().push(ev);
+    }
+    cancel.cancel();
+    let _ = t1.await;
+    let _ = t2.await;
+    while let Ok(ev) = rx.try_recv() {
+        if let DriverEvent::Counters {
+            instrument,
+            counters,
+        } = ev
+        {
+            by.entry(instrument).or_default().counters = Some(counters);
+        }
+    }
+    for i in which {
+        let c = &by[&i];
+        assert_eq!(c.connected.len(), 1, "{i:?}: {:?}", c.errors);
+        assert!(c.stream().count() > 1000, "{i:?} streams at the new rate");
+        let k = c.counters.clone().unwrap();
+        assert_eq!(k.rejections.values().sum::<u64>(), 0, "{i:?}: {k:?}");
+        assert_eq!(
+            (k.gaps, k.resyncs, k.disconnects),
+            (0, 0, 0),
+            "{i:?}: {k:?}"
+        );
+    }
+    first.sim.shutdown().await;
 }

@@ -505,6 +505,10 @@ pub struct StreamFaults {
     /// At most this many of each fault kind (0 = unlimited).
     #[serde(default)]
     pub max_each: u64,
+    /// When a host opens the port while the device streams, its first bytes are the tail of
+    /// a sample it missed ("a device may start mid-frame when the port opens").
+    #[serde(default)]
+    pub mid_frame_on_open: bool,
 }
 
 /// A timed interval.

@@ -118,6 +118,10 @@ impl Cb3 {
         };
         count_fate(ctx.faults, fate);
         match fate {
+            Fate::NotConnected if ctx.keep_unsent => {
+                ctx.unsent.clear();
+                protocol::cb3::encode(&frame, ctx.unsent);
+            }
             Fate::Sent => protocol::cb3::encode(&frame, ctx.out),
             Fate::BadChecksum => {
                 let mut enc = Vec::new();

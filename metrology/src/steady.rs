@@ -36,7 +36,8 @@
 //!
 //! `ExactStop(k)` opens the dwell of pose k (samples with `t_ns ≥` the trigger's time);
 //! `MotionStart`, `DwellEnd`, `FeedHold`, `ProgramStart`, `ProgramEnd` close an open dwell.
-//! A pose value is emitted as soon as its window is found; a dwell that closes without one
+//! The pose number of a motion start is not used (controllers differ on whether it names the
+//! pose left or the pose approached). A pose value is emitted as soon as its window is found; a dwell that closes without one
 //! gets a status: [`PoseStatus::DeviceAway`] (no samples in the dwell),
 //! [`PoseStatus::BeamInvalid`] (no run of `samples` consecutive valid samples),
 //! [`PoseStatus::NeverSteady`] otherwise.

@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, Normal};
 
-use crate::axis_model::{AxisModel, Direction, Effect};
+use crate::axis_model::{AxisModel, Effect};
 use crate::iso230;
 use crate::positioning_data::{PositioningData, dir_slot, schedule_of, simulate};
 
@@ -1294,14 +1294,5 @@ pub fn reproduction_check(data: &PositioningData, model: &AxisModel, seeds: usiz
         baseline_mean_rms_um,
         baseline_s_rms_um,
         seeds: seeds.max(1),
-    }
-}
-
-/// Direction of a per-direction slot (0 = up).
-pub fn slot_dir(slot: usize) -> Direction {
-    if slot == 0 {
-        Direction::Up
-    } else {
-        Direction::Down
     }
 }

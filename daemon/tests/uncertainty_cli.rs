@@ -17,10 +17,16 @@ fn json_output_carries_gum_mc_and_validation() {
         .args(["--trials", "200000", "--seed", "3"])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     // JCGM 101 Table 9: GUM u = 0.0539 mg; Monte Carlo u = 0.0754 mg.
-    let gu = v["gum"]["outputs"][0]["standard_uncertainty"].as_f64().unwrap();
+    let gu = v["gum"]["outputs"][0]["standard_uncertainty"]
+        .as_f64()
+        .unwrap();
     assert!((gu - 0.0539).abs() < 5e-5);
     let mu = v["monte_carlo"]["outputs"][0]["standard_uncertainty"]
         .as_f64()
@@ -33,7 +39,12 @@ fn json_output_carries_gum_mc_and_validation() {
 #[test]
 fn gum_only_text_shows_the_budget_table() {
     let out = metrolog()
-        .args(["uncertainty", &budget("jcgm100_h1_end_gauge.toml"), "--method", "gum"])
+        .args([
+            "uncertainty",
+            &budget("jcgm100_h1_end_gauge.toml"),
+            "--method",
+            "gum",
+        ])
         .output()
         .unwrap();
     assert!(out.status.success());
@@ -55,7 +66,11 @@ fn plot_is_written_as_svg() {
         .arg(&path)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let svg = std::fs::read_to_string(&path).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("GUM normal"));
 }

@@ -35,6 +35,14 @@ fn capball(c: &mut Criterion) {
             );
         }
     }
+    let t = std::time::Instant::now();
+    let r = mc::run(&model, &McOptions::default(), None).unwrap();
+    println!(
+        "capball adaptive run (ndig 2, all cores): {} sequences, {} trials, {:.2} s wall",
+        r.sequences,
+        r.trials,
+        t.elapsed().as_secs_f64()
+    );
     let mut g = c.benchmark_group("capball_mc");
     g.throughput(Throughput::Elements(BLOCK_TRIALS as u64));
     g.bench_function("block_of_500_trials_one_core", |b| {
@@ -79,7 +87,8 @@ fn capball(c: &mut Criterion) {
 }
 
 fn budget(c: &mut Criterion) {
-    let b = Budget::from_toml(include_str!("../../examples/budgets/jcgm101_9_3_mass.toml")).unwrap();
+    let b =
+        Budget::from_toml(include_str!("../../examples/budgets/jcgm101_9_3_mass.toml")).unwrap();
     let mut g = c.benchmark_group("budget_mc");
     g.throughput(Throughput::Elements(BLOCK_TRIALS as u64));
     g.bench_function("mass_9_3_block_of_500_one_core", |bch| {

@@ -11,8 +11,10 @@ use metrology::uncertainty::psd;
 fn li80_budget_file_and_function_agree() {
     // Two independent implementations of the same model: an expression in a budget file and a
     // closure; and Monte Carlo of the file, which also carries the cosine error's spread.
-    let b = Budget::from_toml(include_str!("../../examples/budgets/li80_length_1000mm.toml"))
-        .unwrap();
+    let b = Budget::from_toml(include_str!(
+        "../../examples/budgets/li80_length_1000mm.toml"
+    ))
+    .unwrap();
     let g = &b.gum().unwrap().outputs[0];
     let f = LengthBudget::default().gum(1000.0).unwrap();
     // The function adds the cosine term (0.0015 µm) in quadrature: relative effect ~1e-6.
@@ -28,7 +30,11 @@ fn li80_budget_file_and_function_agree() {
         )
         .unwrap();
     let u = m.outputs[0].standard_uncertainty;
-    assert!((u / f.standard_uncertainty - 1.0).abs() < 0.006, "MC {u} vs {}", f.standard_uncertainty);
+    assert!(
+        (u / f.standard_uncertainty - 1.0).abs() < 0.006,
+        "MC {u} vs {}",
+        f.standard_uncertainty
+    );
     // The expansion-coefficient term is rectangular and dominant, so the 95 % Monte Carlo
     // interval is narrower than ±2u.
     let half = 0.5 * (m.outputs[0].symmetric_interval[1] - m.outputs[0].symmetric_interval[0]);
@@ -37,8 +43,8 @@ fn li80_budget_file_and_function_agree() {
 
 #[test]
 fn psd_table3_budget_reproduces_the_published_combination() {
-    let b = Budget::from_toml(include_str!("../../examples/budgets/psd_frame_table3.toml"))
-        .unwrap();
+    let b =
+        Budget::from_toml(include_str!("../../examples/budgets/psd_frame_table3.toml")).unwrap();
     let g = &b.gum().unwrap().outputs[0];
     // Paper 003 §4.4: u_c,max = 1.13 µm, U_max = 2.26 µm (k = 2, formed from the rounded u_c).
     assert_eq!((g.standard_uncertainty * 100.0).round() / 100.0, 1.13);
@@ -59,12 +65,20 @@ fn psd_table4_monte_carlo_matches_the_exact_linear_propagation() {
     let exact = derive_uncertainty(&layout, sigma).unwrap();
     for (o, u) in mc.outputs.iter().zip(&exact) {
         if *u > 0.0 {
-            assert!((o.standard_uncertainty / u - 1.0).abs() < 0.03, "{}: {} vs {u}", o.name, o.standard_uncertainty);
+            assert!(
+                (o.standard_uncertainty / u - 1.0).abs() < 0.03,
+                "{}: {} vs {u}",
+                o.name,
+                o.standard_uncertainty
+            );
         }
     }
     assert_eq!(rows.len(), 13);
     for r in &rows {
-        eprintln!("{:5} ±{:.2} {}  {:?}", r.error, r.expanded, r.unit, r.expanded_linear_um);
+        eprintln!(
+            "{:5} ±{:.2} {}  {:?}",
+            r.error, r.expanded, r.unit, r.expanded_linear_um
+        );
         assert!(r.expanded > 0.0, "{}", r.error);
     }
 }

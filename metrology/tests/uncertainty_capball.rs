@@ -8,7 +8,7 @@
 //! repeated identifications are simulated directly from the drift's time function.
 
 use metrology::uncertainty::capball::{
-    CapballSources, DriftModel, Source, Paper001Case, coverage_check, simulate_identifications,
+    CapballSources, DriftModel, Paper001Case, Source, coverage_check, simulate_identifications,
 };
 use metrology::uncertainty::mc::{self, McOptions};
 use nalgebra::DMatrix;
@@ -104,17 +104,29 @@ fn statistical_drift_is_too_narrow_cyclic_drift_covers_repeated_identifications(
     )
     .unwrap();
     let cyc = mc::run(
-        &case.monte_carlo_model(&p_mean, &case.cyclic_sources()).unwrap(),
+        &case
+            .monte_carlo_model(&p_mean, &case.cyclic_sources())
+            .unwrap(),
         &opts,
         None,
     )
     .unwrap();
     let c_stat = coverage_check(&stat, &runs);
     let c_cyc = coverage_check(&cyc, &runs);
-    eprintln!("statistical: overall {:.3} per {:?}", c_stat.overall, c_stat.per_parameter);
-    eprintln!("cyclic:      overall {:.3} per {:?}", c_cyc.overall, c_cyc.per_parameter);
+    eprintln!(
+        "statistical: overall {:.3} per {:?}",
+        c_stat.overall, c_stat.per_parameter
+    );
+    eprintln!(
+        "cyclic:      overall {:.3} per {:?}",
+        c_cyc.overall, c_cyc.per_parameter
+    );
     // The statistical model's 95 % intervals miss most repeated identifications.
-    assert!(c_stat.overall < 0.6, "statistical coverage {}", c_stat.overall);
+    assert!(
+        c_stat.overall < 0.6,
+        "statistical coverage {}",
+        c_stat.overall
+    );
     // The cyclic model's cover them at about the nominal rate: with 200 runs the binomial
     // standard error of a 95 % rate is 1.5 %, and the run phases are not perfectly uniform.
     assert!(
@@ -161,7 +173,10 @@ fn drift_dominates_the_contributions() {
             dominated += 1;
         }
     }
-    assert!(dominated >= 12, "drift dominates {dominated} of 14 parameters");
+    assert!(
+        dominated >= 12,
+        "drift dominates {dominated} of 14 parameters"
+    );
 }
 
 #[test]
@@ -178,7 +193,12 @@ fn adaptive_run_converges_and_is_reproducible() {
     assert!(a.converged && a.sequences >= 2);
     for o in &a.outputs {
         let s = o.stability.unwrap();
-        assert!(s.iter().all(|v| *v <= o.tolerance), "{}: {s:?} vs {}", o.name, o.tolerance);
+        assert!(
+            s.iter().all(|v| *v <= o.tolerance),
+            "{}: {s:?} vs {}",
+            o.name,
+            o.tolerance
+        );
     }
     let b = mc::run(&model, &opts, None).unwrap();
     assert_eq!(a, b);

@@ -26,7 +26,9 @@ fn fixed(n: usize, seed: u64) -> McOptions {
 
 #[test]
 fn h1_end_gauge_gum() {
-    let b = budget(include_str!("../../examples/budgets/jcgm100_h1_end_gauge.toml"));
+    let b = budget(include_str!(
+        "../../examples/budgets/jcgm100_h1_end_gauge.toml"
+    ));
     let g = b.gum().unwrap();
     let l = &g.outputs[0];
     // l = 50.000 838 mm.
@@ -37,7 +39,10 @@ fn h1_end_gauge_gum() {
     assert_eq!(nu.floor(), 16.0, "ν_eff = {nu}");
     assert!((l.coverage_factor - 2.92).abs() < 0.005);
     // GUM H.1.6 forms U99 = 2.92 × (32 nm) = 93 nm from the rounded u_c; unrounded it is 92.5.
-    assert_eq!(round(l.coverage_factor * round(l.standard_uncertainty, 0), 0), 93.0);
+    assert_eq!(
+        round(l.coverage_factor * round(l.standard_uncertainty, 0), 0),
+        93.0
+    );
     assert!((l.expanded_uncertainty - 93.0).abs() < 0.6);
     // Table H.1 contributions |c_i|·u(x_i): l_s 25 nm, δα 2.9 nm, δθ 16.6 nm, α_s and θ zero.
     let contrib = |n: &str| {
@@ -66,7 +71,9 @@ fn h1_end_gauge_gum() {
 fn h1_end_gauge_second_order_terms_show_in_monte_carlo() {
     // GUM H.1.7: with the second-order terms u_c(l) = 34 nm. Monte Carlo of the same model
     // carries them automatically.
-    let b = budget(include_str!("../../examples/budgets/jcgm100_h1_end_gauge.toml"));
+    let b = budget(include_str!(
+        "../../examples/budgets/jcgm100_h1_end_gauge.toml"
+    ));
     let m = b.monte_carlo(&fixed(200_000, 3), None).unwrap();
     let u = m.outputs[0].standard_uncertainty;
     assert!((u - 34.0).abs() < 1.0, "MC u = {u}");
@@ -74,7 +81,9 @@ fn h1_end_gauge_second_order_terms_show_in_monte_carlo() {
 
 #[test]
 fn h2_impedance_with_correlated_inputs() {
-    let b = budget(include_str!("../../examples/budgets/jcgm100_h2_impedance.toml"));
+    let b = budget(include_str!(
+        "../../examples/budgets/jcgm100_h2_impedance.toml"
+    ));
     let g = b.gum().unwrap();
     let published = [
         ("R", 127.732, 0.071),
@@ -107,10 +116,10 @@ fn h2_impedance_with_correlated_inputs() {
 
 #[test]
 fn s1_9_2_2_four_normal_inputs_adaptive() {
-    let b = budget(include_str!("../../examples/budgets/jcgm101_9_2_2_additive_normal.toml"));
-    let r = b
-        .evaluate(Method::Both, &b.mc_options(), None)
-        .unwrap();
+    let b = budget(include_str!(
+        "../../examples/budgets/jcgm101_9_2_2_additive_normal.toml"
+    ));
+    let r = b.evaluate(Method::Both, &b.mc_options(), None).unwrap();
     let g = &r.gum.as_ref().unwrap().outputs[0];
     assert_eq!(round(g.standard_uncertainty, 2), 2.00);
     assert_eq!(round(g.interval[0], 2), -3.92);
@@ -131,7 +140,9 @@ fn s1_9_2_2_four_normal_inputs_adaptive() {
     assert!(o.stability.unwrap().iter().all(|s| *s <= o.tolerance));
     // Normal inputs, linear model: the GUM result is validated (§8) by a run of M = 10⁶ as
     // in the document.
-    let r = b.evaluate(Method::Both, &fixed(1_000_000, 23), None).unwrap();
+    let r = b
+        .evaluate(Method::Both, &fixed(1_000_000, 23), None)
+        .unwrap();
     assert!(r.validation[0].passed, "{:?}", r.validation[0]);
 }
 
@@ -146,8 +157,16 @@ fn s1_9_2_3_four_rectangular_inputs() {
     let o = &m.outputs[0];
     assert_eq!(round(o.standard_uncertainty, 2), 2.00);
     // Published ±3.88; the endpoint's Monte Carlo spread at M = 10⁶ is about 0.003.
-    assert!((o.symmetric_interval[0] + 3.88).abs() < 0.008, "{:?}", o.symmetric_interval);
-    assert!((o.symmetric_interval[1] - 3.88).abs() < 0.008, "{:?}", o.symmetric_interval);
+    assert!(
+        (o.symmetric_interval[0] + 3.88).abs() < 0.008,
+        "{:?}",
+        o.symmetric_interval
+    );
+    assert!(
+        (o.symmetric_interval[1] - 3.88).abs() < 0.008,
+        "{:?}",
+        o.symmetric_interval
+    );
 }
 
 #[test]
@@ -162,8 +181,16 @@ fn s1_9_2_4_dominant_rectangular_input() {
     let o = &m.outputs[0];
     assert_eq!(round(o.standard_uncertainty, 2), 10.15);
     // Published ±17.02; exact 97.5 % point by quadrature of the convolution 17.016.
-    assert!((o.symmetric_interval[1] - 17.02).abs() < 0.03, "{:?}", o.symmetric_interval);
-    assert!((o.symmetric_interval[0] + 17.02).abs() < 0.03, "{:?}", o.symmetric_interval);
+    assert!(
+        (o.symmetric_interval[1] - 17.02).abs() < 0.03,
+        "{:?}",
+        o.symmetric_interval
+    );
+    assert!(
+        (o.symmetric_interval[0] + 17.02).abs() < 0.03,
+        "{:?}",
+        o.symmetric_interval
+    );
 }
 
 #[test]
@@ -182,8 +209,16 @@ fn s1_9_3_mass_calibration_gum_not_validated() {
     // 1.2340); the endpoints' spread at M = 10⁶ is about 0.0003.
     assert!((o.estimate - 1.2341).abs() < 0.0002, "{}", o.estimate);
     assert!((o.standard_uncertainty - 0.0754).abs() < 0.0002);
-    assert!((o.symmetric_interval[0] - 1.0844).abs() < 0.0008, "{:?}", o.symmetric_interval);
-    assert!((o.symmetric_interval[1] - 1.3836).abs() < 0.0008, "{:?}", o.symmetric_interval);
+    assert!(
+        (o.symmetric_interval[0] - 1.0844).abs() < 0.0008,
+        "{:?}",
+        o.symmetric_interval
+    );
+    assert!(
+        (o.symmetric_interval[1] - 1.3836).abs() < 0.0008,
+        "{:?}",
+        o.symmetric_interval
+    );
     let v = &r.validation[0];
     assert!(!v.passed);
     assert!((v.d_low - 0.0441).abs() < 0.001, "{v:?}");
@@ -210,7 +245,13 @@ fn result_does_not_depend_on_thread_count() {
         .install(|| b.monte_carlo(&opts, None).unwrap());
     assert_eq!(one, three);
     let other_seed = b
-        .monte_carlo(&McOptions { seed: 99, ..opts.clone() }, None)
+        .monte_carlo(
+            &McOptions {
+                seed: 99,
+                ..opts.clone()
+            },
+            None,
+        )
         .unwrap();
     assert_ne!(one.outputs[0].estimate, other_seed.outputs[0].estimate);
 }
@@ -235,7 +276,11 @@ fn shortest_interval_of_a_skewed_output_is_shorter() {
     let m = b.monte_carlo(&fixed(400_000, 2), None).unwrap();
     let o = &m.outputs[0];
     assert!(o.shortest_interval[0] < 1e-3);
-    assert!((o.shortest_interval[1] - 3.841).abs() < 0.03, "{:?}", o.shortest_interval);
+    assert!(
+        (o.shortest_interval[1] - 3.841).abs() < 0.03,
+        "{:?}",
+        o.shortest_interval
+    );
     assert!((o.symmetric_interval[0] - 0.000_982).abs() < 2e-4);
     assert!((o.symmetric_interval[1] - 5.024).abs() < 0.05);
     assert_eq!(mc::numerical_tolerance(o.standard_uncertainty, 1), 0.5);

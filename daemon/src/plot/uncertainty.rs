@@ -101,7 +101,7 @@ where
             lo = lo.min(g.estimate - 3.5 * g.standard_uncertainty);
             hi = hi.max(g.estimate + 3.5 * g.standard_uncertainty);
         }
-        if !(hi > lo) {
+        if hi.is_nan() || hi <= lo {
             hi = lo + 1.0;
         }
         let bins = 80usize;
@@ -159,9 +159,9 @@ where
         let [a, b] = o.symmetric_interval;
         chart
             .draw_series(
-                [a, b]
-                    .into_iter()
-                    .map(|x| PathElement::new(vec![(x, 0.0), (x, ymax * 1.05)], MC.stroke_width(2))),
+                [a, b].into_iter().map(|x| {
+                    PathElement::new(vec![(x, 0.0), (x, ymax * 1.05)], MC.stroke_width(2))
+                }),
             )
             .map_err(e)?
             .label(format!(
@@ -176,14 +176,19 @@ where
                     .map(|i| {
                         let x = lo + (hi - lo) * i as f64 / 400.0;
                         let z = (x - g.estimate) / s;
-                        (x, (-0.5 * z * z).exp() / (s * (std::f64::consts::TAU).sqrt()))
+                        (
+                            x,
+                            (-0.5 * z * z).exp() / (s * (std::f64::consts::TAU).sqrt()),
+                        )
                     })
                     .collect();
                 chart
                     .draw_series(LineSeries::new(pts, GUM.stroke_width(2)))
                     .map_err(e)?
                     .label(format!("GUM normal: u = {s:.4}"))
-                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], GUM.stroke_width(2)));
+                    .legend(|(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 16, y)], GUM.stroke_width(2))
+                    });
                 let [c, d] = g.interval;
                 chart
                     .draw_series([c, d].into_iter().map(|x| {
@@ -191,7 +196,9 @@ where
                     }))
                     .map_err(e)?
                     .label(format!("GUM y ± U (k = {:.2})", g.coverage_factor))
-                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], GUM.stroke_width(1)));
+                    .legend(|(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 16, y)], GUM.stroke_width(1))
+                    });
             }
         }
         chart

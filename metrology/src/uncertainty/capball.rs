@@ -87,8 +87,8 @@ impl CyclicDrift {
         let mut d = [0.0; 3];
         for h in &self.harmonics {
             let (s, c) = (h.order as f64 * w * t_s).sin_cos();
-            for a in 0..3 {
-                d[a] += h.cos_um[a] * c + h.sin_um[a] * s;
+            for (a, da) in d.iter_mut().enumerate() {
+                *da += h.cos_um[a] * c + h.sin_um[a] * s;
             }
         }
         d
@@ -115,7 +115,9 @@ pub enum DriftModel {
     None,
     /// ISO/TR 230-9 statistical treatment: a normal term of standard deviation `u_um` per
     /// direction, drawn independently for every point.
-    Statistical { u_um: [f64; 3] },
+    Statistical {
+        u_um: [f64; 3],
+    },
     /// Periodic function of time with a random start phase per trial.
     Cyclic(CyclicDrift),
 }
@@ -202,7 +204,7 @@ pub fn pseudo_inverse(j: &DMatrix<f64>) -> Result<DMatrix<f64>, UncertaintyError
     let svd = j.clone().svd(true, true);
     let smax = svd.singular_values.max();
     let smin = svd.singular_values.min();
-    if !(smin > smax * 1e-12) {
+    if smin.is_nan() || smin <= smax * 1e-12 {
         return Err(UncertaintyError::Invalid(format!(
             "the identification Jacobian is rank deficient ({n} parameters, condition number {:.3e}): \
              the poses do not separate all parameters",
@@ -261,15 +263,13 @@ impl CapballMc {
         let sigma = (0..j.nrows())
             .map(|r| {
                 let a = r % 3;
-                (sources.sensor_u_um[a].powi(2)
-                    + sources.frame_u_um[a].powi(2)
-                    + stat[a].powi(2))
-                .sqrt()
+                (sources.sensor_u_um[a].powi(2) + sources.frame_u_um[a].powi(2) + stat[a].powi(2))
+                    .sqrt()
             })
             .collect();
         let mut drift_terms = Vec::new();
         if let DriftModel::Cyclic(cd) = &sources.drift {
-            if !(cd.period_s > 0.0) {
+            if cd.period_s.is_nan() || cd.period_s <= 0.0 {
                 return Err(UncertaintyError::Invalid(
                     "the drift period must be positive".into(),
                 ));

@@ -101,7 +101,10 @@ impl LengthBudget {
             (self.air_temp_accuracy_c, rect(self.air_temp_accuracy_c)),
             (self.pressure_accuracy_kpa, rect(self.pressure_accuracy_kpa)),
             (self.humidity_accuracy_pct, rect(self.humidity_accuracy_pct)),
-            (self.material_temp_accuracy_c, rect(self.material_temp_accuracy_c)),
+            (
+                self.material_temp_accuracy_c,
+                rect(self.material_temp_accuracy_c),
+            ),
             (self.alpha_accuracy_per_k, rect(self.alpha_accuracy_per_k)),
             (0.0, l_um * th2 / (3.0 * 5f64.sqrt())),
         ]
@@ -149,7 +152,10 @@ impl LengthBudget {
 
     /// Expanded uncertainty U (k = 2, µm) at each target position, to attach to ISO 230-2
     /// results.
-    pub fn expanded_uncertainty_um(&self, targets_mm: &[f64]) -> Result<Vec<f64>, UncertaintyError> {
+    pub fn expanded_uncertainty_um(
+        &self,
+        targets_mm: &[f64],
+    ) -> Result<Vec<f64>, UncertaintyError> {
         targets_mm
             .iter()
             .map(|t| Ok(2.0 * self.standard_uncertainty_um(t.abs())?))
@@ -173,8 +179,19 @@ mod tests {
         // u = √Σ² = 1.35028 µm.
         let b = LengthBudget::default();
         let g = b.gum(1000.0).unwrap();
-        assert!((g.standard_uncertainty - 1.35028).abs() < 5e-5, "{}", g.standard_uncertainty);
-        let c = |n: &str| g.budget.iter().find(|l| l.input == n).unwrap().contribution.abs();
+        assert!(
+            (g.standard_uncertainty - 1.35028).abs() < 5e-5,
+            "{}",
+            g.standard_uncertainty
+        );
+        let c = |n: &str| {
+            g.budget
+                .iter()
+                .find(|l| l.input == n)
+                .unwrap()
+                .contribution
+                .abs()
+        };
         assert!((c("air_pressure") - 0.17147).abs() < 1e-4);
         assert!((c("expansion_coefficient") - 1.15470).abs() < 1e-4);
         // The cosine error's mean shifts the estimate: −1e6·1e-8/6 µm.

@@ -217,7 +217,11 @@ fn run_blocks<S: TrialSource>(
         .collect()
 }
 
-fn check_finite(names: &[String], cols: &[Vec<f64>], trials_before: usize) -> Result<(), UncertaintyError> {
+fn check_finite(
+    names: &[String],
+    cols: &[Vec<f64>],
+    trials_before: usize,
+) -> Result<(), UncertaintyError> {
     for (j, col) in cols.iter().enumerate() {
         if let Some(t) = col.iter().position(|v| !v.is_finite()) {
             return Err(UncertaintyError::NonFinite {
@@ -243,12 +247,12 @@ pub fn run<S: TrialSource>(
     }
     let names = src.output_names();
     let n_out = src.n_outputs();
-    if let Some(t) = &opts.tolerance {
-        if t.len() != n_out || t.iter().any(|v| !(*v > 0.0)) {
-            return Err(UncertaintyError::Invalid(format!(
-                "give one positive numerical tolerance per output ({n_out})"
-            )));
-        }
+    if let Some(t) = &opts.tolerance
+        && (t.len() != n_out || t.iter().any(|v| v.is_nan() || *v <= 0.0))
+    {
+        return Err(UncertaintyError::Invalid(format!(
+            "give one positive numerical tolerance per output ({n_out})"
+        )));
     }
     let mut all: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut sequences = 0;
@@ -284,7 +288,12 @@ pub fn run<S: TrialSource>(
         // Per output, per sequence: y, u, y_low, y_high.
         let mut seq_stats: Vec<Vec<[f64; 4]>> = vec![Vec::new(); n_out];
         loop {
-            let cols = run_blocks(src, opts.seed, (sequences * blocks_per_seq) as u64, blocks_per_seq);
+            let cols = run_blocks(
+                src,
+                opts.seed,
+                (sequences * blocks_per_seq) as u64,
+                blocks_per_seq,
+            );
             check_finite(&names, &cols, sequences * m)?;
             for (j, c) in cols.into_iter().enumerate() {
                 let (mu, sd) = mean_std(&c);
@@ -438,9 +447,14 @@ mod tests {
     fn interval_indices_per_clause_7_7() {
         // M = 1000 values 1..=1000, p = 0.95: q = 950, r = 25 → [25, 975].
         let v: Vec<f64> = (1..=1000).map(f64::from).collect();
-        assert_eq!(coverage_interval(&v, 0.95, IntervalKind::Symmetric), [25.0, 975.0]);
+        assert_eq!(
+            coverage_interval(&v, 0.95, IntervalKind::Symmetric),
+            [25.0, 975.0]
+        );
         // A skewed sample: the shortest interval hugs the dense end.
-        let s: Vec<f64> = (1..=1000).map(|i| (f64::from(i) / 1000.0).powi(3)).collect();
+        let s: Vec<f64> = (1..=1000)
+            .map(|i| (f64::from(i) / 1000.0).powi(3))
+            .collect();
         let [lo, _] = coverage_interval(&s, 0.9, IntervalKind::Shortest);
         assert_eq!(lo, s[0]);
     }

@@ -35,6 +35,14 @@ fn capball(c: &mut Criterion) {
             );
         }
     }
+    let t = std::time::Instant::now();
+    let r = mc::run(&model, &McOptions::default(), None).unwrap();
+    println!(
+        "capball adaptive run (ndig 2, all cores): {} sequences, {} trials, {:.2} s wall",
+        r.sequences,
+        r.trials,
+        t.elapsed().as_secs_f64()
+    );
     let mut g = c.benchmark_group("capball_mc");
     g.throughput(Throughput::Elements(BLOCK_TRIALS as u64));
     g.bench_function("block_of_500_trials_one_core", |b| {
@@ -65,12 +73,26 @@ fn capball(c: &mut Criterion) {
             p[(0, 0)]
         })
     });
+    let reduced = model.clone().with_reduced_noise();
+    g.bench_function("block_of_500_trials_one_core_reduced_noise", |b| {
+        let mut scratch = reduced.scratch();
+        let mut out = vec![0.0; BLOCK_TRIALS * reduced.n_outputs()];
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        b.iter(|| reduced.fill(&mut rng, &mut scratch, &mut out));
+    });
     g.finish();
     let mut g = c.benchmark_group("capball_adaptive");
     g.sample_size(10);
     g.bench_function("full_adaptive_run_ndig2_all_cores", |b| {
         b.iter(|| {
             let r = mc::run(&model, &McOptions::default(), None).unwrap();
+            assert!(r.converged);
+            r.trials
+        })
+    });
+    g.bench_function("full_adaptive_run_ndig2_reduced_noise", |b| {
+        b.iter(|| {
+            let r = mc::run(&reduced, &McOptions::default(), None).unwrap();
             assert!(r.converged);
             r.trials
         })

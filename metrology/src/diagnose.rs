@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, Normal};
 
-use crate::axis_model::{AxisModel, Direction, Effect};
+use crate::axis_model::{AxisModel, Effect};
 use crate::iso230;
 use crate::positioning_data::{PositioningData, dir_slot, schedule_of, simulate};
 
@@ -621,6 +621,15 @@ fn in_sample_residuals(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> (MeanFit, Vec
 
 // ---------------------------------------------------------------------------------------
 
+/// A duration for a sentence: minutes, or readings when the dataset has no real times.
+fn dur(s: f64, has_times: bool) -> String {
+    if has_times {
+        format!("{:.1} min", s / 60.0)
+    } else {
+        format!("{s:.0} readings (no real times)")
+    }
+}
+
 /// Diagnoses a positioning run against the static baseline.
 pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
     let m = data.n_targets();
@@ -811,10 +820,15 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                 params_u.insert("rate_um_per_h".into(), ub[0]);
                 (
                     format!(
-                        "steady drift of every target, {:.2} µm/h: the measuring loop warms or \
+                        "steady drift of every target, {:.2} µm {}: the measuring loop warms or \
                          cools steadily — ball-screw heating or a slow change of the room \
                          temperature; check the screw nut/bearing and air temperature records",
-                        beta[0]
+                        beta[0],
+                        if data.has_times {
+                            "per hour"
+                        } else {
+                            "per 3600 readings (no real times)"
+                        }
                     ),
                     Effect::LinearDrift {
                         rate_um_per_h: beta[0],
@@ -831,11 +845,12 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                 (
                     format!(
                         "warm-up: every target settles by {:.2} µm with a time constant of \
-                         {:.0} min — the machine (spindle, drives, ball screw) was not at thermal \
-                         equilibrium at the start; warm it up for at least {:.0} min before measuring",
+                         {} — the machine (spindle, drives, ball screw) was not at thermal \
+                         equilibrium at the start; warm it up for at least 3 time constants ({}) \
+                         before measuring",
                         beta[0],
-                        th / 60.0,
-                        3.0 * th / 60.0
+                        dur(th, data.has_times),
+                        dur(3.0 * th, data.has_times)
                     ),
                     Effect::ExponentialWarmup {
                         amplitude_um: beta[0],
@@ -862,10 +877,10 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                 }
                 (
                     format!(
-                        "periodic drift of the measuring loop, period {:.1} min, {:.2} µm \
+                        "periodic drift of the measuring loop, period {}, {:.2} µm \
                          amplitude: a spindle or coolant temperature cycle (check the cooling \
                          unit's on/off cycle and the spindle/coolant temperatures)",
-                        th / 60.0,
+                        dur(th, data.has_times),
                         amp
                     ),
                     Effect::CyclicDrift {
@@ -885,9 +900,9 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
                 }
                 let mut cause = format!(
                     "scale change growing to {end:.1} µm/m by the end of the run (time constant \
-                     {:.0} min): the axis expands as it heats — ball-screw heating, or an \
+                     {}): the axis expands as it heats — ball-screw heating, or an \
                      uncompensated material temperature",
-                    th / 60.0
+                    dur(th, data.has_times)
                 );
                 if st.alpha_temp {
                     // α from the regression on the measured material temperature.
@@ -1279,14 +1294,5 @@ pub fn reproduction_check(data: &PositioningData, model: &AxisModel, seeds: usiz
         baseline_mean_rms_um,
         baseline_s_rms_um,
         seeds: seeds.max(1),
-    }
-}
-
-/// Direction of a per-direction slot (0 = up).
-pub fn slot_dir(slot: usize) -> Direction {
-    if slot == 0 {
-        Direction::Up
-    } else {
-        Direction::Down
     }
 }

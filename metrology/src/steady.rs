@@ -36,10 +36,12 @@
 //!
 //! `ExactStop(k)` opens the dwell of pose k (samples with `t_ns ≥` the trigger's time);
 //! `MotionStart`, `DwellEnd`, `FeedHold`, `ProgramStart`, `ProgramEnd` close an open dwell.
-//! A pose value is emitted as soon as its window is found; a dwell that closes without one
+//! The pose number of a motion start is not used (controllers differ on whether it names the
+//! pose left or the pose approached). A pose value is emitted as soon as its window is found; a dwell that closes without one
 //! gets a status: [`PoseStatus::DeviceAway`] (no samples in the dwell),
-//! [`PoseStatus::BeamInvalid`] (no run of `samples` consecutive valid samples),
-//! [`PoseStatus::NeverSteady`] otherwise.
+//! [`PoseStatus::BeamInvalid`] (invalid samples broke every run of `samples` consecutive
+//! valid ones), [`PoseStatus::NeverSteady`] otherwise (including a dwell too short for a
+//! window).
 //!
 //! Triggers that are processed after samples with later times (queues of different lengths)
 //! are handled: the detector keeps the samples since the last motion start and starts the
@@ -488,7 +490,7 @@ impl SteadyDetector {
         if d.done {
             return;
         }
-        let (mut samples, mut run, mut max_run) = (0u64, 0usize, 0usize);
+        let (mut samples, mut invalid, mut run, mut max_run) = (0u64, 0u64, 0usize, 0usize);
         let start = d.first.max(self.base);
         for i in start..self.end() {
             let k = (i - self.base) as usize;
@@ -501,13 +503,15 @@ impl SteadyDetector {
                 max_run = max_run.max(run);
             } else {
                 run = 0;
+                invalid += 1;
             }
         }
         let status = if samples == 0 {
             PoseStatus::DeviceAway
-        } else if max_run < self.cfg.samples {
+        } else if max_run < self.cfg.samples && invalid > 0 {
             PoseStatus::BeamInvalid
         } else {
+            // Long enough but never steady, or all valid but too short to settle and average.
             PoseStatus::NeverSteady
         };
         out.push(PoseValue {
@@ -1023,6 +1027,26 @@ mod tests {
     }
 
     #[test]
+    fn feed_hold_and_program_end_close_the_dwell() {
+        // Feed hold 0.1 s after the stop, while it still rings: never steady, and nothing
+        // after the hold is taken for the pose even though the axis then stands still.
+        let f = axis(0.0, 10.0, 0.0, 0.5, 2.0, 0.1, 0.0);
+        let mut evs = sampled(&f, 0.0, 3.0, 15);
+        evs.push(trig(TriggerKind::ExactStop, 1, 0.5));
+        evs.push(trig(TriggerKind::FeedHold, 0, 0.6));
+        evs.push(trig(TriggerKind::ExactStop, 2, 1.5));
+        evs.push(trig(TriggerKind::ProgramEnd, 0, 1.55));
+        let out = run(SteadyConfig::default(), 1, &merge(evs));
+        assert_eq!(out.len(), 2, "{out:?}");
+        assert_eq!(
+            (out[0].pose, out[0].status, out[0].t_last_ns),
+            (1, PoseStatus::NeverSteady, t_ns(0.6))
+        );
+        // Pose 2: only 50 samples before the program end: too short, not a beam problem.
+        assert_eq!((out[1].pose, out[1].status), (2, PoseStatus::NeverSteady));
+    }
+
+    #[test]
     fn all_channels_must_settle() {
         // Channel 1 rings much longer than channel 0.
         let f0 = axis(0.0, 1.0, 0.0, 0.2, 0.5, 0.02, 0.0);
@@ -1120,5 +1144,86 @@ mod tests {
             SteadyDetector::new(SteadyConfig::default(), 0).unwrap_err(),
             SteadyError::NoChannels
         );
+    }
+
+    mod prop {
+        use super::super::*;
+        use proptest::prelude::*;
+
+        #[derive(Debug, Clone)]
+        enum In {
+            S(u64, f64, f64, bool),
+            T(u8, u32, u64),
+        }
+
+        fn input() -> impl Strategy<Value = In> {
+            prop_oneof![
+                8 => (0u64..5_000_000, prop_oneof![Just(f64::NAN), Just(f64::INFINITY), -1e3f64..1e3], -1.0f64..1.0, any::<bool>())
+                    .prop_map(|(t, a, b, v)| In::S(t, a, b, v)),
+                1 => (0u8..6, 0u32..5, 0u64..5_000_000).prop_map(|(k, p, t)| In::T(k, p, t)),
+            ]
+        }
+
+        fn kind(k: u8) -> TriggerKind {
+            [
+                TriggerKind::MotionStart,
+                TriggerKind::ExactStop,
+                TriggerKind::DwellEnd,
+                TriggerKind::ProgramStart,
+                TriggerKind::ProgramEnd,
+                TriggerKind::FeedHold,
+            ][k as usize]
+        }
+
+        fn feed(mode: DetectorMode, ins: &[In]) -> Vec<PoseValue> {
+            let cfg = SteadyConfig {
+                samples: 5,
+                mode,
+                max_history: 64,
+                ..SteadyConfig::default()
+            };
+            let mut d = SteadyDetector::new(cfg, 2).unwrap();
+            let mut out = Vec::new();
+            let mut t_sorted = 0u64;
+            for i in ins {
+                match *i {
+                    In::S(dt, a, b, v) => {
+                        // Mostly increasing times with occasional steps back.
+                        t_sorted = (t_sorted + dt / 1000).saturating_sub(if dt % 17 == 0 {
+                            dt
+                        } else {
+                            0
+                        });
+                        out.extend(d.push_sample(t_sorted, &[a, b], v));
+                    }
+                    In::T(k, p, dt) => out.extend(d.push_trigger(kind(k), p, t_sorted + dt % 3000)),
+                }
+            }
+            out.extend(d.finish(t_sorted));
+            out
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+            /// Any input, in any order: no panic, well-formed values, the same output twice.
+            #[test]
+            fn any_input_gives_well_formed_values(ins in prop::collection::vec(input(), 0..400)) {
+                for mode in [DetectorMode::Triggers, DetectorMode::Plateaus] {
+                    let out = feed(mode, &ins);
+                    for v in &out {
+                        if v.n == 0 {
+                            prop_assert!(v.mean.is_empty() && v.std.is_empty());
+                            prop_assert!(v.status != PoseStatus::Ok);
+                        } else {
+                            prop_assert_eq!(v.n, 5);
+                            prop_assert_eq!(v.mean.len(), 2);
+                            prop_assert!(v.mean.iter().chain(&v.std).all(|x| x.is_finite()));
+                        }
+                    }
+                    let again = feed(mode, &ins);
+                    prop_assert_eq!(format!("{out:?}"), format!("{again:?}"));
+                }
+            }
+        }
     }
 }

@@ -197,7 +197,11 @@ fn hidden_outliers_are_named() {
 #[test]
 #[ignore]
 fn sweep_200_per_category() {
+    let n = std::env::var("SWEEP_N")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(200);
     for cat in CATEGORIES {
-        check(cat, 200, 77);
+        check(cat, n, 77);
     }
 }

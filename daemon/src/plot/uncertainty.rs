@@ -101,7 +101,7 @@ where
             lo = lo.min(g.estimate - 3.5 * g.standard_uncertainty);
             hi = hi.max(g.estimate + 3.5 * g.standard_uncertainty);
         }
-        if !(hi > lo) {
+        if hi.is_nan() || hi <= lo {
             hi = lo + 1.0;
         }
         let bins = 80usize;

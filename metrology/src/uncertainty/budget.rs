@@ -178,13 +178,13 @@ impl Budget {
         }
         for i in &f.inputs {
             i.distribution.validate(&i.name)?;
-            if let Some(d) = i.dof {
-                if !(d > 0.0) {
-                    return Err(UncertaintyError::BadDistribution {
-                        input: i.name.clone(),
-                        reason: "`dof` must be positive".into(),
-                    });
-                }
+            if let Some(d) = i.dof
+                && (d.is_nan() || d <= 0.0)
+            {
+                return Err(UncertaintyError::BadDistribution {
+                    input: i.name.clone(),
+                    reason: "`dof` must be positive".into(),
+                });
             }
         }
         let n_in = f.inputs.len();

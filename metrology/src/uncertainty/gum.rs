@@ -154,14 +154,14 @@ pub fn propagate<M: Model + ?Sized>(
             output_names.len()
         )));
     }
-    if let Some(r) = correlation {
-        if r.nrows() != n_in || r.ncols() != n_in {
-            return Err(UncertaintyError::Invalid(format!(
-                "correlation matrix is {}×{} for {n_in} inputs",
-                r.nrows(),
-                r.ncols()
-            )));
-        }
+    if let Some(r) = correlation
+        && (r.nrows() != n_in || r.ncols() != n_in)
+    {
+        return Err(UncertaintyError::Invalid(format!(
+            "correlation matrix is {}×{} for {n_in} inputs",
+            r.nrows(),
+            r.ncols()
+        )));
     }
     let x: Vec<f64> = inputs.iter().map(|i| i.estimate).collect();
     let u: Vec<f64> = inputs.iter().map(|i| i.standard_uncertainty).collect();

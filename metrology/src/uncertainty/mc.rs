@@ -247,12 +247,12 @@ pub fn run<S: TrialSource>(
     }
     let names = src.output_names();
     let n_out = src.n_outputs();
-    if let Some(t) = &opts.tolerance {
-        if t.len() != n_out || t.iter().any(|v| !(*v > 0.0)) {
-            return Err(UncertaintyError::Invalid(format!(
-                "give one positive numerical tolerance per output ({n_out})"
-            )));
-        }
+    if let Some(t) = &opts.tolerance
+        && (t.len() != n_out || t.iter().any(|v| v.is_nan() || *v <= 0.0))
+    {
+        return Err(UncertaintyError::Invalid(format!(
+            "give one positive numerical tolerance per output ({n_out})"
+        )));
     }
     let mut all: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut sequences = 0;

@@ -11,6 +11,7 @@
 //! - [`capball`]: the CapBall link-error Monte Carlo of paper 001 with the statistical and the
 //!   cyclic drift models.
 //! - [`length`]: the LI-80 length measurement budget (ISO/TR 230-9 style).
+//! - [`psd`]: the Monte Carlo of the PSD frame's 13 errors (paper 003 Table 4).
 //!
 //! ```
 //! use metrology::uncertainty::budget::Budget;
@@ -43,6 +44,7 @@ pub mod expr;
 pub mod gum;
 pub mod length;
 pub mod mc;
+pub mod psd;
 
 pub use budget::{Budget, Method, Report};
 pub use dist::{Distribution, DriftShape};

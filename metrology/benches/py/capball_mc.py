@@ -1,0 +1,65 @@
+#!/usr/bin/env python3
+"""NumPy reference for the CapBall Monte Carlo benchmark (benches/uncertainty.rs).
+
+The same computation per trial: 2421 normal draws (807 poses x 3 directions) scaled by the
+per-row standard deviation, one 14 x 2421 projection by the pseudo-inverse, plus the cyclic
+drift's projection (3 harmonics, random phase per trial). Vectorised NumPy in batches, which is
+how one would write it in NumPy. The Jacobian is a random 2421 x 14 matrix: the cost does not
+depend on its values.
+
+    python3 metrology/benches/py/capball_mc.py [--trials 200000] [--threads 1]
+
+Prints trials per second; compare with `capball_mc/block_of_500_trials_one_core` and the
+"trials per CPU-second" line of `cargo bench -p metrolog-metrology --bench uncertainty`.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--trials", type=int, default=200_000)
+    ap.add_argument("--batch", type=int, default=500)
+    ap.add_argument("--threads", type=int, default=1, help="BLAS threads (1 = one core)")
+    a = ap.parse_args()
+    for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[v] = str(a.threads)
+    import numpy as np  # after the thread settings
+
+    rng = np.random.default_rng(1)
+    n_rows, n_par = 3 * 807, 14
+    j = rng.standard_normal((n_rows, n_par))
+    pinv = np.linalg.pinv(j)  # 14 x 2421
+    sigma = np.tile(np.sqrt([0.1**2 + 0.3**2] * 3), 807)
+    p_hat = rng.standard_normal(n_par)
+    harmonics = [(k, rng.standard_normal(n_par), rng.standard_normal(n_par)) for k in (1, 2, 3)]
+
+    def batch(m: int) -> np.ndarray:
+        e = rng.standard_normal((m, n_rows)) * sigma
+        p = e @ pinv.T + p_hat
+        phi = rng.random(m) * 2 * np.pi
+        for k, a_k, b_k in harmonics:
+            p += np.cos(k * phi)[:, None] * a_k + np.sin(k * phi)[:, None] * b_k
+        return p
+
+    batch(a.batch)  # warm-up
+    done = 0
+    t0 = time.perf_counter()
+    c0 = time.process_time()
+    while done < a.trials:
+        m = min(a.batch, a.trials - done)
+        batch(m)
+        done += m
+    wall = time.perf_counter() - t0
+    cpu = time.process_time() - c0
+    print(f"numpy {np.__version__}: {done} trials, {wall:.2f} s wall, {cpu:.2f} s CPU")
+    print(f"trials per second (wall): {done / wall:.0f}")
+    print(f"trials per CPU-second: {done / cpu:.0f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -29,6 +29,7 @@ fn scenario() -> Scenario {
         truncated_rate: 1e-4,
         drop_rate: 1e-4,
         max_each: 0,
+        ..Default::default()
     };
     s.faults.interferometer = stream;
     s.faults.capball = stream;

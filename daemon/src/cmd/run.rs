@@ -50,11 +50,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             handle_signals: true,
         },
     ))?;
+    let st = &report.outcome.status;
     tracing::info!(
-        "run ended ({}); log {}; {}",
+        "run ended ({}); log {}; {}; queue at most {} of {}; pose latency at most {:.1} ms",
         report.reason_text(),
         report.log_path.display(),
-        report.outcome.status.summary()
+        st.summary(),
+        st.queue_max,
+        st.queue_capacity,
+        st.pose_latency_max_ms
     );
     Ok(())
 }

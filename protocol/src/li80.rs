@@ -24,8 +24,8 @@
 use std::io::Write as _;
 
 use crate::text::{
-    Piece, Splitter, hex_digit_upper, parse_decimal, parse_hex_u32, parse_i64, parse_u32,
-    parse_u64, printable, printable_string, split_fields, strip_cr,
+    Fields, Piece, Splitter, field_count, hex_digit_upper, parse_decimal, parse_u32, parse_u64,
+    printable, printable_string, split_fields, strip_cr,
 };
 use crate::{Decoded, RejectKind, Rejection};
 
@@ -147,7 +147,13 @@ fn decode_line(raw: &[u8], sink: &mut impl FnMut(Decoded<Line>)) {
         return;
     }
     let cr = raw.len() - line.len();
-    match line.iter().rposition(|&b| b == b'$') {
+    // The common case (one `$`, at the start) without a backward scan.
+    let last_dollar = if line.first() == Some(&b'$') && !line[1..].contains(&b'$') {
+        Some(0)
+    } else {
+        line.iter().rposition(|&b| b == b'$')
+    };
+    match last_dollar {
         Some(0) => sink(match parse_record(line) {
             Ok(l) => Decoded::Frame(l),
             Err(k) => reject(k, raw.len() + 1),
@@ -207,18 +213,23 @@ fn parse_record(rec: &[u8]) -> Result<Line, RejectKind> {
 
 #[inline]
 fn parse_pos(body: &[u8]) -> Result<PosFrame, RejectKind> {
-    let mut f: [&[u8]; 6] = [&[]; 6];
-    if split_fields(body, &mut f) != 6 {
+    if field_count(body) != 6 {
         return Err(RejectKind::FieldCount);
     }
+    let mut f = Fields::new(body);
+    f.skip();
     let m = RejectKind::Malformed;
-    let sig = parse_u32(f[4]).filter(|&s| s <= 100).ok_or(m)?;
+    let seq = f.u32().ok_or(m)?;
+    let t_us = f.u64().ok_or(m)?;
+    let raw_nm = f.i64().ok_or(m)?;
+    let sig = f.u32().filter(|&s| s <= 100).ok_or(m)? as u8;
+    let flags = PosFlags(f.hex_u32().ok_or(m)?);
     Ok(PosFrame {
-        seq: parse_u32(f[1]).ok_or(m)?,
-        t_us: parse_u64(f[2]).ok_or(m)?,
-        raw_nm: parse_i64(f[3]).ok_or(m)?,
-        sig: sig as u8,
-        flags: PosFlags(parse_hex_u32(f[5]).ok_or(m)?),
+        seq,
+        t_us,
+        raw_nm,
+        sig,
+        flags,
     })
 }
 
@@ -593,6 +604,22 @@ mod tests {
             decode_all(&s),
             vec![rej(RejectKind::OverlongLine, MAX_LINE + 3)]
         );
+    }
+
+    #[test]
+    fn reset_forgets_partial_line() {
+        let mut d = Decoder::new();
+        let mut out = Vec::new();
+        d.feed(b"$POS,1,2", |x| out.push(x));
+        d.reset();
+        d.feed(POS_LINE, |x| out.push(x));
+        assert_eq!(out, decode_all(POS_LINE));
+        // Also while discarding an over-long line.
+        let mut out = Vec::new();
+        d.feed(&[b'x'; 500], |x| out.push(x));
+        d.reset();
+        d.feed(POS_LINE, |x| out.push(x));
+        assert_eq!(out, decode_all(POS_LINE));
     }
 
     #[test]

@@ -9,6 +9,18 @@
 //! - [`can`]: CNC exact-stop trigger frames (CAN 2.0A payload) and [`slcan`] (Lawicel text).
 //!
 //! The host-side conversions are in [`edlen`] (refractive index of air) and [`convert`].
+//!
+//! ```
+//! use protocol::{Decoded, RejectKind, StreamDecoder, li80};
+//!
+//! let mut dec = li80::Decoder::new();
+//! let mut out = Vec::new();
+//! // The port opened in the middle of a record; the next one arrives in two reads.
+//! dec.feed(b"50,0*65\r\n$POS,1,2,3,", |d| out.push(d));
+//! dec.feed(b"50,0*65\r\n", |d| out.push(d));
+//! assert!(matches!(&out[0], Decoded::Reject(r) if r.kind == RejectKind::Malformed && r.bytes == 9));
+//! assert!(matches!(&out[1], Decoded::Frame(li80::Line::Pos(p)) if p.seq == 1 && p.raw_nm == 3));
+//! ```
 
 pub mod can;
 pub mod cb3;

@@ -16,7 +16,7 @@
 use std::io::Write as _;
 
 use crate::text::{
-    Piece, Splitter, parse_i32, parse_u32, parse_u64, printable_string, split_fields, strip_cr,
+    Fields, Piece, Splitter, field_count, parse_i32, parse_u32, printable_string, strip_cr,
 };
 use crate::{Decoded, RejectKind, Rejection};
 
@@ -104,19 +104,27 @@ fn decode_line(line: &[u8]) -> Result<Line, RejectKind> {
 
 #[inline]
 fn parse_data(line: &[u8]) -> Result<DataLine, RejectKind> {
-    let mut f: [&[u8]; 8] = [&[]; 8];
-    if split_fields(line, &mut f) != 8 {
+    if field_count(line) != 8 {
         return Err(RejectKind::FieldCount);
     }
+    let mut f = Fields::new(line);
+    f.skip();
     let m = RejectKind::Malformed;
+    let seq = f.u32().ok_or(m)?;
+    let t_us = f.u64().ok_or(m)?;
+    let x1_pa = f.u64().ok_or(m)?;
+    let x2_pa = f.u64().ok_or(m)?;
+    let y1_pa = f.u64().ok_or(m)?;
+    let y2_pa = f.u64().ok_or(m)?;
+    let head_mc = f.i32().ok_or(m)?;
     Ok(DataLine {
-        seq: parse_u32(f[1]).ok_or(m)?,
-        t_us: parse_u64(f[2]).ok_or(m)?,
-        x1_pa: parse_u64(f[3]).ok_or(m)?,
-        x2_pa: parse_u64(f[4]).ok_or(m)?,
-        y1_pa: parse_u64(f[5]).ok_or(m)?,
-        y2_pa: parse_u64(f[6]).ok_or(m)?,
-        head_mc: parse_i32(f[7]).ok_or(m)?,
+        seq,
+        t_us,
+        x1_pa,
+        x2_pa,
+        y1_pa,
+        y2_pa,
+        head_mc,
     })
 }
 
@@ -180,6 +188,31 @@ impl Command {
         }
     }
 }
+
+/// `*IDN?` answer: `PSD-2,<serial>,<firmware>`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Idn {
+    pub serial: String,
+    pub firmware: String,
+}
+impl Idn {
+    pub fn parse(line: &str) -> Option<Idn> {
+        let l = line.strip_suffix('\n').unwrap_or(line);
+        let l = l.strip_suffix('\r').unwrap_or(l);
+        let (serial, firmware) = l.strip_prefix("PSD-2,")?.split_once(',')?;
+        Some(Idn {
+            serial: serial.to_owned(),
+            firmware: firmware.to_owned(),
+        })
+    }
+    /// The answer line with its `\n`.
+    pub fn to_line(&self) -> String {
+        format!("PSD-2,{},{}\n", self.serial, self.firmware)
+    }
+}
+
+/// `*OPC?` answer line.
+pub const OPC_ANSWER: &str = "1\n";
 
 /// `SYST:ERR?` answer: `<code>,"<text>"`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -331,6 +364,13 @@ mod tests {
         assert_eq!(q.to_line(), "-100,\"say \"\"hi\"\"\"\n");
         assert_eq!(SystErr::parse(&q.to_line()), Some(q));
         assert_eq!(SystErr::parse("0,No error"), None);
+        let idn = Idn {
+            serial: "4711".into(),
+            firmware: "0.9".into(),
+        };
+        assert_eq!(idn.to_line(), "PSD-2,4711,0.9\n");
+        assert_eq!(Idn::parse(&idn.to_line()), Some(idn));
+        assert_eq!(Idn::parse("LI-80,1,2"), None);
         assert_eq!(SystErr::parse("0,\"a\"b\""), None);
     }
 }

@@ -177,19 +177,6 @@ pub(crate) fn hex_digit_upper(b: u8) -> Option<u8> {
     }
 }
 
-/// Hexadecimal, 1 to 8 digits, either case.
-#[inline]
-pub(crate) fn parse_hex_u32(s: &[u8]) -> Option<u32> {
-    if s.is_empty() || s.len() > 8 {
-        return None;
-    }
-    let mut v = 0u32;
-    for &b in s {
-        v = (v << 4) | u32::from(hex_digit(b)?);
-    }
-    Some(v)
-}
-
 /// Plain decimal number as the data sheets define it: `-?[0-9]+(\.[0-9]+)?`; no exponent,
 /// no `inf`/`NaN`, no `+`, no thousands separators.
 pub(crate) fn parse_decimal(s: &[u8]) -> Option<f64> {
@@ -219,6 +206,115 @@ pub(crate) fn split_fields<'a, const N: usize>(s: &'a [u8], out: &mut [&'a [u8];
         n += 1;
     }
     n
+}
+
+/// Number of comma-separated fields of `s` (a vectorisable count, no splitting).
+#[inline]
+pub(crate) fn field_count(s: &[u8]) -> usize {
+    s.iter().filter(|&&b| b == b',').count() + 1
+}
+
+/// Parses comma-separated fields in one pass, each number up to the next `,` or the end. The
+/// caller checks the field count first (so a failure here means a malformed field).
+pub(crate) struct Fields<'a> {
+    s: &'a [u8],
+    i: usize,
+}
+
+impl<'a> Fields<'a> {
+    #[inline]
+    pub(crate) fn new(s: &'a [u8]) -> Self {
+        Fields { s, i: 0 }
+    }
+
+    /// Consumes the field separator: `,` or the end of the input.
+    #[inline]
+    fn end_field(&mut self) -> Option<()> {
+        match self.s.get(self.i) {
+            None => Some(()),
+            Some(b',') => {
+                self.i += 1;
+                Some(())
+            }
+            Some(_) => None,
+        }
+    }
+
+    /// Skips a field whatever it holds.
+    #[inline]
+    pub(crate) fn skip(&mut self) {
+        while self.i < self.s.len() && self.s[self.i] != b',' {
+            self.i += 1;
+        }
+        if self.i < self.s.len() {
+            self.i += 1;
+        }
+    }
+
+    /// Unsigned decimal field (digits only).
+    #[inline]
+    pub(crate) fn u64(&mut self) -> Option<u64> {
+        let start = self.i;
+        let mut v: u64 = 0;
+        while let Some(&b) = self.s.get(self.i) {
+            let d = b.wrapping_sub(b'0');
+            if d > 9 {
+                break;
+            }
+            v = v.checked_mul(10)?.checked_add(u64::from(d))?;
+            self.i += 1;
+        }
+        if self.i == start {
+            return None;
+        }
+        self.end_field()?;
+        Some(v)
+    }
+
+    #[inline]
+    pub(crate) fn u32(&mut self) -> Option<u32> {
+        u32::try_from(self.u64()?).ok()
+    }
+
+    /// Signed decimal field: optional `-`, digits.
+    #[inline]
+    pub(crate) fn i64(&mut self) -> Option<i64> {
+        if self.s.get(self.i) == Some(&b'-') {
+            self.i += 1;
+            let m = self.u64()?;
+            if m > i64::MAX as u64 + 1 {
+                None
+            } else {
+                Some((m as i64).wrapping_neg())
+            }
+        } else {
+            i64::try_from(self.u64()?).ok()
+        }
+    }
+
+    #[inline]
+    pub(crate) fn i32(&mut self) -> Option<i32> {
+        i32::try_from(self.i64()?).ok()
+    }
+
+    /// Hexadecimal field, 1 to 8 digits of either case.
+    #[inline]
+    pub(crate) fn hex_u32(&mut self) -> Option<u32> {
+        let start = self.i;
+        let mut v = 0u32;
+        while let Some(d) = self.s.get(self.i).and_then(|&b| hex_digit(b)) {
+            if self.i - start == 8 {
+                return None;
+            }
+            v = (v << 4) | u32::from(d);
+            self.i += 1;
+        }
+        if self.i == start {
+            return None;
+        }
+        self.end_field()?;
+        Some(v)
+    }
 }
 
 /// Printable ASCII (0x20-0x7E) only, and not empty.
@@ -265,10 +361,38 @@ mod tests {
         assert_eq!(parse_i64(b"--1"), None);
         assert_eq!(parse_i32(b"-2147483648"), Some(i32::MIN));
         assert_eq!(parse_i32(b"2147483648"), None);
-        assert_eq!(parse_hex_u32(b"1f"), Some(31));
-        assert_eq!(parse_hex_u32(b"FFFFFFFF"), Some(u32::MAX));
-        assert_eq!(parse_hex_u32(b"100000000"), None);
-        assert_eq!(parse_hex_u32(b"G"), None);
+    }
+
+    #[test]
+    fn fields_cursor() {
+        let mut f = Fields::new(b"POS,4294967295,18446744073709551615,-9223372036854775808,1a,-5");
+        f.skip();
+        assert_eq!(f.u32(), Some(u32::MAX));
+        assert_eq!(f.u64(), Some(u64::MAX));
+        assert_eq!(f.i64(), Some(i64::MIN));
+        assert_eq!(f.hex_u32(), Some(0x1A));
+        assert_eq!(f.i32(), Some(-5));
+        for (s, ok) in [
+            (&b"12x"[..], false),
+            (b"", false),
+            (b"-", false),
+            (b"1,", true),
+            (b"+1", false),
+        ] {
+            assert_eq!(
+                Fields::new(s).i64().is_some(),
+                ok,
+                "{:?}",
+                std::str::from_utf8(s)
+            );
+        }
+        assert_eq!(Fields::new(b"123456789").hex_u32(), None);
+        assert_eq!(Fields::new(b"FFFFFFFF").hex_u32(), Some(u32::MAX));
+        assert_eq!(Fields::new(b"1f").hex_u32(), Some(31));
+        assert_eq!(Fields::new(b"G").hex_u32(), None);
+        assert_eq!(Fields::new(b"4294967296").u32(), None);
+        assert_eq!(field_count(b"a,b,,c"), 4);
+        assert_eq!(field_count(b""), 1);
     }
 
     #[test]
@@ -296,15 +420,10 @@ mod tests {
         let mut s = Splitter::default();
         let mut out = Vec::new();
         for c in chunks {
-            s.feed(
-                c,
-                limit,
-                (b'\n', b'\n'),
-                |p| match p {
-                    Piece::Line(l, t) => out.push((l.to_vec(), 0, t)),
-                    Piece::Overlong(n, t) => out.push((Vec::new(), n, t)),
-                },
-            );
+            s.feed(c, limit, (b'\n', b'\n'), |p| match p {
+                Piece::Line(l, t) => out.push((l.to_vec(), 0, t)),
+                Piece::Overlong(n, t) => out.push((Vec::new(), n, t)),
+            });
         }
         out
     }

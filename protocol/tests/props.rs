@@ -375,6 +375,15 @@ proptest! {
         // Every byte up to the last line end is accounted for at most once.
         let consumed = soup.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
         prop_assert!(rejected_bytes(&whole) <= consumed);
+        // One output per line; two when a `$` follows other bytes on a line of legal length.
+        let mut expected = 0;
+        for raw in soup[..consumed].split(|&b| b == b'\n').take(soup[..consumed].iter().filter(|&&b| b == b'\n').count()) {
+            let line = raw.strip_suffix(b"\r").unwrap_or(raw);
+            let long = raw.len() > li80::MAX_LINE + 1 || line.len() > li80::MAX_LINE;
+            let late_dollar = line.iter().rposition(|&b| b == b'$').is_some_and(|i| i > 0);
+            expected += if !long && late_dollar { 2 } else { 1 };
+        }
+        prop_assert_eq!(whole.len(), expected);
     }
 
     #[test]
@@ -405,6 +414,8 @@ proptest! {
         prop_assert_eq!(frames(&whole), want);
         let consumed = soup.iter().rposition(|&b| b == 0).map_or(0, |i| i + 1);
         prop_assert!(rejected_bytes(&whole) <= consumed);
+        // Exactly one frame or one rejection per `0x00`.
+        prop_assert_eq!(whole.len(), soup.iter().filter(|&&b| b == 0).count());
     }
 
     #[test]
@@ -427,6 +438,18 @@ proptest! {
         let nacks = soup.iter().filter(|&&b| b == 0x07).count();
         let got = frames(&whole).iter().filter(|m| matches!(m, slcan::Message::Nack)).count();
         prop_assert_eq!(got, nacks);
+        // One output per `\r`-terminated message; a `\a` gives the nack plus one rejection
+        // when it cut a message short.
+        let mut expected = 0;
+        let mut pending = false;
+        for &b in &soup {
+            match b {
+                b'\r' => { expected += 1; pending = false; }
+                0x07 => { expected += 1 + usize::from(pending); pending = false; }
+                _ => pending = true,
+            }
+        }
+        prop_assert_eq!(whole.len(), expected);
         for f in frames(&whole) {
             if let slcan::Message::Frame(c) = f {
                 prop_assert!(c.data.len() <= 8);

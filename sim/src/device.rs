@@ -149,6 +149,7 @@ pub(crate) struct Ctx<'a> {
     pub power_up: u32,
     /// Counters to add to the record after the step.
     pub faults: &'a mut FaultCounts,
+    pub device: Device,
 }
 
 impl Ctx<'_> {
@@ -162,6 +163,18 @@ impl Ctx<'_> {
             None
         }
     }
+    /// Append generated samples to this device's record, up to the scenario's cap.
+    pub fn record_samples(&mut self, samples: Vec<crate::record::SentSample>) {
+        let cap = self.shared.world.scenario.record_max_samples;
+        let dev = self.device;
+        let mut rec = self.shared.lock_record();
+        let r = rec.device_mut(dev);
+        let room = cap.saturating_sub(r.samples.len());
+        let n = samples.len();
+        r.samples.extend(samples.into_iter().take(room));
+        r.unrecorded += n.saturating_sub(room) as u64;
+    }
+
     /// Real seconds since simulation start of a true instant.
     pub fn sim_s(&self, at: Instant) -> f64 {
         at.saturating_duration_since(self.shared.t0).as_secs_f64()
@@ -193,6 +206,8 @@ pub(crate) trait Model: Send + 'static {
     /// Also called while unplugged, so time-driven state (a beam interruption, the CNC's
     /// trigger events) advances without a port.
     fn tick_unplugged(&mut self, _ctx: &mut Ctx) {}
+    /// Streaming (the SLCAN adapter: channel open), and at what rate.
+    fn activity(&self) -> (bool, u32);
     /// Bytes ending a command line.
     fn is_terminator(b: u8) -> bool {
         b == b'\n'
@@ -281,6 +296,7 @@ impl<M: Model> Runner<M> {
                 connected: false,
                 power_up: self.power_up,
                 faults: &mut faults,
+                device: M::DEVICE,
             };
             self.model.power_up(&mut ctx);
         }
@@ -358,11 +374,9 @@ impl<M: Model> Runner<M> {
     }
 
     fn rearm(&mut self) {
-        if let Some(p) = &mut self.pty {
-            if let Err(e) = p.rearm() {
-                tracing::warn!(device = M::DEVICE.name(), error = %e, "cannot re-register the pty; polling only");
-                self.readable_ok = false;
-            }
+        if let Some(Err(e)) = self.pty.as_mut().map(|p| p.rearm()) {
+            tracing::warn!(device = M::DEVICE.name(), error = %e, "cannot re-register the pty; polling only");
+            self.readable_ok = false;
         }
     }
 
@@ -389,6 +403,7 @@ impl<M: Model> Runner<M> {
                 connected: self.connected,
                 power_up: self.power_up,
                 faults: &mut faults,
+                device: M::DEVICE,
             };
             if plugged {
                 for l in &lines {
@@ -410,7 +425,29 @@ impl<M: Model> Runner<M> {
             self.pending.extend_from_slice(&out);
             self.flush();
         }
+        self.publish();
         got
+    }
+
+    /// Publish the device's state for [`crate::SimHandle::state`].
+    pub(crate) fn publish(&self) {
+        let (active, rate_hz) = self.model.activity();
+        let st = crate::DeviceState {
+            plugged: self.pty.is_some(),
+            host_connected: self.connected,
+            active: active && self.pty.is_some(),
+            rate_hz,
+            power_ups: self.power_up,
+        };
+        self.shared.states.send_if_modified(|all| {
+            let slot = &mut all[M::DEVICE as usize];
+            if *slot != st {
+                *slot = st;
+                true
+            } else {
+                false
+            }
+        });
     }
 
     fn flush(&mut self) {
@@ -451,11 +488,14 @@ impl<M: Model> Runner<M> {
             match ev {
                 Ev::Ctl(Some(Control::Unplug(ack))) => {
                     self.unplug();
+                    self.publish();
                     let _ = ack.send(());
                 }
                 Ev::Ctl(Some(Control::Replug(ack))) => {
                     self.unplug_silently();
-                    let _ = ack.send(self.plug());
+                    let r = self.plug();
+                    self.publish();
+                    let _ = ack.send(r);
                 }
                 Ev::Ctl(Some(Control::Shutdown(ack))) => {
                     self.unplug_silently();

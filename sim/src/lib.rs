@@ -11,13 +11,40 @@
 //! | `Psd` | `<dir>/psd2` | PSD-2 SCPI and `D,` lines |
 //! | `Trigger` | `<dir>/slcan` | SLCAN adapter carrying the CNC's trigger frames |
 //!
-//! The host opens the link like a serial port. Each device comes up in its power-up state
-//! (not streaming, 10 Hz) and must be configured by the host.
+//! The host opens a link like a serial port (the baud rate is ignored). Each device comes up
+//! in its power-up state: not streaming, 10 Hz (the data sheet's common default, also for the
+//! CB-3, whose `RATE` accepts only 100–20000), clock and sequence at the scenario's start
+//! values; the host must configure it. Every byte is written by the `protocol` crate's
+//! encoders; commands are parsed by its command parsers.
 //!
-//! The CNC program (moves, dwells, trigger frames) starts as the scenario says
-//! ([`ProgramStart`]): by default only when [`SimHandle::start_program`] is called, so a
-//! caller can first wait until its drivers stream; [`SimHandle::program_done`] resolves after
-//! the program-end frame.
+//! # Timing
+//! Each streaming device has its own clock running `clock_ppm` fast against true time. Every
+//! `batch_ms` (2 ms) a device writes, in one write, all samples its clock says are due, each
+//! evaluated at its own instant, so rates up to LI-80 10 kHz, CB-3 20 kHz and PSD-2 1 kHz hold
+//! at once. While no host has a port open the device writes nothing (the samples are recorded
+//! as [`Fate::NotConnected`]); a host that stops reading loses samples beyond 256 KiB
+//! ([`Fate::Overflow`]).
+//!
+//! # The program
+//! The CNC program (moves, dwells, trigger frames `4`, then per pose `1`, `2`, `3`, then `5`)
+//! starts as the scenario says ([`ProgramStart`]): by default only when
+//! [`SimHandle::start_program`] is called, so a caller can first wait until its drivers
+//! stream; `on_can_open` starts it when the host opens the SLCAN channel (`O`), `after_delay`
+//! on its own. [`SimHandle::program_done`] resolves after the program-end frame.
+//! Timed faults (beam interruptions, unplugs) count from the program start.
+//!
+//! # The physics
+//! See [`physics`]: machine position along an S-shaped move profile, damped ringing after each
+//! exact stop, the X axis deviation from `metrology::axis_model::AxisModel` (one random draw
+//! per visit, since repeatability belongs to the positioning), the LI-80's reading in air
+//! (`raw = n·L20/(1 − α(T_mat − 20))`, so the host's `raw/n` and material compensation give
+//! the 20 °C length back), the CapBall error from a [`CapballTruth`] through the sensors'
+//! directions, offsets and inverse polynomials to 24-bit codes, and the PSD spot from
+//! straightness polynomials to photocurrents. Slow effects run `time_scale` times faster.
+//! The true values per pose are in [`Record::truth`].
+//!
+//! Not modelled: the LI-80 over-speed flag (bit 2 is never set). `$ENV` lines have their own
+//! sequence counter, independent of `$POS`.
 //!
 //! ```no_run
 //! # async fn demo() -> Result<(), sim::SimError> {
@@ -35,7 +62,7 @@
 
 mod device;
 mod devices;
-mod physics;
+pub mod physics;
 mod pty;
 pub mod record;
 pub mod scenario;
@@ -130,6 +157,21 @@ pub enum SimError {
     Stopped(&'static str),
 }
 
+/// What a device is doing, as seen from the device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct DeviceState {
+    /// The device is plugged in (its link exists).
+    pub plugged: bool,
+    /// A host has its port open.
+    pub host_connected: bool,
+    /// Streaming samples (the SLCAN adapter: CAN channel open with `O`).
+    pub active: bool,
+    /// The configured sample rate, Hz (0 for the SLCAN adapter).
+    pub rate_hz: u32,
+    /// Power-ups so far (1 after start, +1 per replug).
+    pub power_ups: u32,
+}
+
 /// Program state shared by the tasks.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct ProgramState {
@@ -142,6 +184,7 @@ pub(crate) struct Shared {
     pub world: World,
     pub t0: Instant,
     pub program: watch::Sender<ProgramState>,
+    pub states: watch::Sender<[DeviceState; 4]>,
     record: Mutex<Record>,
     controls: Vec<mpsc::Sender<Control>>,
     runtime: tokio::runtime::Handle,
@@ -238,6 +281,7 @@ impl Sim {
             world,
             t0: Instant::now(),
             program,
+            states: watch::channel([DeviceState::default(); 4]).0,
             record: Mutex::new(Record::default()),
             controls: senders,
             runtime: runtime.clone(),
@@ -267,8 +311,8 @@ impl Sim {
     }
 }
 
-/// A running simulation. Dropping it without [`SimHandle::shutdown`] leaves the tasks running
-/// until the runtime ends.
+/// A running simulation. Dropping it aborts the devices; [`SimHandle::shutdown`] stops them in
+/// order.
 pub struct SimHandle {
     shared: Arc<Shared>,
     ports: Vec<PathBuf>,
@@ -318,6 +362,21 @@ impl SimHandle {
         self.shared.control(d, Control::Replug).await?
     }
 
+    /// What a device is doing now.
+    pub fn state(&self, d: Device) -> DeviceState {
+        self.shared.states.borrow()[d.index()]
+    }
+
+    /// Resolves once every device in `devices` is active: streaming, or for
+    /// [`Device::Trigger`] its CAN channel open. What `metrolog demo` waits for before
+    /// [`SimHandle::start_program`].
+    pub async fn wait_active(&self, devices: &[Device]) {
+        let mut rx = self.shared.states.subscribe();
+        let _ = rx
+            .wait_for(|s| devices.iter().all(|d| s[d.index()].active))
+            .await;
+    }
+
     /// Start the CNC program now (no effect if it already started).
     pub fn start_program(&self) {
         self.shared.start_program_at(Instant::now());
@@ -347,12 +406,27 @@ impl SimHandle {
     }
 
     /// Stop every device: ptys closed, links removed.
-    pub async fn shutdown(self) {
+    pub async fn shutdown(mut self) {
         for d in Device::ALL {
             let _ = self.shared.control(d, Control::Shutdown).await;
         }
-        for t in self.tasks {
+        for t in std::mem::take(&mut self.tasks) {
             let _ = t.await;
+        }
+    }
+}
+
+impl Drop for SimHandle {
+    /// Without [`SimHandle::shutdown`]: abort the device tasks (closing their ptys) and remove
+    /// the links.
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+        if !self.tasks.is_empty() {
+            for p in &self.ports {
+                let _ = std::fs::remove_file(p);
+            }
         }
     }
 }

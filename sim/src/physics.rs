@@ -160,6 +160,7 @@ fn invert3(m: &M3) -> Option<M3> {
         return None;
     }
     let mut r = [[0.0; 3]; 3];
+    #[allow(clippy::needless_range_loop)] // cofactor indices, clearer as numbers
     for i in 0..3 {
         for j in 0..3 {
             let (a, b) = ((j + 1) % 3, (j + 2) % 3);
@@ -463,10 +464,10 @@ fn draw_visits(s: &Scenario, rng: &mut ChaCha8Rng) -> Vec<AxisVisit> {
         } else {
             0.0
         };
-        if let Some((rate, mag)) = m.outliers() {
-            if rng.random_bool(rate.clamp(0.0, 1.0)) {
-                random_um += if rng.random_bool(0.5) { mag } else { -mag };
-            }
+        if let Some((rate, mag)) = m.outliers()
+            && rng.random_bool(rate.clamp(0.0, 1.0))
+        {
+            random_um += if rng.random_bool(0.5) { mag } else { -mag };
         }
         out.push(AxisVisit {
             target_index: idx,

@@ -57,6 +57,9 @@ pub struct DeviceRecord {
     pub power_ups: u32,
     /// `DATUM` commands, as real seconds since simulation start.
     pub datums_s: Vec<f64>,
+    /// Samples generated beyond the scenario's `record_max_samples` (counted, not kept; their
+    /// faults are still in `faults`).
+    pub unrecorded: u64,
 }
 
 impl DeviceRecord {

@@ -28,6 +28,10 @@ pub struct Scenario {
     /// clock says are due.
     #[serde(default = "two")]
     pub batch_ms: f64,
+    /// At most this many samples per device are kept in the record (a long `metrolog sim`
+    /// session at 20 kHz would otherwise grow it without bound); the rest are only counted.
+    #[serde(default = "record_cap")]
+    pub record_max_samples: usize,
     pub program: Program,
     #[serde(default)]
     pub ringing: Ringing,
@@ -47,6 +51,9 @@ pub struct Scenario {
     pub faults: Faults,
 }
 
+fn record_cap() -> usize {
+    1_000_000
+}
 fn one() -> f64 {
     1.0
 }
@@ -767,7 +774,11 @@ mod tests {
         for (i, p) in d.program.poses.iter().enumerate() {
             let dwell = p.dwell_s.unwrap_or(d.program.dwell_s);
             // Reversal points are not measured (dwell 0); every other pose holds 150 samples.
-            assert!(dwell == 0.0 || dwell >= settle + 0.150, "pose {}: dwell {dwell}", i + 1);
+            assert!(
+                dwell == 0.0 || dwell >= settle + 0.150,
+                "pose {}: dwell {dwell}",
+                i + 1
+            );
         }
     }
 
@@ -776,7 +787,10 @@ mod tests {
         let text = DEMO_TOML.replace("batch_ms = 2.0", "batch_ms = 2.0\nbatchms = 3.0");
         let e = Scenario::from_toml(&text).expect_err("unknown key");
         assert!(e.to_string().contains("batchms"), "{e}");
-        let text = DEMO_TOML.replace("sample_noise_nm = 15.0", "sample_noise_nm = 15.0\nnoise = 1.0");
+        let text = DEMO_TOML.replace(
+            "sample_noise_nm = 15.0",
+            "sample_noise_nm = 15.0\nnoise = 1.0",
+        );
         assert!(Scenario::from_toml(&text).is_err());
     }
 
@@ -810,7 +824,13 @@ mod tests {
 
     #[test]
     fn slow_quantity() {
-        let s = Slow { mean: 20.0, amplitude: 0.5, period_s: 100.0, phase_rad: 0.0, drift_per_h: 3.6 };
+        let s = Slow {
+            mean: 20.0,
+            amplitude: 0.5,
+            period_s: 100.0,
+            phase_rad: 0.0,
+            drift_per_h: 3.6,
+        };
         assert!((s.at(25.0) - (20.0 + 0.025 + 0.5)).abs() < 1e-12);
     }
 }

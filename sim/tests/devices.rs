@@ -103,7 +103,7 @@ fn li80_streams_at_rate_with_env_and_configured_drift() {
         });
     }
     // 1.5 s at 2 kHz.
-    assert!((2800..=3100).contains(&pos.len()), "{} samples", pos.len());
+    assert!((2700..=3100).contains(&pos.len()), "{} samples", pos.len());
     for w in pos.windows(2) {
         assert_eq!(w[1].seq, w[0].seq + 1);
         // 500 µs apart on the device clock (± rounding).
@@ -172,7 +172,7 @@ fn cb3_answers_stream_and_wraps() {
         .collect();
     // 20 kHz for about 1 s.
     assert!(
-        (18_000..=21_000).contains(&samples.len()),
+        (17_000..=21_000).contains(&samples.len()),
         "{} samples",
         samples.len()
     );
@@ -232,7 +232,7 @@ fn psd_scpi_errors_and_stream() {
             _ => None,
         })
         .collect();
-    assert!((900..=1050).contains(&data.len()), "{} lines", data.len());
+    assert!((850..=1050).contains(&data.len()), "{} lines", data.len());
     // Spot at home (z = 0): the straightness polynomials' constants, 12 µm and −5 µm.
     let n = data.len() as f64;
     let x = data
@@ -429,4 +429,107 @@ fn idle_devices_with_open_ports_do_not_spin() {
         ask(&mut *li, "*IDN?\n", ends_with(b"\r\n")),
         b"LI-80,LI80-SIM-0001,2.4.1\r\n"
     );
+}
+
+#[test]
+fn program_starts_when_the_can_channel_opens() {
+    let mut sc = quick();
+    sc.program.start = sim::ProgramStart::OnCanOpen;
+    sc.program.start_delay_s = 0.2;
+    let env = Env::start(sc);
+    let mut p = env.open(Device::Trigger);
+    ask(&mut *p, "S6\r", ends_with(b"\r"));
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(!env.sim().program_started());
+    assert_eq!(ask(&mut *p, "O\r", ends_with(b"\r")), b"\r");
+    assert!(env.sim().program_started());
+    let t = Instant::now();
+    let bytes = read_until(&mut *p, Duration::from_secs(2), |b| !b.is_empty());
+    // The program-start frame comes after the configured delay.
+    assert!(
+        t.elapsed() >= Duration::from_millis(180),
+        "{:?}",
+        t.elapsed()
+    );
+    assert!(
+        bytes.starts_with(b"t1818040000"),
+        "{:?}",
+        String::from_utf8_lossy(&bytes)
+    );
+    let done = env.rt.block_on(async {
+        tokio::time::timeout(Duration::from_secs(5), env.sim().program_done()).await
+    });
+    assert!(done.is_ok());
+}
+
+#[test]
+fn program_starts_after_a_delay_without_any_host() {
+    let mut sc = quick();
+    sc.program.start = sim::ProgramStart::AfterDelay;
+    sc.program.start_delay_s = 0.1;
+    let env = Env::start(sc);
+    let dur = env.sim().program_duration_s();
+    let t = Instant::now();
+    env.rt
+        .block_on(async {
+            tokio::time::timeout(Duration::from_secs(5), env.sim().program_done()).await
+        })
+        .unwrap();
+    let took = t.elapsed().as_secs_f64();
+    assert!(
+        took >= dur + 0.1 - 0.01 && took < dur + 0.1 + 0.6,
+        "{took} s for a {dur} s program"
+    );
+    let rec = env.sim().record();
+    // No host had the adapter open: every event is accounted for as not delivered.
+    assert_eq!(rec.trigger.events.len(), 2 + 3 * 2);
+    assert!(
+        rec.trigger
+            .events
+            .iter()
+            .all(|e| e.fate == sim::TriggerFate::ChannelClosed)
+    );
+}
+
+#[test]
+fn device_states_and_waiting_until_all_stream() {
+    let env = Env::start(quick());
+    let all = [
+        Device::Interferometer,
+        Device::Capball,
+        Device::Psd,
+        Device::Trigger,
+    ];
+    for d in all {
+        let st = env.sim().state(d);
+        assert!(
+            st.plugged && !st.active && st.power_ups == 1,
+            "{d:?}: {st:?}"
+        );
+        assert_eq!(st.rate_hz, if d == Device::Trigger { 0 } else { 10 });
+    }
+    let mut li = env.open(Device::Interferometer);
+    let mut cb = env.open(Device::Capball);
+    let mut psd = env.open(Device::Psd);
+    let mut tr = env.open(Device::Trigger);
+    ask(&mut *li, "RATE 500\n", ends_with(b"\r\n"));
+    send(&mut *li, "STREAM ON\n");
+    send(&mut *cb, "START\n");
+    send(&mut *psd, "INIT:CONT ON\n");
+    let waited = env.rt.block_on(async {
+        tokio::time::timeout(Duration::from_millis(300), env.sim().wait_active(&all)).await
+    });
+    assert!(waited.is_err(), "the CAN channel is still closed");
+    send(&mut *tr, "O\r");
+    let waited = env.rt.block_on(async {
+        tokio::time::timeout(Duration::from_secs(2), env.sim().wait_active(&all)).await
+    });
+    assert!(waited.is_ok());
+    let st = env.sim().state(Device::Interferometer);
+    assert!(
+        st.host_connected && st.active && st.rate_hz == 500,
+        "{st:?}"
+    );
+    env.rt.block_on(env.sim().unplug(Device::Psd)).unwrap();
+    assert!(!env.sim().state(Device::Psd).plugged);
 }

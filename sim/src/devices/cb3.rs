@@ -159,6 +159,10 @@ impl Cb3 {
 impl Model for Cb3 {
     const DEVICE: Device = Device::Capball;
 
+    fn activity(&self) -> (bool, u32) {
+        (self.stream.is_some(), self.rate_hz)
+    }
+
     fn power_up(&mut self, _ctx: &mut Ctx) {
         self.rate_hz = POWER_UP_RATE_HZ as u32;
         self.stream = None;
@@ -207,7 +211,7 @@ impl Model for Cb3 {
         }
         self.stream = Some(cad);
         if !samples.is_empty() {
-            ctx.shared.lock_record().capball.samples.extend(samples);
+            ctx.record_samples(samples);
         }
     }
 }

@@ -281,6 +281,10 @@ fn corrupt_digit(line: &mut [u8], ctx: &mut Ctx) {
 impl Model for Li80 {
     const DEVICE: Device = Device::Interferometer;
 
+    fn activity(&self) -> (bool, u32) {
+        (self.stream.is_some(), self.rate_hz)
+    }
+
     fn power_up(&mut self, ctx: &mut Ctx) {
         self.rate_hz = POWER_UP_RATE_HZ as u32;
         self.stream = None;
@@ -372,11 +376,7 @@ impl Model for Li80 {
         }
         self.stream = Some(cad);
         if !samples.is_empty() {
-            ctx.shared
-                .lock_record()
-                .interferometer
-                .samples
-                .extend(samples);
+            ctx.record_samples(samples);
         }
     }
 

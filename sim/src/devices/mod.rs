@@ -17,6 +17,7 @@ use crate::{Device, Shared, SimError};
 /// Default rate of every streaming device after power-up (instruments.md, common rules).
 pub(crate) const POWER_UP_RATE_HZ: f64 = 10.0;
 
+#[allow(clippy::too_many_arguments)] // one call site per device, all arguments distinct
 fn start<M: Model>(
     model: M,
     shared: Arc<Shared>,
@@ -29,6 +30,7 @@ fn start<M: Model>(
 ) -> Result<tokio::task::JoinHandle<()>, SimError> {
     let mut r = Runner::new(model, shared, link, rng, ppm, start_us);
     r.plug()?;
+    r.publish();
     Ok(rt.spawn(r.run(ctl)))
 }
 

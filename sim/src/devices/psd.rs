@@ -165,6 +165,10 @@ impl Psd2 {
 impl Model for Psd2 {
     const DEVICE: Device = Device::Psd;
 
+    fn activity(&self) -> (bool, u32) {
+        (self.stream.is_some(), self.rate_hz)
+    }
+
     fn power_up(&mut self, _ctx: &mut Ctx) {
         self.rate_hz = POWER_UP_RATE_HZ as u32;
         self.stream = None;
@@ -237,7 +241,7 @@ impl Model for Psd2 {
         }
         self.stream = Some(cad);
         if !samples.is_empty() {
-            ctx.shared.lock_record().psd.samples.extend(samples);
+            ctx.record_samples(samples);
         }
     }
 }

@@ -113,6 +113,10 @@ impl Slcan {
 impl Model for Slcan {
     const DEVICE: Device = Device::Trigger;
 
+    fn activity(&self) -> (bool, u32) {
+        (self.open, 0)
+    }
+
     fn power_up(&mut self, _ctx: &mut Ctx) {
         self.open = false;
         self.bitrate = None;

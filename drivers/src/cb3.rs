@@ -89,8 +89,8 @@ impl Device for Cb3 {
     fn idle_timeout(&self) -> Duration {
         crate::li80::idle_timeout(self.cfg.rate_hz)
     }
-    fn stop_line(&self) -> &'static str {
-        "STOP\n"
+    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
+        link.expect(self, "STOP\n", is_ok).await.map(drop)
     }
 
     async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
@@ -117,5 +117,13 @@ pub fn spawn(
     let acq = Acq::new(Instrument::Capball, &cfg.port, 16, 32, clock, tx);
     let poly = cfg.poly.map(|c| CapBallPoly { c });
     let transform = CapBallTransform { t: cfg.transform };
-    tokio::spawn(crate::link::run(Cb3 { cfg, acq, poly, transform }, cancel))
+    tokio::spawn(crate::link::run(
+        Cb3 {
+            cfg,
+            acq,
+            poly,
+            transform,
+        },
+        cancel,
+    ))
 }

@@ -5,10 +5,16 @@
 //! scheduler, the driver reading in batches). A least-squares fit through all points would be
 //! pulled up and tilted by those delays, so the fit is made through the *lower envelope*: the
 //! device time axis is cut into windows, the point of least delay of each window is kept (the
-//! sample that waited least), and a straight line `h = h0 + 1000·(d − d0) + a + c·(d − d0)` is
-//! fitted by least squares through those minima, after trimming the minima that lie far above
-//! the line (windows in which every sample was delayed, e.g. by a stall). The slope excess `c`
-//! (ns per µs) gives the drift: the device clock runs `1000/(1000 + c) − 1` fast.
+//! sample that waited least), and the straight line `h = h0 + 1000·(d − d0) + a + c·(d − d0)`
+//! is the one under all those minima that lies highest at their mean (the linear-programming
+//! estimate of Moon et al. 1999: an edge of their lower convex hull). Windows in which every
+//! sample was delayed (a stall) lie above it and do not matter. The slope excess `c` (ns per
+//! µs) gives the drift: the device clock runs `1000/(1000 + c) − 1` fast.
+//!
+//! Why not least squares through the minima: on a loaded host the minimum delay of a window
+//! is itself noisy and skewed (whether a read happened just after a device write), and a
+//! least-squares line follows that noise; the envelope only needs the few least-delayed
+//! windows near either end of the run.
 //!
 //! Device clocks wrap (CB-3 `t_us` is u32) and sequence numbers wrap (u16, u32): [`Unwrap`]
 //! extends them to u64 before anything is fitted or counted.
@@ -108,29 +114,9 @@ impl ClockFit {
         if self.minima.len() < MIN_WINDOWS {
             return;
         }
-        let Some(first) = least_squares(self.minima.iter().copied()) else {
-            return;
-        };
-        // Trim minima lying far above the line: windows in which every sample was delayed.
-        let mut res: Vec<f64> = self
-            .minima
-            .iter()
-            .map(|&(x, r)| r - (first.0 + first.1 * x))
-            .collect();
-        res.sort_by(f64::total_cmp);
-        let med = res[res.len() / 2];
-        let mut dev: Vec<f64> = res.iter().map(|e| (e - med).abs()).collect();
-        dev.sort_by(f64::total_cmp);
-        // 1.4826·MAD estimates σ for normal scatter; floor at 2 µs so a very clean link does
-        // not trim honest points.
-        let sigma = (1.4826 * dev[dev.len() / 2]).max(2_000.0);
-        let limit = med + 4.0 * sigma;
-        let kept = self
-            .minima
-            .iter()
-            .copied()
-            .filter(|&(x, r)| r - (first.0 + first.1 * x) <= limit);
-        self.line = least_squares(kept).or(Some(first));
+        if let Some(line) = lower_envelope_line(self.minima.make_contiguous()) {
+            self.line = Some(line);
+        }
     }
 
     /// Device time mapped onto the host axis, ns, once the fit has [`MIN_WINDOWS`] windows.
@@ -151,28 +137,44 @@ impl ClockFit {
     }
 }
 
-/// Least-squares line `r = a + c·x` through the points, centred for precision.
-fn least_squares(points: impl Iterator<Item = (f64, f64)> + Clone) -> Option<(f64, f64)> {
-    let (mut n, mut sx, mut sr) = (0.0, 0.0, 0.0);
-    for (x, r) in points.clone() {
-        n += 1.0;
-        sx += x;
-        sr += r;
-    }
-    if n < 2.0 {
+/// The line under all `points` (sorted by x) that lies highest at their mean x: the
+/// linear-programming estimate of Moon, Skelly and Towsley (1999, "Estimation and removal of
+/// clock skew from network delay measurements"): minimise `Σ (r_i − a − c·x_i)` subject to
+/// `r_i ≥ a + c·x_i`. Delays are never negative, so the true line lies under every point; the
+/// optimum is the edge of the lower convex hull that spans the mean x. It uses the
+/// least-delayed points only, so the heavy tail of the delays does not bias it, and a window
+/// in which everything was delayed simply does not touch the hull.
+fn lower_envelope_line(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+    if points.len() < 2 {
         return None;
     }
-    let (mx, mr) = (sx / n, sr / n);
-    let (mut sxx, mut sxr) = (0.0, 0.0);
-    for (x, r) in points {
-        sxx += (x - mx) * (x - mx);
-        sxr += (x - mx) * (r - mr);
+    // Andrew's monotone chain, lower half (points arrive sorted by device time).
+    let mut hull: Vec<(f64, f64)> = Vec::with_capacity(points.len());
+    for &p in points {
+        while hull.len() >= 2 {
+            let (o, a) = (hull[hull.len() - 2], hull[hull.len() - 1]);
+            let cross = (a.0 - o.0) * (p.1 - o.1) - (a.1 - o.1) * (p.0 - o.0);
+            if cross <= 0.0 {
+                hull.pop();
+            } else {
+                break;
+            }
+        }
+        if hull.last().is_none_or(|l| p.0 > l.0) {
+            hull.push(p);
+        } else if let Some(l) = hull.last_mut()
+            && p.1 < l.1
+        {
+            *l = p;
+        }
     }
-    if sxx <= 0.0 {
-        return None;
-    }
-    let c = sxr / sxx;
-    Some((mr - c * mx, c))
+    let mean_x = points.iter().map(|p| p.0).sum::<f64>() / points.len() as f64;
+    let edge = hull
+        .windows(2)
+        .find(|e| e[0].0 <= mean_x && mean_x <= e[1].0)?;
+    let (p, q) = (edge[0], edge[1]);
+    let c = (q.1 - p.1) / (q.0 - p.0);
+    c.is_finite().then_some((p.1 - c * p.0, c))
 }
 
 /// Extends a wrapping counter of `bits` bits (sequence number, device clock) to u64.
@@ -313,6 +315,28 @@ mod tests {
             worst < 60_000.0,
             "mapped time off the send time by {worst} ns"
         );
+    }
+
+    #[test]
+    fn recovers_drift_when_the_delay_floor_is_only_reached_now_and_then() {
+        // What a loaded host shows: samples are read in batches, and only now and then does a
+        // read fall right after a device write (delay < 50 µs); otherwise the least delay of a
+        // window is ~1.2 ms or more. Windows of 0.5 s often never reach the floor.
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let drift_ppm = -42.0;
+        let mut fit = ClockFit::default();
+        for i in 0..20_000u64 {
+            let t_s = i as f64 / 1000.0;
+            let dev_us = 4_294_000_000 + (t_s * 1e6 * (1.0 + drift_ppm * 1e-6)) as u64;
+            let delay_s = if rng.random_range(0.0..1.0) < 0.002 {
+                rng.random_range(0.0..50e-6)
+            } else {
+                1.2e-3 + rng.random_range(0.0..1.0f64).powi(3) * 10e-3
+            };
+            fit.push(dev_us, ((t_s + delay_s) * 1e9) as u64);
+        }
+        let est = fit.drift_ppm().unwrap();
+        assert!((est - drift_ppm).abs() < 2.0, "{est}");
     }
 
     #[test]

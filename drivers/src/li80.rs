@@ -133,8 +133,8 @@ impl Device for Li80 {
     fn idle_timeout(&self) -> Duration {
         idle_timeout(self.cfg.rate_hz)
     }
-    fn stop_line(&self) -> &'static str {
-        "STREAM OFF\n"
+    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
+        link.expect(self, "STREAM OFF\n", is_ok).await.map(drop)
     }
 
     async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {

@@ -24,7 +24,12 @@ const READ_BUF: usize = 64 * 1024;
 /// While streaming, a read that returned less than this lets the next read wait a little so
 /// that bytes accumulate: at 20 kHz the CB-3 otherwise wakes the driver for every frame.
 const BATCH_BYTES: usize = 2048;
-const BATCH_WAIT: Duration = Duration::from_millis(2);
+const BATCH_WAIT: Duration = Duration::from_millis(10);
+/// Every this many batched reads, one read waits for the next bytes without the batching
+/// pause: its arrival time is then the write time plus the wake-up latency only, which gives
+/// the clock fit ([`crate::clock`]) the least-delayed points it needs (a batched read dates
+/// everything in it by the read, up to `BATCH_WAIT` late).
+const PROBE_EVERY: u32 = 4;
 
 /// Why a session ended.
 #[derive(Debug)]
@@ -250,7 +255,7 @@ impl Acq {
     }
 
     pub(crate) fn set_rate(&mut self, rate_hz: u32) {
-        self.rate_per_us = (rate_hz > 0).then(|| rate_hz as f64 * 1e-6);
+        self.rate_per_us = (rate_hz > 0).then_some(rate_hz as f64 * 1e-6);
     }
 
     /// A new connection: the device may have restarted its sequence and clock.
@@ -423,8 +428,12 @@ pub(crate) trait Device: Handler + Send {
     fn new_decoder(&self) -> Self::Dec;
     /// Longest silence while streaming before the port is taken for lost.
     fn idle_timeout(&self) -> Duration;
-    /// The line that stops streaming, sent best-effort on cancellation.
-    fn stop_line(&self) -> &'static str;
+    /// Stop streaming and wait for the device's answer, handling every data line before it,
+    /// so a run that ends on purpose loses nothing the device sent.
+    fn stop(
+        &mut self,
+        link: &mut Link<Self::Dec>,
+    ) -> impl Future<Output = Result<(), SessionError>> + Send;
     /// Stop, identify, configure and start streaming; returns the identity string.
     fn setup(
         &mut self,
@@ -434,10 +443,12 @@ pub(crate) trait Device: Handler + Send {
 
 async fn stream<D: Device>(dev: &mut D, link: &mut Link<D::Dec>) -> Result<(), SessionError> {
     let idle = dev.idle_timeout();
+    let mut cycle = 0u32;
     loop {
         match tokio::time::timeout(idle, link.read_once(dev)).await {
             Ok(Ok(n)) => {
-                if n < BATCH_BYTES {
+                cycle = cycle.wrapping_add(1);
+                if n < BATCH_BYTES && !cycle.is_multiple_of(PROBE_EVERY) {
                     tokio::time::sleep(BATCH_WAIT).await;
                 }
                 dev.acq().tick(false);
@@ -491,8 +502,11 @@ pub(crate) async fn run<D: Device>(mut dev: D, cancel: CancellationToken) {
         };
         match result {
             Ok(()) | Err(SessionError::Cancelled) => {
-                let stop = dev.stop_line();
-                let _ = tokio::time::timeout(Duration::from_millis(200), link.send(stop)).await;
+                if let Err(SessionError::Device(m) | SessionError::Lost(m)) =
+                    dev.stop(&mut link).await
+                {
+                    tracing::warn!(port = %path, "stopping the stream: {m}");
+                }
                 break;
             }
             Err(SessionError::Lost(reason)) => {

@@ -55,7 +55,11 @@ impl Config {
     pub fn convert(&self, d: &DataLine) -> (f64, f64, f64, bool) {
         let sum_pa = (d.x1_pa as f64 + d.x2_pa as f64) + (d.y1_pa as f64 + d.y2_pa as f64);
         // Sums are integers: `sum ≥ min` ⇔ `sum ≥ ⌈min⌉`.
-        let min = if self.min_sum_pa.is_finite() { self.min_sum_pa.max(0.0).ceil() as u64 } else { u64::MAX };
+        let min = if self.min_sum_pa.is_finite() {
+            self.min_sum_pa.max(0.0).ceil() as u64
+        } else {
+            u64::MAX
+        };
         let (mut x, mut y) = match psd_position(d, min) {
             PsdReading::Valid { x_um, y_um } => (x_um, y_um),
             PsdReading::LowIntensity { .. } => return (f64::NAN, f64::NAN, sum_pa, false),
@@ -136,15 +140,21 @@ impl Device for Psd {
     fn idle_timeout(&self) -> Duration {
         crate::li80::idle_timeout(self.cfg.rate_hz)
     }
-    fn stop_line(&self) -> &'static str {
-        "INIT:CONT OFF\n"
+    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
+        link.send("INIT:CONT OFF\n").await?;
+        link.expect(self, "*OPC?\n", |a| a.trim() == "1")
+            .await
+            .map(drop)
     }
 
     async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
         if let Some(m) = &self.cfg.error_map
             && let Err(e) = m.validate()
         {
-            return Err(SessionError::Device(format!("port {}: PSD error map: {e}", self.acq.port)));
+            return Err(SessionError::Device(format!(
+                "port {}: PSD error map: {e}",
+                self.acq.port
+            )));
         }
         self.acq.set_rate(self.cfg.rate_hz);
         link.send("INIT:CONT OFF\n").await?;
@@ -196,11 +206,26 @@ mod tests {
     use protocol::convert::OutsideMap;
 
     fn cfg() -> Config {
-        Config { port: String::new(), baud: 921_600, rate_hz: 100, min_sum_pa: 1000.0, error_map: None, head: None }
+        Config {
+            port: String::new(),
+            baud: 921_600,
+            rate_hz: 100,
+            min_sum_pa: 1000.0,
+            error_map: None,
+            head: None,
+        }
     }
 
     fn line(x1: u64, x2: u64, y1: u64, y2: u64, head_mc: i32) -> DataLine {
-        DataLine { seq: 0, t_us: 0, x1_pa: x1, x2_pa: x2, y1_pa: y1, y2_pa: y2, head_mc }
+        DataLine {
+            seq: 0,
+            t_us: 0,
+            x1_pa: x1,
+            x2_pa: x2,
+            y1_pa: y1,
+            y2_pa: y2,
+            head_mc,
+        }
     }
 
     #[test]
@@ -234,7 +259,10 @@ mod tests {
             outside: OutsideMap::Error,
         });
         // 193 mm · 1.7 µm/(m·K) · 2 K = 0.6562 µm, subtracted along y.
-        c.head = Some(HeadCorrection { axis: PsdAxis::Y, t_ref_c: 20.0 });
+        c.head = Some(HeadCorrection {
+            axis: PsdAxis::Y,
+            t_ref_c: 20.0,
+        });
         // x = 5000·(2200−1800)/4000 = 500 → +5; y = 5000·(2300−1700)/4000 = 750 → +3 − 0.6562.
         let (x, y, _, ok) = c.convert(&line(1800, 2200, 1700, 2300, 22_000));
         assert!(ok);

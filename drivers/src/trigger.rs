@@ -117,8 +117,10 @@ impl Device for Slcan {
         // shows as a read error.
         Duration::from_secs(24 * 3600)
     }
-    fn stop_line(&self) -> &'static str {
-        "C\r"
+    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
+        link.expect(self, "C\r", |a| a == ACK || a == NACK)
+            .await
+            .map(drop)
     }
 
     async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {

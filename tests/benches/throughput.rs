@@ -24,7 +24,10 @@ const PSD_HZ: u64 = 1_000;
 const CHUNK_MS: u64 = 2;
 
 fn secs() -> u64 {
-    std::env::var("METROLOG_BENCH_SECS").ok().and_then(|s| s.parse().ok()).unwrap_or(15)
+    std::env::var("METROLOG_BENCH_SECS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(15)
 }
 
 fn device_main(dir: &str) {
@@ -32,12 +35,30 @@ fn device_main(dir: &str) {
     let dir = std::path::Path::new(dir);
     let p = Duration::from_millis(CHUNK_MS);
     let per = |hz: u64| hz * CHUNK_MS / 1000;
-    let li = FakeDevice::start(&dir.join("li80"), b'\n', li80_device(), li80_script(n * LI80_HZ, LI80_HZ, per(LI80_HZ)), p)
-        .expect("li80 pty");
-    let cb = FakeDevice::start(&dir.join("cb3"), b'\n', cb3_device(), cb3_script(n * CB3_HZ, CB3_HZ, per(CB3_HZ)), p)
-        .expect("cb3 pty");
-    let ps = FakeDevice::start(&dir.join("psd2"), b'\n', psd_device(), psd_script(n * PSD_HZ, PSD_HZ, per(PSD_HZ)), p)
-        .expect("psd pty");
+    let li = FakeDevice::start(
+        &dir.join("li80"),
+        b'\n',
+        li80_device(),
+        li80_script(n * LI80_HZ, LI80_HZ, per(LI80_HZ)),
+        p,
+    )
+    .expect("li80 pty");
+    let cb = FakeDevice::start(
+        &dir.join("cb3"),
+        b'\n',
+        cb3_device(),
+        cb3_script(n * CB3_HZ, CB3_HZ, per(CB3_HZ)),
+        p,
+    )
+    .expect("cb3 pty");
+    let ps = FakeDevice::start(
+        &dir.join("psd2"),
+        b'\n',
+        psd_device(),
+        psd_script(n * PSD_HZ, PSD_HZ, per(PSD_HZ)),
+        p,
+    )
+    .expect("psd pty");
     let deadline = Instant::now() + Duration::from_secs(n * 3 + 30);
     while !(li.script_done() && cb.script_done() && ps.script_done()) && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(50));
@@ -82,7 +103,20 @@ fn main() {
             std::thread::sleep(Duration::from_millis(10));
         }
     }
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
+    // The daemon's runtime: multi-threaded with 2 workers (METROLOG_BENCH_RT=current for a
+    // current-thread runtime).
+    let current = std::env::var("METROLOG_BENCH_RT").is_ok_and(|v| v == "current");
+    let rt = if current {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+    } else {
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+    }
+    .expect("runtime");
     rt.block_on(async {
         let (tx, mut rx) = tokio::sync::mpsc::channel(65_536);
         let cancel = CancellationToken::new();
@@ -128,8 +162,14 @@ fn main() {
         let mut connected = 0;
         let (mut t0, mut c0) = (Instant::now(), cpu_s());
         let deadline = Instant::now() + Duration::from_secs(n * 3 + 30);
-        while Instant::now() < deadline {
-            let Ok(Some(ev)) = tokio::time::timeout(Duration::from_secs(5), rx.recv()).await else { break };
+        let mut batch = Vec::with_capacity(1024);
+        'outer: while Instant::now() < deadline {
+            batch.clear();
+            let Ok(k) = tokio::time::timeout(Duration::from_secs(5), rx.recv_many(&mut batch, 1024)).await else { break };
+            if k == 0 {
+                break;
+            }
+            for ev in batch.drain(..) {
             match ev {
                 DriverEvent::Sample(s) => {
                     if matches!(s.values, SampleValues::Environment { .. }) {
@@ -142,7 +182,7 @@ fn main() {
                     e.next_seq = Some(s.seq + 1);
                     e.samples += 1;
                     if expected.iter().all(|(i, &n)| seen.get(i).is_some_and(|s| s.samples >= n)) {
-                        break;
+                        break 'outer;
                     }
                 }
                 DriverEvent::Connected { .. } => {
@@ -160,6 +200,7 @@ fn main() {
                 DriverEvent::Disconnected { reason, .. } => eprintln!("disconnected: {reason}"),
                 DriverEvent::Trigger(_) => {}
             }
+            }
         }
         let (wall, cpu) = (t0.elapsed().as_secs_f64(), cpu_s() - c0);
         cancel.cancel();
@@ -172,7 +213,10 @@ fn main() {
             }
         }
         let total: u64 = seen.values().map(|s| s.samples).sum();
-        println!("drivers end to end through ptys, {n} s of data: LI-80 {LI80_HZ} Hz + CB-3 {CB3_HZ} Hz + PSD-2 {PSD_HZ} Hz");
+        println!(
+            "drivers end to end through ptys, {n} s of data: LI-80 {LI80_HZ} Hz + CB-3 {CB3_HZ} Hz + PSD-2 {PSD_HZ} Hz ({} runtime)",
+            if current { "current-thread" } else { "2-worker" }
+        );
         let mut lost_any = false;
         for (i, &exp) in &expected {
             let s = seen.get(i).map_or(0, |s| s.samples);

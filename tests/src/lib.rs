@@ -30,7 +30,11 @@ pub fn pty() -> anyhow::Result<Pty> {
         tcsetattr(fd.as_fd(), SetArg::TCSANOW, &t).context("tcsetattr")?;
     }
     let path = nix::unistd::ttyname(r.slave.as_fd()).context("ttyname")?;
-    Ok(Pty { master: r.master, slave: r.slave, path })
+    Ok(Pty {
+        master: r.master,
+        slave: r.slave,
+        path,
+    })
 }
 
 /// Point the stable `link` at `target` (atomically: a udev rule re-pointing a symlink).
@@ -69,7 +73,10 @@ impl FakeDevice {
     ) -> anyhow::Result<FakeDevice> {
         let p = pty()?;
         let flags = OFlag::from_bits_truncate(fcntl(p.master.as_fd(), FcntlArg::F_GETFL)?);
-        fcntl(p.master.as_fd(), FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+        fcntl(
+            p.master.as_fd(),
+            FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK),
+        )?;
         point_link(link, &p.path)?;
         let stop = Arc::new(AtomicBool::new(false));
         let done = Arc::new(AtomicBool::new(false));
@@ -121,7 +128,13 @@ impl FakeDevice {
             drop(slave);
             drop(master);
         });
-        Ok(FakeDevice { stop, done, handle: Some(handle), commands, link: link.to_path_buf() })
+        Ok(FakeDevice {
+            stop,
+            done,
+            handle: Some(handle),
+            commands,
+            link: link.to_path_buf(),
+        })
     }
 
     /// Whether every chunk of the script has been written.
@@ -185,7 +198,9 @@ impl Collected {
 
     /// Samples of the main stream (LI-80 `$POS`, CB-3, PSD), without `$ENV`.
     pub fn stream(&self) -> impl Iterator<Item = &Sample> {
-        self.samples.iter().filter(|s| !matches!(s.values, drivers::SampleValues::Environment { .. }))
+        self.samples
+            .iter()
+            .filter(|s| !matches!(s.values, drivers::SampleValues::Environment { .. }))
     }
 }
 
@@ -275,7 +290,11 @@ pub mod fake {
                 "*IDN?" => out.extend_from_slice(b"PSD-2,777,2.1\n"),
                 "*OPC?" => out.extend_from_slice(b"1\n"),
                 "SYST:ERR?" => {
-                    let (code, text) = if err.is_empty() { (0, "No error") } else { err.remove(0) };
+                    let (code, text) = if err.is_empty() {
+                        (0, "No error")
+                    } else {
+                        err.remove(0)
+                    };
                     out.extend_from_slice(format!("{code},\"{text}\"\n").as_bytes());
                 }
                 "INIT:CONT ON" => return Some(true),

@@ -96,30 +96,59 @@ async fn python_can_slcan_frames_are_read_by_our_trigger_driver() {
 
     let (tx, mut rx) = tokio::sync::mpsc::channel(1000);
     let cancel = CancellationToken::new();
-    let cfg = drivers::trigger::SlcanConfig { port: link.display().to_string(), can_id: 0x181 };
+    let cfg = drivers::trigger::SlcanConfig {
+        port: link.display().to_string(),
+        can_id: 0x181,
+    };
     let task = drivers::trigger::spawn_slcan(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
-    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c.connected.is_empty()).await, "{:?}", c.errors);
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c
+            .connected
+            .is_empty())
+        .await,
+        "{:?}",
+        c.errors
+    );
 
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/python/slcan_peer.py");
     let py_path = py_side.path.clone();
-    let out = tokio::task::spawn_blocking(move || std::process::Command::new("python3").arg(script).arg(&py_path).output())
-        .await
-        .unwrap()
-        .expect("python3 must be installed (with python-can: pip install python-can)");
-    assert!(out.status.success(), "python-can peer failed: {}", String::from_utf8_lossy(&out.stderr));
+    let out = tokio::task::spawn_blocking(move || {
+        std::process::Command::new("python3")
+            .arg(script)
+            .arg(&py_path)
+            .output()
+    })
+    .await
+    .unwrap()
+    .expect("python3 must be installed (with python-can: pip install python-can)");
+    assert!(
+        out.status.success(),
+        "python-can peer failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let sent = report["sent"].as_array().unwrap().clone();
     assert_eq!(sent.len(), 18);
 
-    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| c.triggers.len() >= sent.len()).await);
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| c
+            .triggers
+            .len()
+            >= sent.len())
+        .await
+    );
     tokio::time::sleep(Duration::from_millis(200)).await;
     finish(cancel, task, &mut rx, &mut c).await;
     stop.store(true, Ordering::Relaxed);
     let ours = relay.join().unwrap();
     assert_eq!(&ours[..3], ["C", "S6", "O"]);
 
-    assert_eq!(c.triggers.len(), sent.len(), "frames of other ids or extended frames must be ignored");
+    assert_eq!(
+        c.triggers.len(),
+        sent.len(),
+        "frames of other ids or extended frames must be ignored"
+    );
     for (t, s) in c.triggers.iter().zip(&sent) {
         let event = serde_json::to_value(t.event).unwrap();
         let code = match event.as_str().unwrap() {
@@ -139,4 +168,62 @@ async fn python_can_slcan_frames_are_read_by_our_trigger_driver() {
     assert_eq!(k.samples, sent.len() as u64);
     assert_eq!(k.rejections.get(&RejectKind::BadLength), Some(&1), "{k:?}");
     assert_eq!(k.rejections.values().sum::<u64>(), 1);
+}
+
+/// The other direction: python-can's `slcan` interface as the host of our simulated adapter.
+/// python-can sends its own open sequence (`C`, `S6`, `O`); the scenario starts the CNC program
+/// when the channel opens; every trigger frame the simulation sent must reach python-can with
+/// the payload of the data sheet (packed here by hand, little-endian).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn python_can_host_reads_the_simulated_slcan_adapter() {
+    hil::init_tracing();
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = sim::Scenario::demo();
+    sc.program.poses.truncate(3);
+    sc.program.move_s = 0.05;
+    sc.program.dwell_s = 0.1;
+    sc.program.start = sim::ProgramStart::OnCanOpen;
+    sc.program.start_delay_s = 0.3;
+    let sim = sim::Sim::start(sc, dir.path()).unwrap();
+    let port = sim.port(sim::Device::Trigger);
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/python/slcan_host.py");
+    let out = tokio::task::spawn_blocking(move || {
+        std::process::Command::new("python3")
+            .arg(script)
+            .arg(&port)
+            .arg("20")
+            .output()
+    })
+    .await
+    .unwrap()
+    .expect("python3 must be installed (with python-can: pip install python-can)");
+    assert!(
+        out.status.success(),
+        "python-can host failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let frames: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+    let rec = sim.record();
+    let sent: Vec<_> = rec
+        .trigger
+        .events
+        .iter()
+        .filter(|e| e.fate == sim::TriggerFate::Sent)
+        .collect();
+    assert_eq!(
+        sent.len(),
+        2 + 3 * 3,
+        "program start, 3 poses × 3 events, program end"
+    );
+    assert_eq!(frames.len(), sent.len(), "{frames:?}");
+    for (f, s) in frames.iter().zip(&sent) {
+        assert_eq!(f["id"].as_u64(), Some(0x181));
+        assert_eq!(f["extended"].as_bool(), Some(false));
+        let mut want = vec![s.event as u8, 0];
+        want.extend_from_slice(&s.pose.to_le_bytes());
+        want.extend_from_slice(&s.nc_ms.to_le_bytes());
+        let want: String = want.iter().map(|b| format!("{b:02x}")).collect();
+        assert_eq!(f["data"].as_str(), Some(want.as_str()));
+    }
+    sim.shutdown().await;
 }

@@ -85,7 +85,8 @@ async fn cb3_values_wraps_and_fault_counts() {
         }
     }
     chunks.push(chunk);
-    let dev = FakeDevice::start(&link, b'\n', cb3_device(), chunks, Duration::from_millis(2)).unwrap();
+    let dev =
+        FakeDevice::start(&link, b'\n', cb3_device(), chunks, Duration::from_millis(2)).unwrap();
 
     let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
     let cancel = CancellationToken::new();
@@ -93,14 +94,31 @@ async fn cb3_values_wraps_and_fault_counts() {
         port: link.display().to_string(),
         rate_hz: 20_000,
         poly: [[10.0, 0.0, 0.0], [10.0, 0.5, 0.0], [10.0, 0.0, 0.0]],
-        transform: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+        transform: [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
     };
     let task = drivers::cb3::spawn(cfg, HostClock::new(), tx, cancel.clone());
-    let lost: BTreeSet<u64> = dropped.union(&bad_crc).chain(truncated.iter()).copied().collect();
+    let lost: BTreeSet<u64> = dropped
+        .union(&bad_crc)
+        .chain(truncated.iter())
+        .copied()
+        .collect();
     let expected = N - lost.len() as u64;
     let mut c = Collected::default();
-    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| c.samples.len() as u64 >= expected).await;
-    assert!(ok, "got {} of {expected} samples; errors {:?}", c.samples.len(), c.errors);
+    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| {
+        c.samples.len() as u64 >= expected
+    })
+    .await;
+    assert!(
+        ok,
+        "got {} of {expected} samples; errors {:?}",
+        c.samples.len(),
+        c.errors
+    );
     tokio::time::sleep(Duration::from_millis(100)).await;
     finish(cancel, task, &mut rx, &mut c).await;
     drop(dev);
@@ -112,13 +130,29 @@ async fn cb3_values_wraps_and_fault_counts() {
     let first = &c.samples[0];
     for (s, &i) in c.samples.iter().zip(&sent) {
         assert_eq!(s.seq - first.seq, i, "unwrapped sequence");
-        assert_eq!(s.device_t_us - first.device_t_us, i * 50, "unwrapped device clock");
-        let SampleValues::Capball { volts, d_um, e_um, flags } = &s.values else { panic!("{s:?}") };
+        assert_eq!(
+            s.device_t_us - first.device_t_us,
+            i * 50,
+            "unwrapped device clock"
+        );
+        let SampleValues::Capball {
+            volts,
+            d_um,
+            e_um,
+            flags,
+        } = &s.values
+        else {
+            panic!("{s:?}")
+        };
         let codes = cb3_codes(i);
         for k in 0..3 {
             let v = codes[k] as f64 * 10.0 / 8_388_608.0;
             assert!((volts[k] - v).abs() < 1e-12);
-            let d = if k == 1 { 10.0 * v + 0.5 * v * v } else { 10.0 * v };
+            let d = if k == 1 {
+                10.0 * v + 0.5 * v * v
+            } else {
+                10.0 * v
+            };
             assert!((d_um[k] - d).abs() < 1e-9 && (e_um[k] - d).abs() < 1e-9);
         }
         assert_eq!(s.valid, !over_range.contains(&i));
@@ -130,7 +164,11 @@ async fn cb3_values_wraps_and_fault_counts() {
     assert_eq!(k.samples, sent.len() as u64);
     assert_eq!(k.invalid, over_range.len() as u64);
     assert_eq!(k.rejections.get(&RejectKind::BadCrc), Some(&1), "{k:?}");
-    assert_eq!(total_rejections(&k), (garbage_before.len() + bad_crc.len() + truncated.len()) as u64, "{k:?}");
+    assert_eq!(
+        total_rejections(&k),
+        (garbage_before.len() + bad_crc.len() + truncated.len()) as u64,
+        "{k:?}"
+    );
     assert_eq!((k.dropped, k.resyncs, k.reconnects), (0, 0, 0));
 }
 
@@ -148,7 +186,11 @@ async fn psd_values_gating_and_bad_lines() {
     let mut chunks = Vec::new();
     let mut chunk = Vec::new();
     let currents = |i: u64| -> [u64; 4] {
-        if (300..320).contains(&i) { [10, 12, 9, 11] } else { [1000 + i, 3000 - i, 2000, 2000 + 2 * i] }
+        if (300..320).contains(&i) {
+            [10, 12, 9, 11]
+        } else {
+            [1000 + i, 3000 - i, 2000, 2000 + 2 * i]
+        }
     };
     for i in 0..N {
         let [x1, x2, y1, y2] = currents(i);
@@ -173,7 +215,8 @@ async fn psd_values_gating_and_bad_lines() {
         }
     }
     chunks.push(chunk);
-    let dev = FakeDevice::start(&link, b'\n', psd_device(), chunks, Duration::from_millis(5)).unwrap();
+    let dev =
+        FakeDevice::start(&link, b'\n', psd_device(), chunks, Duration::from_millis(5)).unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
     let cancel = CancellationToken::new();
     let cfg = drivers::psd::Config {
@@ -188,22 +231,46 @@ async fn psd_values_gating_and_bad_lines() {
     let lost: BTreeSet<u64> = bad_field_count.union(&unparsable).copied().collect();
     let expected = N - lost.len() as u64;
     let mut c = Collected::default();
-    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| c.samples.len() as u64 >= expected).await;
-    assert!(ok, "got {} of {expected}; errors {:?}", c.samples.len(), c.errors);
+    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| {
+        c.samples.len() as u64 >= expected
+    })
+    .await;
+    assert!(
+        ok,
+        "got {} of {expected}; errors {:?}",
+        c.samples.len(),
+        c.errors
+    );
     finish(cancel, task, &mut rx, &mut c).await;
     tokio::time::sleep(Duration::from_millis(100)).await;
     let cmds = dev.commands.lock().unwrap().clone();
     drop(dev);
     assert_eq!(
         cmds,
-        ["INIT:CONT OFF", "*OPC?", "SYST:ERR?", "*IDN?", "CONF:RATE 1000", "SYST:ERR?", "INIT:CONT ON", "*OPC?", "INIT:CONT OFF"]
+        [
+            "INIT:CONT OFF",
+            "*OPC?",
+            "SYST:ERR?",
+            "*IDN?",
+            "CONF:RATE 1000",
+            "SYST:ERR?",
+            "INIT:CONT ON",
+            "*OPC?",
+            "INIT:CONT OFF",
+            "*OPC?"
+        ]
     );
     let sent: Vec<u64> = (0..N).filter(|i| !lost.contains(i)).collect();
     assert_eq!(c.samples.len(), sent.len());
     let s0 = c.samples[0].seq;
     for (s, &i) in c.samples.iter().zip(&sent) {
         assert_eq!(s.seq - s0, i, "sequence unwrapped across the u32 wrap");
-        let SampleValues::Psd { x_um, y_um, head_c, .. } = s.values else { panic!() };
+        let SampleValues::Psd {
+            x_um, y_um, head_c, ..
+        } = s.values
+        else {
+            panic!()
+        };
         let [x1, x2, y1, y2] = currents(i).map(|v| v as f64);
         assert_eq!(s.valid, !blocked.contains(&i));
         if s.valid {
@@ -224,7 +291,8 @@ async fn psd_rate_refused_is_reported_with_port_command_and_answer() {
     hil::init_tracing();
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("psd2");
-    let _dev = FakeDevice::start(&link, b'\n', psd_device(), vec![], Duration::from_millis(5)).unwrap();
+    let _dev =
+        FakeDevice::start(&link, b'\n', psd_device(), vec![], Duration::from_millis(5)).unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(1000);
     let cancel = CancellationToken::new();
     let cfg = drivers::psd::Config {
@@ -237,10 +305,20 @@ async fn psd_rate_refused_is_reported_with_port_command_and_answer() {
     };
     let task = drivers::psd::spawn(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
-    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c.errors.is_empty()).await);
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c
+            .errors
+            .is_empty())
+        .await
+    );
     finish(cancel, task, &mut rx, &mut c).await;
     let e = &c.errors[0];
-    assert!(e.contains(&link.display().to_string()) && e.contains("CONF:RATE 5000") && e.contains("-222"), "{e}");
+    assert!(
+        e.contains(&link.display().to_string())
+            && e.contains("CONF:RATE 5000")
+            && e.contains("-222"),
+        "{e}"
+    );
     assert!(c.connected.is_empty() && c.samples.is_empty());
 }
 
@@ -249,21 +327,41 @@ async fn silent_device_gets_a_clear_error() {
     hil::init_tracing();
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("cb3");
-    let _dev = FakeDevice::start(&link, b'\n', Box::new(|_, _| None), vec![], Duration::from_millis(5)).unwrap();
+    let _dev = FakeDevice::start(
+        &link,
+        b'\n',
+        Box::new(|_, _| None),
+        vec![],
+        Duration::from_millis(5),
+    )
+    .unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(1000);
     let cancel = CancellationToken::new();
     let cfg = drivers::cb3::Config {
         port: link.display().to_string(),
         rate_hz: 1000,
         poly: [[10.0, 0.0, 0.0]; 3],
-        transform: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+        transform: [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
     };
     let task = drivers::cb3::spawn(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
-    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c.errors.is_empty()).await);
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c
+            .errors
+            .is_empty())
+        .await
+    );
     finish(cancel, task, &mut rx, &mut c).await;
     let e = &c.errors[0];
-    assert!(e.contains(&link.display().to_string()) && e.contains("no answer to `STOP`"), "{e}");
+    assert!(
+        e.contains(&link.display().to_string()) && e.contains("no answer to `STOP`"),
+        "{e}"
+    );
 }
 
 /// CB-3 script of `n` samples with seq and clock from 0 (a fresh power-up).
@@ -271,7 +369,12 @@ fn cb3_script(n: u64) -> Vec<Vec<u8>> {
     let mut chunks = Vec::new();
     let mut chunk = Vec::new();
     for i in 0..n {
-        let f = protocol::cb3::SampleFrame { seq: i as u16, t_us: (i * 1000) as u32, ch: cb3_codes(i), flags: 0 };
+        let f = protocol::cb3::SampleFrame {
+            seq: i as u16,
+            t_us: (i * 1000) as u32,
+            ch: cb3_codes(i),
+            flags: 0,
+        };
         protocol::cb3::encode(&protocol::cb3::Frame::Sample(f), &mut chunk);
         if i % 10 == 9 {
             chunks.push(std::mem::take(&mut chunk));
@@ -286,26 +389,60 @@ async fn replugged_device_is_reconfigured_and_its_restart_is_not_a_gap() {
     hil::init_tracing();
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("cb3");
-    let dev = FakeDevice::start(&link, b'\n', cb3_device(), cb3_script(400), Duration::from_millis(2)).unwrap();
+    let dev = FakeDevice::start(
+        &link,
+        b'\n',
+        cb3_device(),
+        cb3_script(400),
+        Duration::from_millis(2),
+    )
+    .unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
     let cancel = CancellationToken::new();
     let cfg = drivers::cb3::Config {
         port: link.display().to_string(),
         rate_hz: 1000,
         poly: [[10.0, 0.0, 0.0]; 3],
-        transform: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+        transform: [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
     };
     let task = drivers::cb3::spawn(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
-    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(20), |c| c.samples.len() >= 400).await);
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(20), |c| c
+            .samples
+            .len()
+            >= 400)
+        .await
+    );
     // Unplug: pty closed, link gone.
     dev.unplug();
-    assert!(collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c.disconnected.is_empty()).await);
+    assert!(
+        collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c
+            .disconnected
+            .is_empty())
+        .await
+    );
     tokio::time::sleep(Duration::from_millis(300)).await;
     // Plugged in again: a new pty behind the same link, sequence restarted at 0.
-    let dev2 = FakeDevice::start(&link, b'\n', cb3_device(), cb3_script(300), Duration::from_millis(2)).unwrap();
+    let dev2 = FakeDevice::start(
+        &link,
+        b'\n',
+        cb3_device(),
+        cb3_script(300),
+        Duration::from_millis(2),
+    )
+    .unwrap();
     assert!(
-        collect_until(&mut rx, &mut c, Duration::from_secs(20), |c| c.samples.len() >= 700).await,
+        collect_until(&mut rx, &mut c, Duration::from_secs(20), |c| c
+            .samples
+            .len()
+            >= 700)
+        .await,
         "{} samples after replug; {:?}",
         c.samples.len(),
         c.errors
@@ -317,11 +454,23 @@ async fn replugged_device_is_reconfigured_and_its_restart_is_not_a_gap() {
     assert_eq!(c.samples.len(), 700);
     for (k, s) in c.samples.iter().enumerate() {
         let i = if k < 400 { k } else { k - 400 } as u64;
-        let SampleValues::Capball { volts, .. } = s.values else { panic!() };
+        let SampleValues::Capball { volts, .. } = s.values else {
+            panic!()
+        };
         assert!((volts[0] - cb3_codes(i)[0] as f64 * 10.0 / 8_388_608.0).abs() < 1e-12);
     }
     let k = c.counters.unwrap();
-    assert_eq!((k.reconnects, k.disconnects, k.gaps, k.gap_samples, k.resyncs), (1, 1, 0, 0, 0), "{k:?}");
+    assert_eq!(
+        (
+            k.reconnects,
+            k.disconnects,
+            k.gaps,
+            k.gap_samples,
+            k.resyncs
+        ),
+        (1, 1, 0, 0, 0),
+        "{k:?}"
+    );
     assert_eq!(k.samples, 700);
 }
 
@@ -367,11 +516,33 @@ async fn li80_values_compensation_validity_and_fault_counts() {
             protocol::li80::encode_env(&env2, &mut chunk);
         }
         if i == 1300 {
-            encode_err(&ErrFrame { code: 3, text: "beam lost".into() }, &mut chunk);
+            encode_err(
+                &ErrFrame {
+                    code: 3,
+                    text: "beam lost".into(),
+                },
+                &mut chunk,
+            );
         }
-        let flags = if datum_lost.contains(&i) { PosFlags::DATUM_LOST | PosFlags::BEAM_LOW } else { 0 };
-        let sig = if datum_lost.contains(&i) { 5 } else if beam_low.contains(&i) { 20 } else { 90 };
-        let f = PosFrame { seq: i as u32, t_us: 7_000_000 + i * 100, raw_nm: raw(i), sig, flags: PosFlags(flags) };
+        let flags = if datum_lost.contains(&i) {
+            PosFlags::DATUM_LOST | PosFlags::BEAM_LOW
+        } else {
+            0
+        };
+        let sig = if datum_lost.contains(&i) {
+            5
+        } else if beam_low.contains(&i) {
+            20
+        } else {
+            90
+        };
+        let f = PosFrame {
+            seq: i as u32,
+            t_us: 7_000_000 + i * 100,
+            raw_nm: raw(i),
+            sig,
+            flags: PosFlags(flags),
+        };
         let mut line = Vec::new();
         encode_pos(&f, &mut line);
         if dropped.contains(&i) {
@@ -392,23 +563,58 @@ async fn li80_values_compensation_validity_and_fault_counts() {
         }
     }
     chunks.push(chunk);
-    let dev = FakeDevice::start(&link, b'\n', hil::fake::li80_device(), chunks, Duration::from_millis(2)).unwrap();
+    let dev = FakeDevice::start(
+        &link,
+        b'\n',
+        hil::fake::li80_device(),
+        chunks,
+        Duration::from_millis(2),
+    )
+    .unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
     let cancel = CancellationToken::new();
     let alpha = 11.7;
-    let cfg = drivers::li80::Config { port: link.display().to_string(), rate_hz: 10_000, alpha_um_per_m_k: alpha };
+    let cfg = drivers::li80::Config {
+        port: link.display().to_string(),
+        rate_hz: 10_000,
+        alpha_um_per_m_k: alpha,
+    };
     let task = drivers::li80::spawn(cfg, HostClock::new(), tx, cancel.clone());
-    let lost: BTreeSet<u64> = dropped.iter().chain(&bad_checksum).chain(&truncated).copied().collect();
+    let lost: BTreeSet<u64> = dropped
+        .iter()
+        .chain(&bad_checksum)
+        .chain(&truncated)
+        .copied()
+        .collect();
     let expected = N - lost.len() as u64;
     let mut c = Collected::default();
-    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| c.stream().count() as u64 >= expected).await;
-    assert!(ok, "got {} of {expected}; errors {:?}", c.stream().count(), c.errors);
+    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| {
+        c.stream().count() as u64 >= expected
+    })
+    .await;
+    assert!(
+        ok,
+        "got {} of {expected}; errors {:?}",
+        c.stream().count(),
+        c.errors
+    );
     tokio::time::sleep(Duration::from_millis(100)).await;
     finish(cancel, task, &mut rx, &mut c).await;
     tokio::time::sleep(Duration::from_millis(100)).await;
     let cmds = dev.commands.lock().unwrap().clone();
     drop(dev);
-    assert_eq!(cmds, ["STREAM OFF", "*IDN?", "RATE 10000", "DATUM", "ENV?", "STREAM ON", "STREAM OFF"]);
+    assert_eq!(
+        cmds,
+        [
+            "STREAM OFF",
+            "*IDN?",
+            "RATE 10000",
+            "DATUM",
+            "ENV?",
+            "STREAM ON",
+            "STREAM OFF"
+        ]
+    );
     assert_eq!(c.connected, ["LI-80,80123,2.4.1"]);
     // The `$ERR` line: counted and reported.
     assert_eq!(c.errors.len(), 1);
@@ -421,22 +627,48 @@ async fn li80_values_compensation_validity_and_fault_counts() {
     for (s, &i) in stream.iter().zip(&sent) {
         assert_eq!(s.seq, i);
         assert_eq!(s.device_t_us, 7_000_000 + i * 100);
-        let SampleValues::Position { raw_nm, position_um, .. } = s.values else { panic!() };
+        let SampleValues::Position {
+            raw_nm,
+            position_um,
+            ..
+        } = s.values
+        else {
+            panic!()
+        };
         assert_eq!(raw_nm, raw(i));
         let env = if i < env_at { &env1 } else { &env2 };
         let want = li80_expected_um(raw(i), env, alpha);
-        assert!((position_um - want).abs() < 1e-9 * want.abs().max(1.0), "sample {i}: {position_um} vs {want}");
-        assert_eq!(s.valid, !datum_lost.contains(&i) && !beam_low.contains(&i), "sample {i}");
+        assert!(
+            (position_um - want).abs() < 1e-9 * want.abs().max(1.0),
+            "sample {i}: {position_um} vs {want}"
+        );
+        assert_eq!(
+            s.valid,
+            !datum_lost.contains(&i) && !beam_low.contains(&i),
+            "sample {i}"
+        );
     }
     // Two `$ENV` samples: the answer to `ENV?` and the one in the stream.
-    let envs: Vec<_> = c.samples.iter().filter(|s| matches!(s.values, SampleValues::Environment { .. })).collect();
+    let envs: Vec<_> = c
+        .samples
+        .iter()
+        .filter(|s| matches!(s.values, SampleValues::Environment { .. }))
+        .collect();
     assert_eq!(envs.len(), 2);
     let k = c.counters.unwrap();
     assert_eq!(k.samples, sent.len() as u64 + 2);
     assert_eq!((k.gaps, k.gap_samples), gaps_of(&lost), "{k:?}");
     assert_eq!(k.invalid, (datum_lost.len() + beam_low.len()) as u64);
     assert_eq!(k.device_errors, 1);
-    assert_eq!(k.rejections.get(&RejectKind::BadChecksum), Some(&1), "{k:?}");
-    assert_eq!(total_rejections(&k), (garbage_before.len() + bad_checksum.len() + truncated.len()) as u64, "{k:?}");
+    assert_eq!(
+        k.rejections.get(&RejectKind::BadChecksum),
+        Some(&1),
+        "{k:?}"
+    );
+    assert_eq!(
+        total_rejections(&k),
+        (garbage_before.len() + bad_checksum.len() + truncated.len()) as u64,
+        "{k:?}"
+    );
     assert_eq!((k.dropped, k.resyncs, k.reconnects), (0, 0, 0));
 }

@@ -81,6 +81,13 @@ fn truncated_logs_give_their_intact_prefix() {
             // Everything logged in the prefix is reproduced; only the end can differ.
             assert_eq!(r.logged[..], full_replay.logged[..r.logged.len()]);
             assert_eq!(r.identical, r.logged.len(), "cut at {at}");
+            // Nothing invented for the dwell the cut left open.
+            assert!(r.replayed.len() <= full_replay.replayed.len());
+            assert_eq!(
+                r.replayed[..],
+                full_replay.replayed[..r.replayed.len()],
+                "cut at {at}"
+            );
         }
     }
     // Most of the file is recovered from a cut near its end.

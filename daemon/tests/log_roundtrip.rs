@@ -351,3 +351,48 @@ fn info_and_replay_commands() {
         "{err}"
     );
 }
+
+#[test]
+fn dark_psd_samples_round_trip_as_nan_and_replay_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    // Every 40th PSD sample is dark: the 150-sample windows must avoid them, so with
+    // 100 Hz the PSD never has 150 consecutive valid samples: beam_invalid, in replay too.
+    let run = SyntheticRun {
+        targets_mm: vec![0.0, 10.0],
+        psd_dark_every: 40,
+        ..SyntheticRun::default()
+    };
+    let w = log_common::write_run(dir.path(), "dark.mcap", &run);
+    let mut dark = 0;
+    read_log(&w.path, |item| {
+        if let LogItem::Message {
+            topic: "/psd/sample",
+            data,
+            ..
+        } = item
+        {
+            let text = std::str::from_utf8(data).unwrap();
+            if let Some(Decoded::Psd(m)) = decode("/psd/sample", data).unwrap()
+                && !m.valid
+            {
+                assert!(m.x_um.is_nan() && m.y_um.is_nan(), "{text}");
+                assert!(text.contains("\"x_um\":null"), "{text}");
+                dark += 1;
+            }
+        }
+    })
+    .unwrap();
+    assert!(dark > 10);
+    let psd: Vec<_> = w
+        .poses
+        .iter()
+        .filter(|p| p.instrument == PoseInstrument::Psd)
+        .collect();
+    assert_eq!(psd.len(), 2);
+    assert!(
+        psd.iter().all(|p| p.status == PoseStatusName::BeamInvalid),
+        "{psd:?}"
+    );
+    let out = replay(&w.path, &ReplayOptions::default()).unwrap();
+    assert!(out.reproduces_log());
+}

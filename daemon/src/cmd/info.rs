@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde::Serialize;
 
-use crate::log::topics::{self, Decoded, StatusMsg};
+use crate::log::topics::{self, Decoded, PoseMsg, StatusMsg, TopicMessage};
 use crate::log::{self, LogItem, RUN_METADATA, ReadSummary};
 
 #[derive(Debug, clap::Args)]
@@ -54,7 +54,7 @@ pub struct InfoReport {
     /// The last `/status` message.
     pub last_status: Option<StatusMsg>,
     pub attachments: Vec<AttachmentInfo>,
-    /// Messages that did not decode as their topic's type.
+    /// `/pose` and `/status` messages that did not decode as their topic's type.
     pub undecodable: u64,
 }
 
@@ -78,6 +78,10 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
             t.messages += 1;
             t.first_ns.get_or_insert(log_ns);
             t.last_ns = Some(log_ns);
+            // Only the topics the report reads are decoded: an hour of raw samples is millions.
+            if topic != PoseMsg::TOPIC && topic != StatusMsg::TOPIC {
+                return;
+            }
             match topics::decode(topic, data) {
                 Ok(Some(Decoded::Pose(p))) => {
                     *poses

@@ -9,6 +9,25 @@
 //! - [`reader::read_log`]: reads a log record by record and stops at the first damaged byte,
 //!   so the intact prefix of a file whose writer was killed is read.
 //!
+//! # Use
+//!
+//! ```no_run
+//! use metrolog::log::{LogOptions, Recorder, RunMetadata};
+//! # fn events() -> Vec<drivers::DriverEvent> { Vec::new() }
+//! # fn main() -> Result<(), metrolog::log::LogError> {
+//! let clock = drivers::HostClock::new();
+//! let meta = RunMetadata { machine: "mill-1".into(), started_ns: clock.now_ns(), ..Default::default() };
+//! let mut rec = Recorder::create_in_dir("/var/lib/metrolog".as_ref(), &meta, LogOptions::default())?;
+//! rec.writer().attach_file("/etc/metrolog/metrolog.toml".as_ref(), "application/toml", clock.now_ns())?;
+//! for ev in events() {
+//!     // Raw topics, /event, /pose (returned too), /status once a second, flush once a second.
+//!     let _poses = rec.record(&ev, clock.now_ns())?;
+//! }
+//! rec.tick(clock.now_ns())?; // also from a 1 s timer when no events come
+//! let (_path, _last_poses) = rec.finish(clock.now_ns())?;
+//! # Ok(()) }
+//! ```
+//!
 //! # Files
 //!
 //! Each run writes a new file, created with `O_EXCL` (an existing file is never opened for

@@ -96,6 +96,29 @@ pub struct Recorder {
 pub const STATUS_INTERVAL_NS: u64 = 1_000_000_000;
 
 impl Recorder {
+    /// A new log file in `dir` (see [`LogWriter::create_in_dir`]) whose detectors use
+    /// `meta.detector` — the settings stored in the log, so replay uses the same.
+    pub fn create_in_dir(
+        dir: &std::path::Path,
+        meta: &super::RunMetadata,
+        opts: super::LogOptions,
+    ) -> Result<Recorder, LogError> {
+        let settings = meta.detector.clone();
+        Recorder::new(LogWriter::create_in_dir(dir, meta, opts)?, &settings)
+    }
+
+    /// Like [`Recorder::create_in_dir`], at an explicit path (which must not exist).
+    pub fn create(
+        path: &std::path::Path,
+        meta: &super::RunMetadata,
+        opts: super::LogOptions,
+    ) -> Result<Recorder, LogError> {
+        let settings = meta.detector.clone();
+        Recorder::new(LogWriter::create(path, meta, opts)?, &settings)
+    }
+
+    /// Around an open writer; `settings` must be the `detector` of the writer's
+    /// [`RunMetadata`](super::RunMetadata), or replay will not reproduce the pose values.
     pub fn new(writer: LogWriter, settings: &DetectorSettings) -> Result<Recorder, LogError> {
         Ok(Recorder {
             writer,

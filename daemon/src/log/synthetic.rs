@@ -24,6 +24,8 @@ pub struct SyntheticRun {
     pub noise_um: f64,
     /// Emit triggers (false: a trigger-free run).
     pub triggers: bool,
+    /// Every k-th PSD sample is dark (no light: x, y NaN, sum 0, invalid); 0 = never.
+    pub psd_dark_every: u64,
     pub seed: u64,
 }
 
@@ -41,6 +43,7 @@ impl Default for SyntheticRun {
             ring_tau_s: 0.08,
             noise_um: 0.01,
             triggers: true,
+            psd_dark_every: 0,
             seed: 1,
         }
     }
@@ -251,6 +254,22 @@ impl Iterator for SyntheticEvents<'_> {
                         flags: 0,
                     },
                 )
+            }
+            3 if r.psd_dark_every > 0 && seq.is_multiple_of(r.psd_dark_every) => {
+                return Some(DriverEvent::Sample(Sample {
+                    instrument: Instrument::Psd,
+                    seq,
+                    device_t_us,
+                    host_ns,
+                    fitted_ns,
+                    valid: false,
+                    values: SampleValues::Psd {
+                        x_um: f64::NAN,
+                        y_um: f64::NAN,
+                        sum_pa: 0.0,
+                        head_c: 21.0,
+                    },
+                }));
             }
             3 => {
                 let e0 = SyntheticRun::psd_error_um(k);

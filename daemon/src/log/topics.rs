@@ -29,6 +29,52 @@ macro_rules! topic {
     };
 }
 
+/// Non-finite numbers (a PSD sample with no light divides by zero) are written as JSON `null`
+/// — JSON has no NaN — and read back as NaN; the schema says `number` or `null`.
+mod nullable {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f64(*v)
+        } else {
+            s.serialize_none()
+        }
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+
+    pub mod array3 {
+        use serde::ser::SerializeTuple;
+        use serde::{Deserialize, Deserializer, Serializer};
+
+        pub fn serialize<S: Serializer>(v: &[f64; 3], s: S) -> Result<S::Ok, S::Error> {
+            let mut t = s.serialize_tuple(3)?;
+            for x in v {
+                t.serialize_element(&x.is_finite().then_some(*x))?;
+            }
+            t.end()
+        }
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
+            let a = <[Option<f64>; 3]>::deserialize(d)?;
+            Ok(a.map(|x| x.unwrap_or(f64::NAN)))
+        }
+    }
+
+    pub mod vec {
+        use serde::{Deserialize, Deserializer, Serializer};
+
+        pub fn serialize<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+            s.collect_seq(v.iter().map(|x| x.is_finite().then_some(*x)))
+        }
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+            let v = Vec::<Option<f64>>::deserialize(d)?;
+            Ok(v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
+        }
+    }
+}
+
 /// `/interferometer/position`: one LI-80 `$POS` record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct PositionMsg {
@@ -38,6 +84,8 @@ pub struct PositionMsg {
     pub fitted_ns: u64,
     pub raw_nm: i64,
     /// Compensated length, µm.
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub position_um: f64,
     /// Signal strength, %.
     pub sig: u8,
@@ -52,10 +100,20 @@ pub struct EnvironmentMsg {
     pub seq: u64,
     pub device_t_us: u64,
     pub fitted_ns: u64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub air_c: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub air_pa: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub rh_pct: f64,
+    #[serde(with = "nullable::vec")]
+    #[schemars(with = "Vec<Option<f64>>")]
     pub material_c: Vec<f64>,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub n_air: f64,
     pub valid: bool,
 }
@@ -72,10 +130,16 @@ pub struct CapballMsg {
     pub device_t_us: u64,
     pub fitted_ns: u64,
     /// Sensor voltages, V.
+    #[serde(with = "nullable::array3")]
+    #[schemars(with = "[Option<f64>; 3]")]
     pub volts: [f64; 3],
     /// Distance changes of the three sensors, µm.
+    #[serde(with = "nullable::array3")]
+    #[schemars(with = "[Option<f64>; 3]")]
     pub d_um: [f64; 3],
     /// Ball-centre error in the machine frame (x, y, z), µm.
+    #[serde(with = "nullable::array3")]
+    #[schemars(with = "[Option<f64>; 3]")]
     pub e_um: [f64; 3],
     pub flags: u8,
     pub valid: bool,
@@ -88,9 +152,17 @@ pub struct PsdMsg {
     pub seq: u64,
     pub device_t_us: u64,
     pub fitted_ns: u64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub x_um: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub y_um: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub sum_pa: f64,
+    #[serde(with = "nullable")]
+    #[schemars(with = "Option<f64>")]
     pub head_c: f64,
     pub valid: bool,
 }

@@ -412,3 +412,16 @@ impl Drop for LogWriter {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_full_disk_says_so() {
+        let e = McapError::Io(std::io::Error::from(std::io::ErrorKind::StorageFull));
+        assert!(hint_for(&e).starts_with("the disk is full"));
+        let e = McapError::Io(std::io::Error::from(std::io::ErrorKind::PermissionDenied));
+        assert!(hint_for(&e).contains("writable"));
+    }
+}

@@ -6,4 +6,5 @@ pub mod cmd;
 pub mod config;
 pub mod log;
 pub mod pipeline;
+pub mod plot;
 pub mod service;

@@ -101,10 +101,9 @@ impl AxisModel {
                 index: i,
                 std_ratio,
             } = *e
+                && i == index + 1
             {
-                if i == index + 1 {
-                    s *= std_ratio;
-                }
+                s *= std_ratio;
             }
         }
         s

@@ -1,1 +1,534 @@
-//! (to be written)
+//! A positioning measurement of one linear axis (`shared/datasets.md`): the readings of an
+//! interferometer at programmed targets, over repeated bidirectional cycles, with their times
+//! and the environment. Read from the CSV dataset format, or built by an adapter (MCAP log) or
+//! by [`simulate`] from an [`AxisModel`].
+
+use std::collections::BTreeMap;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use crate::axis_model::{AxisModel, Direction};
+
+/// One interferometer reading at a target.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Reading {
+    /// Cycle number, 1..n.
+    pub cycle: usize,
+    /// Direction of approach.
+    pub direction: Direction,
+    /// Target number, 1..m.
+    pub index: usize,
+    /// Programmed target, mm.
+    pub target_mm: f64,
+    /// Measured minus target, µm (after environmental compensation).
+    pub deviation_um: f64,
+    /// Seconds since the start of the run (row order when the dataset had no times).
+    pub time_s: f64,
+    /// Air temperature at the reading, °C.
+    pub air_c: Option<f64>,
+    /// Material (axis) temperature at the reading, °C.
+    pub material_c: Option<f64>,
+}
+
+/// A whole positioning run.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PositioningData {
+    /// Axis name (metadata `axis`), if known.
+    pub axis: Option<String>,
+    /// Expansion coefficient of the axis, µm/(m·K) (metadata `alpha_um_per_m_k`).
+    pub alpha_um_per_m_k: Option<f64>,
+    /// `false` when the deviations were not normalised to 20 °C (`material_compensation: off`).
+    pub material_compensation: bool,
+    /// `true` when the readings carry real times; `false` when row order stands in for time
+    /// (then `time_s` counts readings, one per second).
+    pub has_times: bool,
+    /// All `# key: value` metadata as read.
+    pub metadata: BTreeMap<String, String>,
+    /// Readings in the order they were taken.
+    pub readings: Vec<Reading>,
+}
+
+/// Why a dataset could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// cannot read the dataset: {0}
+    #[error("cannot read the dataset: {0}")]
+    Io(#[from] std::io::Error),
+    /// the dataset has no header row (expected e.g. `cycle,direction,index,target_mm,deviation_um`)
+    #[error(
+        "the dataset has no header row (expected e.g. `cycle,direction,index,target_mm,deviation_um`)"
+    )]
+    NoHeader,
+    /// the header lacks the required column `{0}`
+    #[error(
+        "the header lacks the required column `{0}` (required: cycle, direction, index, target_mm, deviation_um)"
+    )]
+    MissingColumn(&'static str),
+    /// line {line}: {message}
+    #[error("line {line}: {message}")]
+    BadRow { line: u64, message: String },
+    /// bad metadata `{key}: {value}`: {message}
+    #[error("bad metadata `{key}: {value}`: {message}")]
+    BadMetadata {
+        key: String,
+        value: String,
+        message: String,
+    },
+    /// the dataset holds no readings
+    #[error("the dataset holds no readings")]
+    Empty,
+    /// the dataset is inconsistent: {0}
+    #[error("the dataset is inconsistent: {0}")]
+    Inconsistent(String),
+}
+
+impl PositioningData {
+    /// Reads a dataset from a CSV file.
+    pub fn from_csv_path(path: &std::path::Path) -> Result<Self, DatasetError> {
+        let text = std::fs::read_to_string(path)?;
+        Self::from_csv_str(&text)
+    }
+
+    /// Reads a dataset from CSV text (`shared/datasets.md`).
+    pub fn from_csv_str(text: &str) -> Result<Self, DatasetError> {
+        let mut metadata = BTreeMap::new();
+        for line in text.lines() {
+            let t = line.trim_start();
+            if let Some((k, v)) = t.strip_prefix('#').and_then(|rest| rest.split_once(':')) {
+                let k = k.trim();
+                if !k.is_empty() && !k.contains(' ') {
+                    metadata.insert(k.to_string(), v.trim().to_string());
+                }
+            }
+        }
+        let mut rdr = csv::ReaderBuilder::new()
+            .comment(Some(b'#'))
+            .trim(csv::Trim::All)
+            .flexible(true)
+            .has_headers(true)
+            .from_reader(text.as_bytes());
+        let headers = rdr.headers().map_err(|_| DatasetError::NoHeader)?.clone();
+        if headers.is_empty() || headers.iter().all(|h| h.is_empty()) {
+            return Err(DatasetError::NoHeader);
+        }
+        let col = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
+        let need = |name: &'static str| col(name).ok_or(DatasetError::MissingColumn(name));
+        let c_cycle = need("cycle")?;
+        let c_dir = need("direction")?;
+        let c_index = need("index")?;
+        let c_target = need("target_mm")?;
+        let c_dev = need("deviation_um")?;
+        let c_time = col("time_s");
+        let c_air = col("air_c");
+        let c_mat = col("material_c");
+
+        let mut readings = Vec::new();
+        for (row_no, rec) in rdr.records().enumerate() {
+            // Line numbers from byte offsets: the csv crate's own count skips comment lines.
+            let line_of = |byte: u64| {
+                let bytes = text.as_bytes();
+                let mut b = (byte as usize).min(bytes.len());
+                // A record's position is where the reader started, before skipped comments.
+                while b < bytes.len()
+                    && (bytes[b] == b'#' || bytes[b] == b'\n' || bytes[b] == b'\r')
+                {
+                    if bytes[b] == b'#' {
+                        b += bytes[b..]
+                            .iter()
+                            .position(|c| *c == b'\n')
+                            .unwrap_or(bytes.len() - b);
+                    }
+                    b += 1;
+                }
+                let b = b.min(bytes.len());
+                bytes[..b].iter().filter(|c| **c == b'\n').count() as u64 + 1
+            };
+            let rec = rec.map_err(|e| DatasetError::BadRow {
+                line: e.position().map(|p| line_of(p.byte())).unwrap_or(0),
+                message: e.to_string(),
+            })?;
+            // Counted only for an error: counting for every row would be quadratic.
+            let byte = rec.position().map(|p| p.byte());
+            let bad = |message: String| DatasetError::BadRow {
+                line: byte.map(line_of).unwrap_or(0),
+                message,
+            };
+            let field = |c: usize, name: &str| -> Result<&str, DatasetError> {
+                rec.get(c).ok_or_else(|| {
+                    bad(format!(
+                        "missing field `{name}` (row has {} fields)",
+                        rec.len()
+                    ))
+                })
+            };
+            let num = |c: usize, name: &str| -> Result<f64, DatasetError> {
+                let s = field(c, name)?;
+                let v: f64 = s
+                    .parse()
+                    .map_err(|_| bad(format!("`{name}` is `{s}`, expected a number")))?;
+                if !v.is_finite() {
+                    return Err(bad(format!("`{name}` is `{s}`, expected a finite number")));
+                }
+                Ok(v)
+            };
+            let int = |c: usize, name: &str| -> Result<usize, DatasetError> {
+                let s = field(c, name)?;
+                match s.parse::<usize>() {
+                    Ok(v) if v >= 1 => Ok(v),
+                    _ => Err(bad(format!(
+                        "`{name}` is `{s}`, expected a whole number from 1"
+                    ))),
+                }
+            };
+            let opt = |c: Option<usize>, name: &str| -> Result<Option<f64>, DatasetError> {
+                match c {
+                    Some(c) if rec.get(c).is_some_and(|s| !s.is_empty()) => num(c, name).map(Some),
+                    _ => Ok(None),
+                }
+            };
+            let direction = match field(c_dir, "direction")? {
+                "+" | "up" | "Up" => Direction::Up,
+                "-" | "down" | "Down" => Direction::Down,
+                s => return Err(bad(format!("`direction` is `{s}`, expected `+` or `-`"))),
+            };
+            // An empty deviation is a reading lost to a beam interruption: skipped, and reported
+            // by the analysis as missing.
+            if rec.get(c_dev).is_some_and(|s| s.is_empty()) {
+                continue;
+            }
+            let time_s = match c_time {
+                Some(c) => num(c, "time_s")?,
+                None => row_no as f64,
+            };
+            readings.push(Reading {
+                cycle: int(c_cycle, "cycle")?,
+                direction,
+                index: int(c_index, "index")?,
+                target_mm: num(c_target, "target_mm")?,
+                deviation_um: num(c_dev, "deviation_um")?,
+                time_s,
+                air_c: opt(c_air, "air_c")?,
+                material_c: opt(c_mat, "material_c")?,
+            });
+        }
+        let alpha_um_per_m_k = match metadata.get("alpha_um_per_m_k") {
+            Some(v) => Some(v.parse::<f64>().map_err(|_| DatasetError::BadMetadata {
+                key: "alpha_um_per_m_k".into(),
+                value: v.clone(),
+                message: "expected a number".into(),
+            })?),
+            None => None,
+        };
+        let material_compensation = !matches!(
+            metadata
+                .get("material_compensation")
+                .map(|s| s.to_ascii_lowercase())
+                .as_deref(),
+            Some("off" | "false" | "no")
+        );
+        let data = PositioningData {
+            axis: metadata.get("axis").cloned(),
+            alpha_um_per_m_k,
+            material_compensation,
+            has_times: c_time.is_some(),
+            metadata,
+            readings,
+        };
+        data.validate()?;
+        Ok(data)
+    }
+
+    /// Checks what the analysis relies on: readings exist, a target number always names the
+    /// same programmed position, and no reading is given twice.
+    pub fn validate(&self) -> Result<(), DatasetError> {
+        if self.readings.is_empty() {
+            return Err(DatasetError::Empty);
+        }
+        let mut pos: BTreeMap<usize, f64> = BTreeMap::new();
+        let mut seen = std::collections::HashSet::new();
+        for r in &self.readings {
+            let p = *pos.entry(r.index).or_insert(r.target_mm);
+            if (p - r.target_mm).abs() > 1e-3 {
+                return Err(DatasetError::Inconsistent(format!(
+                    "target {} is at {} mm in one row and {} mm in another",
+                    r.index, p, r.target_mm
+                )));
+            }
+            if !seen.insert((r.cycle, r.direction, r.index)) {
+                return Err(DatasetError::Inconsistent(format!(
+                    "cycle {} direction {} target {} is given twice",
+                    r.cycle,
+                    dir_sign(r.direction),
+                    r.index
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Number of cycles (largest cycle number).
+    pub fn n_cycles(&self) -> usize {
+        self.readings.iter().map(|r| r.cycle).max().unwrap_or(0)
+    }
+
+    /// Number of targets (largest target number).
+    pub fn n_targets(&self) -> usize {
+        self.readings.iter().map(|r| r.index).max().unwrap_or(0)
+    }
+
+    /// Programmed targets by index (0-based position = index − 1), mm; NaN if never seen.
+    pub fn targets_mm(&self) -> Vec<f64> {
+        let mut t = vec![f64::NAN; self.n_targets()];
+        for r in &self.readings {
+            t[r.index - 1] = r.target_mm;
+        }
+        t
+    }
+
+    /// Readings as a grid `[direction][target][cycle]` (direction 0 = up), `None` where missing.
+    pub fn grid(&self) -> [Vec<Vec<Option<f64>>>; 2] {
+        let (m, n) = (self.n_targets(), self.n_cycles());
+        let mut g = [vec![vec![None; n]; m], vec![vec![None; n]; m]];
+        for r in &self.readings {
+            g[dir_slot(r.direction)][r.index - 1][r.cycle - 1] = Some(r.deviation_um);
+        }
+        g
+    }
+
+    /// Times as a grid like [`Self::grid`].
+    pub fn time_grid(&self) -> [Vec<Vec<Option<f64>>>; 2] {
+        let (m, n) = (self.n_targets(), self.n_cycles());
+        let mut g = [vec![vec![None; n]; m], vec![vec![None; n]; m]];
+        for r in &self.readings {
+            g[dir_slot(r.direction)][r.index - 1][r.cycle - 1] = Some(r.time_s);
+        }
+        g
+    }
+
+    /// Readings expected in a full run but absent: `(cycle, direction, index)`.
+    pub fn missing(&self) -> Vec<(usize, Direction, usize)> {
+        let g = self.grid();
+        let mut out = Vec::new();
+        for c in 0..self.n_cycles() {
+            for (d, dir) in [(0, Direction::Up), (1, Direction::Down)] {
+                // A direction never measured at all is not "missing" (unidirectional test).
+                if g[d].iter().all(|t| t.iter().all(|v| v.is_none())) {
+                    continue;
+                }
+                for (i, row) in g[d].iter().enumerate() {
+                    if row[c].is_none() {
+                        out.push((c + 1, dir, i + 1));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Writes the dataset as CSV (`shared/datasets.md`).
+    pub fn to_csv_string(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        if let Some(a) = &self.axis {
+            let _ = writeln!(s, "# axis: {a}");
+        }
+        if let Some(a) = self.alpha_um_per_m_k {
+            let _ = writeln!(s, "# alpha_um_per_m_k: {a}");
+        }
+        if !self.material_compensation {
+            let _ = writeln!(s, "# material_compensation: off");
+        }
+        let temps = self
+            .readings
+            .iter()
+            .any(|r| r.air_c.is_some() || r.material_c.is_some());
+        s.push_str("cycle,direction,index,target_mm,deviation_um");
+        if self.has_times {
+            s.push_str(",time_s");
+        }
+        if temps {
+            s.push_str(",air_c,material_c");
+        }
+        s.push('\n');
+        for r in &self.readings {
+            let _ = write!(
+                s,
+                "{},{},{},{},{}",
+                r.cycle,
+                dir_sign(r.direction),
+                r.index,
+                r.target_mm,
+                r.deviation_um
+            );
+            if self.has_times {
+                let _ = write!(s, ",{}", r.time_s);
+            }
+            if temps {
+                let f = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
+                let _ = write!(s, ",{},{}", f(r.air_c), f(r.material_c));
+            }
+            s.push('\n');
+        }
+        s
+    }
+}
+
+/// `0` for up, `1` for down: the slot of a direction in per-direction arrays.
+pub fn dir_slot(d: Direction) -> usize {
+    match d {
+        Direction::Up => 0,
+        Direction::Down => 1,
+    }
+}
+
+/// `+` or `-`.
+pub fn dir_sign(d: Direction) -> &'static str {
+    match d {
+        Direction::Up => "+",
+        Direction::Down => "-",
+    }
+}
+
+/// When each reading of a run is taken: what [`simulate`] needs to repeat a run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScheduledReading {
+    pub cycle: usize,
+    pub direction: Direction,
+    /// Target number, 1..m.
+    pub index: usize,
+    pub time_s: f64,
+    pub material_c: Option<f64>,
+    pub air_c: Option<f64>,
+}
+
+/// The schedule of an existing run (to simulate "the same run").
+pub fn schedule_of(data: &PositioningData) -> Vec<ScheduledReading> {
+    data.readings
+        .iter()
+        .map(|r| ScheduledReading {
+            cycle: r.cycle,
+            direction: r.direction,
+            index: r.index,
+            time_s: r.time_s,
+            material_c: r.material_c,
+            air_c: r.air_c,
+        })
+        .collect()
+}
+
+/// The usual ISO 230-2 schedule: `n_cycles` cycles, each an up pass over targets 1..m then a
+/// down pass m..1, one reading every `reading_interval_s`.
+pub fn standard_schedule(
+    n_targets: usize,
+    n_cycles: usize,
+    reading_interval_s: f64,
+) -> Vec<ScheduledReading> {
+    let mut out = Vec::with_capacity(2 * n_targets * n_cycles);
+    let mut t = 0.0;
+    for c in 1..=n_cycles {
+        for (dir, order) in [
+            (Direction::Up, (1..=n_targets).collect::<Vec<_>>()),
+            (Direction::Down, (1..=n_targets).rev().collect()),
+        ] {
+            for i in order {
+                out.push(ScheduledReading {
+                    cycle: c,
+                    direction: dir,
+                    index: i,
+                    time_s: t,
+                    material_c: None,
+                    air_c: None,
+                });
+                t += reading_interval_s;
+            }
+        }
+    }
+    out
+}
+
+/// Simulates an [`AxisModel`] over a schedule: deterministic part + Gaussian noise (with the
+/// model's local anomaly) + outliers of random sign, reproducibly from `seed`. Pure: the same
+/// model, schedule and seed give the same data.
+pub fn simulate(model: &AxisModel, schedule: &[ScheduledReading], seed: u64) -> PositioningData {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let outliers = model.outliers();
+    let readings = schedule
+        .iter()
+        .map(|s| {
+            let i0 = s.index.saturating_sub(1);
+            let mut dev = model.deterministic_um(i0, s.direction, s.time_s);
+            let z: f64 = StandardNormal.sample(&mut rng);
+            dev += model.noise_std_um(i0) * z;
+            if let Some((rate, mag)) = outliers {
+                let u: f64 = rand::Rng::random(&mut rng);
+                if u < rate {
+                    let sign = if rand::Rng::random::<bool>(&mut rng) {
+                        1.0
+                    } else {
+                        -1.0
+                    };
+                    dev += sign * mag;
+                }
+            }
+            Reading {
+                cycle: s.cycle,
+                direction: s.direction,
+                index: s.index,
+                target_mm: model.targets_mm.get(i0).copied().unwrap_or(0.0),
+                deviation_um: dev,
+                time_s: s.time_s,
+                air_c: s.air_c,
+                material_c: s.material_c,
+            }
+        })
+        .collect();
+    PositioningData {
+        axis: Some(model.axis.clone()),
+        alpha_um_per_m_k: None,
+        material_compensation: true,
+        has_times: true,
+        metadata: BTreeMap::new(),
+        readings,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_any_column_order_metadata_and_missing() {
+        let text = "# axis: Y\n# alpha_um_per_m_k: 11.7\n# material_compensation: off\n\
+            deviation_um,index,cycle,direction,target_mm,extra\n\
+            1.5,1,1,+,0.0,x\n\
+            ,2,1,+,10.0,x\n\
+            2.5,2,1,-,10.0,x\n";
+        let d = PositioningData::from_csv_str(text).unwrap();
+        assert_eq!(d.axis.as_deref(), Some("Y"));
+        assert_eq!(d.alpha_um_per_m_k, Some(11.7));
+        assert!(!d.material_compensation);
+        assert!(!d.has_times);
+        assert_eq!(d.readings.len(), 2);
+        assert_eq!(d.readings[1].time_s, 2.0);
+        assert_eq!(
+            d.missing(),
+            vec![(1, Direction::Up, 2), (1, Direction::Down, 1)]
+        );
+    }
+
+    #[test]
+    fn bad_rows_name_their_line() {
+        let text = "# c\ncycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n1,*,2,5,1\n";
+        let e = PositioningData::from_csv_str(text).unwrap_err().to_string();
+        assert!(e.contains("line 4") && e.contains("direction"), "{e}");
+        let text = "cycle,direction,index,target_mm,deviation_um\n1,+,1,0,abc\n";
+        let e = PositioningData::from_csv_str(text).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("deviation_um"), "{e}");
+        let text = "cycle,direction,target_mm,deviation_um\n1,+,0,1\n";
+        let e = PositioningData::from_csv_str(text).unwrap_err().to_string();
+        assert!(e.contains("`index`"), "{e}");
+    }
+}

@@ -9,11 +9,11 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sim::Scenario;
-use sim::physics::{CapballTruth, World};
+use sim::physics::{CachedCapballModel, CapballTruth, World};
 
 fn world() -> World {
     let sc = Scenario::demo();
-    let truth: Arc<dyn CapballTruth> = Arc::new(sc.capball.truth.clone());
+    let truth: Arc<dyn CapballTruth> = Arc::new(CachedCapballModel::new(sc.capball.truth.clone()));
     World::new(sc, truth, &mut ChaCha8Rng::seed_from_u64(1))
 }
 
@@ -53,9 +53,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let s = mid(36 + (k % 20) as usize) + k as f64 * 5e-5;
             let ph = w.phase(Some(s));
-            let e = w
-                .capball_truth
-                .error_um(&w.coords(ph), s * w.scenario.time_scale);
+            let e = w.capball_error_um(ph, s * w.scenario.time_scale);
             let d = w.capball_sensor_um(e);
             let mut ch = [0i32; 3];
             for i in 0..3 {

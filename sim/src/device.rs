@@ -150,6 +150,10 @@ pub(crate) struct Ctx<'a> {
     /// Counters to add to the record after the step.
     pub faults: &'a mut FaultCounts,
     pub device: Device,
+    /// Keep the encoding of the last sample generated while no host was connected
+    /// (`mid_frame_on_open`).
+    pub keep_unsent: bool,
+    pub unsent: &'a mut Vec<u8>,
 }
 
 impl Ctx<'_> {
@@ -236,6 +240,9 @@ pub(crate) struct Runner<M: Model> {
     readable_ok: bool,
     /// Consecutive reactor wake-ups that brought no data.
     spurious: u32,
+    mid_frame_on_open: bool,
+    /// The last sample generated while no host was connected, encoded.
+    unsent: Vec<u8>,
 }
 
 impl<M: Model> Runner<M> {
@@ -265,7 +272,13 @@ impl<M: Model> Runner<M> {
             power_up: 0,
             readable_ok: true,
             spurious: 0,
+            mid_frame_on_open: false,
+            unsent: Vec::new(),
         }
+    }
+
+    pub fn set_mid_frame_on_open(&mut self, on: bool) {
+        self.mid_frame_on_open = on;
     }
 
     /// Plug in: a fresh pty at the stable path, power-up state.
@@ -279,6 +292,7 @@ impl<M: Model> Runner<M> {
         self.pty = Some(pty);
         self.connected = false;
         self.pending.clear();
+        self.unsent.clear();
         self.line.clear();
         self.discarding = false;
         self.power_up += 1;
@@ -297,6 +311,8 @@ impl<M: Model> Runner<M> {
                 power_up: self.power_up,
                 faults: &mut faults,
                 device: M::DEVICE,
+                keep_unsent: self.mid_frame_on_open,
+                unsent: &mut self.unsent,
             };
             self.model.power_up(&mut ctx);
         }
@@ -385,6 +401,7 @@ impl<M: Model> Runner<M> {
     fn step(&mut self) -> bool {
         let now = Instant::now();
         let plugged = self.pty.is_some();
+        let was_connected = self.connected;
         let (lines, got) = if plugged {
             self.read_host()
         } else {
@@ -404,6 +421,8 @@ impl<M: Model> Runner<M> {
                 power_up: self.power_up,
                 faults: &mut faults,
                 device: M::DEVICE,
+                keep_unsent: self.mid_frame_on_open,
+                unsent: &mut self.unsent,
             };
             if plugged {
                 for l in &lines {
@@ -414,6 +433,17 @@ impl<M: Model> Runner<M> {
             } else {
                 self.model.tick_unplugged(&mut ctx);
             }
+        }
+        if self.connected && !was_connected && !self.unsent.is_empty() {
+            // The host joins mid-stream: its first bytes are the end of a sample it missed.
+            let cut = self.rng.random_range(1..self.unsent.len().max(2));
+            let tail: Vec<u8> = self.unsent.drain(..).skip(cut).collect();
+            out.splice(0..0, tail);
+            faults.partial_on_open += 1;
+        }
+        if self.connected {
+            // Only the sample generated just before a connect is ever cut.
+            self.unsent.clear();
         }
         if faults != FaultCounts::default() {
             add_counts(
@@ -549,6 +579,7 @@ fn add_counts(a: &mut FaultCounts, b: &FaultCounts) {
     a.unplugs += b.unplugs;
     a.not_connected += b.not_connected;
     a.overflow += b.overflow;
+    a.partial_on_open += b.partial_on_open;
 }
 
 /// Printable garbage bytes for a line protocol, never the characters that would make it a

@@ -32,6 +32,18 @@
 //! stream; `on_can_open` starts it when the host opens the SLCAN channel (`O`), `after_delay`
 //! on its own. [`SimHandle::program_done`] resolves after the program-end frame.
 //! Timed faults (beam interruptions, unplugs) count from the program start.
+//! [`SimHandle::state`] and [`SimHandle::wait_active`] tell what the devices are doing as seen
+//! from the device side (plugged, host connected, streaming / CAN channel open, rate), so a
+//! caller can wait until its drivers have configured everything before starting the program.
+//!
+//! # Faults
+//! Per streaming device (probabilities per sample, optional cap): garbage bursts (one
+//! rejected line or frame each), wrong checksum / CRC, truncated lines or frames, dropped
+//! samples (sequence gaps), and optionally a sample's tail at the start of a reconnect. Timed:
+//! LI-80 beam interruptions (`sig` < 25, `$ERR,3,beam lost`, datum lost until `DATUM`),
+//! unplug/replug of any device. The CNC program can leave out chosen trigger frames.
+//! [`Record`] holds every sample as generated with its [`Fate`] and exact counts
+//! ([`FaultCounts`]).
 //!
 //! # The physics
 //! See [`physics`]: machine position along an S-shaped move profile, damped ringing after each
@@ -250,7 +262,9 @@ impl Sim {
     /// Start the four simulated devices with their links in `dir` (created if missing), using
     /// the scenario's default CapBall model. Must be called inside a tokio runtime.
     pub fn start(scenario: Scenario, dir: &Path) -> Result<SimHandle, SimError> {
-        let truth: Arc<dyn CapballTruth> = Arc::new(scenario.capball.truth.clone());
+        let truth: Arc<dyn CapballTruth> = Arc::new(physics::CachedCapballModel::new(
+            scenario.capball.truth.clone(),
+        ));
         Sim::start_with(scenario, dir, truth)
     }
 

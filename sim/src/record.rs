@@ -84,6 +84,8 @@ pub struct FaultCounts {
     pub not_connected: u64,
     /// Samples discarded because the host did not read and the device buffer was full.
     pub overflow: u64,
+    /// Connects that began with the tail of a missed sample (`mid_frame_on_open`).
+    pub partial_on_open: u64,
 }
 
 /// What became of a generated sample.

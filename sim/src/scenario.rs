@@ -324,7 +324,7 @@ pub struct Capball {
     /// Scale of the ringing seen by the CapBall (1 = the scenario's amplitude).
     pub ringing_gain: f64,
     /// The default volumetric-error model (used unless a [`crate::CapballTruth`] is given).
-    pub truth: LinkErrors,
+    pub truth: CapballModel,
 }
 
 impl Default for Capball {
@@ -349,40 +349,124 @@ impl Default for Capball {
             ],
             noise_um: 0.02,
             ringing_gain: 0.5,
-            truth: LinkErrors::default(),
+            truth: CapballModel::default(),
         }
     }
 }
 
-/// A small 5-axis link-error model (table-on-table, A about X carrying C about Z): location
-/// errors of the two rotary axes, a tilt of C, the ball's setup offset and its drift.
-/// Volumetric error `e = s + drift·t + (I − R_A)·δA + R_A·(I − R_C)·δC + R_A·R_C·(θ × p)`.
+/// The machine's true CapBall errors, in the parameters of [`metrology::capball`] (paper 001):
+/// the eight link errors and six setup errors of its `WCAYFXZT` machine
+/// ([`metrology::capball::CapballSetup::paper_default`]: A about X and C about Z through the
+/// origin, ball at (120, 80, 100) mm on the table), by their names there, plus an optional
+/// drift of the measuring loop. The simulator evaluates the analysis's own forward model
+/// ([`metrology::capball::forward_um`] geometry), so simulation and identification share one
+/// geometry: `metrolog identify capball` on the per-pose truth of poses that hold the tool on
+/// the ball recovers these 14 values (without drift).
+///
+/// Sign conventions are those of [`metrology::kinematics`]: errors of the relative motion of
+/// the tool against the workpiece; the volumetric error is `p_tool − p_ball` in the machine
+/// frame, µm.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct LinkErrors {
-    /// Setup offset of the ball against the tool, µm.
-    pub setup_offset_um: [f64; 3],
-    /// Setup drift, µm per (scaled) hour.
+pub struct CapballModel {
+    /// Squareness of Y to X (rotation of the Y direction about Z), µrad.
+    pub ec0y_urad: f64,
+    /// Squareness of Z to X (rotation of the Z direction about Y), µrad.
+    pub eb0z_urad: f64,
+    /// Squareness of Z to Y (rotation of the Z direction about X), µrad.
+    pub ea0z_urad: f64,
+    /// Orientation of the A axis line about Y, µrad.
+    pub eb0a_urad: f64,
+    /// Orientation of the A axis line about Z, µrad.
+    pub ec0a_urad: f64,
+    /// Orientation of the C axis line about X (relative to A), µrad.
+    pub ea0c_urad: f64,
+    /// Orientation of the C axis line about Y (relative to A), µrad.
+    pub eb0c_urad: f64,
+    /// Offset of the C axis line from the A axis along Y, µm.
+    pub ey0c_um: f64,
+    /// Ball centre, actual − nominal, table frame, µm.
+    pub ball_x_um: f64,
+    pub ball_y_um: f64,
+    pub ball_z_um: f64,
+    /// Tool point, actual − nominal, spindle frame, µm.
+    pub tool_x_um: f64,
+    pub tool_y_um: f64,
+    pub tool_z_um: f64,
+    /// Linear drift of the measuring loop (e.g. spindle growth), µm per (scaled) hour, machine
+    /// frame. Not one of the 14 parameters: a non-zero drift biases the identification as it
+    /// would on a real machine. Default 0.
+    #[serde(default)]
     pub drift_um_per_h: [f64; 3],
-    /// Location error of the C axis centre line in X and Y (EX0C, EY0C), µm.
-    pub c_offset_um: [f64; 2],
-    /// Location error of the A axis centre line in Y and Z (EY0A, EZ0A), µm.
-    pub a_offset_um: [f64; 2],
-    /// Squareness of C to X and Y (EA0C, EB0C), µrad.
-    pub c_tilt_urad: [f64; 2],
-    /// Ball position on the table relative to the C axis, mm.
-    pub ball_mm: [f64; 3],
 }
 
-impl Default for LinkErrors {
+impl CapballModel {
+    /// The 14 parameters as metrology's types.
+    pub fn errors(&self) -> metrology::capball::CapballErrors {
+        use metrology::capball::{CapballErrors, LinkErrors, SetupErrors};
+        CapballErrors {
+            link: LinkErrors {
+                ec0y_urad: self.ec0y_urad,
+                eb0z_urad: self.eb0z_urad,
+                ea0z_urad: self.ea0z_urad,
+                eb0a_urad: self.eb0a_urad,
+                ec0a_urad: self.ec0a_urad,
+                ea0c_urad: self.ea0c_urad,
+                eb0c_urad: self.eb0c_urad,
+                ey0c_um: self.ey0c_um,
+            },
+            setup: SetupErrors {
+                ball_x_um: self.ball_x_um,
+                ball_y_um: self.ball_y_um,
+                ball_z_um: self.ball_z_um,
+                tool_x_um: self.tool_x_um,
+                tool_y_um: self.tool_y_um,
+                tool_z_um: self.tool_z_um,
+            },
+        }
+    }
+
+    /// A model from metrology's parameters, without drift.
+    pub fn from_errors(e: &metrology::capball::CapballErrors) -> Self {
+        let (l, s) = (&e.link, &e.setup);
+        CapballModel {
+            ec0y_urad: l.ec0y_urad,
+            eb0z_urad: l.eb0z_urad,
+            ea0z_urad: l.ea0z_urad,
+            eb0a_urad: l.eb0a_urad,
+            ec0a_urad: l.ec0a_urad,
+            ea0c_urad: l.ea0c_urad,
+            eb0c_urad: l.eb0c_urad,
+            ey0c_um: l.ey0c_um,
+            ball_x_um: s.ball_x_um,
+            ball_y_um: s.ball_y_um,
+            ball_z_um: s.ball_z_um,
+            tool_x_um: s.tool_x_um,
+            tool_y_um: s.tool_y_um,
+            tool_z_um: s.tool_z_um,
+            drift_um_per_h: [0.0; 3],
+        }
+    }
+}
+
+impl Default for CapballModel {
     fn default() -> Self {
-        LinkErrors {
-            setup_offset_um: [1.5, -0.8, 0.6],
-            drift_um_per_h: [0.4, -0.2, 0.9],
-            c_offset_um: [6.0, -4.0],
-            a_offset_um: [5.0, 8.0],
-            c_tilt_urad: [20.0, -15.0],
-            ball_mm: [100.0, 0.0, 50.0],
+        CapballModel {
+            ec0y_urad: 12.0,
+            eb0z_urad: -18.0,
+            ea0z_urad: 9.0,
+            eb0a_urad: 25.0,
+            ec0a_urad: -15.0,
+            ea0c_urad: 20.0,
+            eb0c_urad: -15.0,
+            ey0c_um: 4.0,
+            ball_x_um: 3.0,
+            ball_y_um: -2.0,
+            ball_z_um: 1.5,
+            tool_x_um: -1.5,
+            tool_y_um: 2.5,
+            tool_z_um: 4.0,
+            drift_um_per_h: [0.0; 3],
         }
     }
 }
@@ -505,6 +589,10 @@ pub struct StreamFaults {
     /// At most this many of each fault kind (0 = unlimited).
     #[serde(default)]
     pub max_each: u64,
+    /// When a host opens the port while the device streams, its first bytes are the tail of
+    /// a sample it missed ("a device may start mid-frame when the port opens").
+    #[serde(default)]
+    pub mid_frame_on_open: bool,
 }
 
 /// A timed interval.

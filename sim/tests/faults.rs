@@ -29,6 +29,7 @@ fn heavy() -> StreamFaults {
         truncated_rate: 0.01,
         drop_rate: 0.01,
         max_each: 0,
+        mid_frame_on_open: false,
     }
 }
 
@@ -303,4 +304,43 @@ fn full_rates_simultaneously_without_falling_behind() {
     for r in [&rec.interferometer, &rec.capball, &rec.psd] {
         assert_eq!(r.faults.overflow, 0);
     }
+}
+
+#[test]
+fn reopening_a_streaming_device_starts_mid_frame() {
+    let mut sc = quick();
+    sc.faults.psd.mid_frame_on_open = true;
+    let env = Env::start(sc);
+    let mut p = env.open(Device::Psd);
+    send(&mut *p, "CONF:RATE 1000\n");
+    send(&mut *p, "INIT:CONT ON\n");
+    let first = read_for(&mut *p, Duration::from_millis(100));
+    // A fresh host connection before streaming started: whole lines from the first byte.
+    assert!(
+        first.starts_with(b"D,"),
+        "{:?}",
+        String::from_utf8_lossy(&first[..20])
+    );
+    drop(p);
+    std::thread::sleep(Duration::from_millis(100));
+    let mut p = env.open(Device::Psd);
+    let bytes = read_for(&mut *p, Duration::from_millis(100));
+    assert!(
+        !bytes.starts_with(b"D,"),
+        "{:?}",
+        String::from_utf8_lossy(&bytes[..20])
+    );
+    let (frames, rejects) = decode(protocol::psd::Decoder::new(), &bytes);
+    // The tail of the missed line is rejected (or taken for an answer); whole lines follow.
+    let answers = frames
+        .iter()
+        .filter(|f| !matches!(f, protocol::psd::Line::Data(_)))
+        .count() as u64;
+    assert_eq!(
+        answers + rejects.values().sum::<u64>(),
+        1,
+        "{rejects:?} {:?}",
+        &frames[..2]
+    );
+    assert_eq!(env.sim().record().psd.faults.partial_on_open, 1);
 }

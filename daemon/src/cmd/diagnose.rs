@@ -1,8 +1,135 @@
-//! `metrolog diagnose` (not written yet).
+//! `metrolog diagnose`: find what the simulation's baseline model gets wrong in a measured
+//! positioning run, name the cause, and write the extended model.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use metrology::diagnose::{self, Diagnosis, Options};
 
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Positioning dataset (CSV, see datasets.md) or MCAP log of a run.
+    pub input: PathBuf,
+    /// Print the JSON report (datasets.md, "Diagnosis report") instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the extended axis model to FILE: the `[axis]` table of a simulator scenario
+    /// (TOML).
+    #[arg(long, value_name = "FILE")]
+    pub write_model: Option<PathBuf>,
+    /// Draw the residual views (.svg or .png).
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
+    /// Seeds averaged when checking that the extended model reproduces the run.
+    #[arg(long, default_value_t = 8)]
+    pub check_seeds: usize,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`metrolog diagnose` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let data = crate::cmd::analyze::load_positioning(&args.input)?;
+    let mut d: Diagnosis = diagnose::diagnose(&data, &Options::default())
+        .with_context(|| format!("diagnosing {}", args.input.display()))?;
+    d.report.reproduction = Some(diagnose::reproduction_check(
+        &data,
+        &d.model,
+        args.check_seeds,
+    ));
+    if let Some(p) = &args.write_model {
+        // The `[axis]` table of a simulator scenario (sim's `Scenario::axis`), so it can
+        // replace that table as it is.
+        let toml = toml::to_string_pretty(&metrology::diagnose::AxisTable {
+            axis: d.model.clone(),
+        })
+        .context("serialising the model")?;
+        let header = format!(
+            "# Axis model extended by `metrolog diagnose {}`: baseline fitted from the data plus\n\
+             # the effects found ({}).\n",
+            args.input.display(),
+            if d.report.findings.is_empty() {
+                "none".to_string()
+            } else {
+                d.report
+                    .findings
+                    .iter()
+                    .map(|f| f.effect.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
+        );
+        std::fs::write(p, header + &toml).with_context(|| format!("writing {}", p.display()))?;
+        d.report.extended_model = Some(p.display().to_string());
+    }
+    if let Some(p) = &args.plot {
+        crate::plot::positioning::draw_diagnosis(p, &data, &d)
+            .with_context(|| format!("drawing {}", p.display()))?;
+    }
+    let text = if args.json {
+        serde_json::to_string_pretty(&d.report)? + "\n"
+    } else {
+        render_text(&d)
+    };
+    crate::cmd::analyze::print_out(&text)
+}
+
+/// The human-readable diagnosis.
+pub fn render_text(d: &Diagnosis) -> String {
+    let r = &d.report;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Baseline (static deviation per target and direction + stationary noise): RMS residual \
+         {:.3} µm, held-out cycles {:.3} µm",
+        r.baseline.rms_um, r.baseline.heldout_rms_um
+    );
+    if r.findings.is_empty() {
+        let _ = writeln!(
+            s,
+            "No finding: the baseline explains the data (noise {:.3} µm).",
+            d.model.noise_um
+        );
+    }
+    for (k, f) in r.findings.iter().enumerate() {
+        let params: Vec<String> = f
+            .params
+            .iter()
+            .map(|(name, v)| match f.params_u.get(name) {
+                Some(u) => format!("{name} = {v:.4} ± {u:.2}"),
+                None => format!("{name} = {v:.4}"),
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "\n{}. {} (significance {:.1})",
+            k + 1,
+            f.effect,
+            f.significance
+        );
+        let _ = writeln!(s, "   {}", params.join(", "));
+        let _ = writeln!(
+            s,
+            "   held-out error {:.3} → {:.3} µm",
+            f.heldout_rms_before_um, f.heldout_rms_after_um
+        );
+        let _ = writeln!(s, "   cause: {}", f.cause);
+    }
+    if let Some(rep) = &r.reproduction {
+        let _ = writeln!(
+            s,
+            "\nSimulating the same run ({} seeds) — RMS of simulated − measured per-target statistics:\n   \
+             extended model: x̄ {:.3} µm, s {:.3} µm\n   baseline model: x̄ {:.3} µm, s {:.3} µm",
+            rep.seeds,
+            rep.mean_rms_um,
+            rep.s_rms_um,
+            rep.baseline_mean_rms_um,
+            rep.baseline_s_rms_um
+        );
+    }
+    if let Some(p) = &r.extended_model {
+        let _ = writeln!(s, "\nExtended model written to {p}");
+    }
+    for n in &r.notes {
+        let _ = writeln!(s, "Note: {n}");
+    }
+    s
 }

@@ -60,8 +60,7 @@ impl Cb3 {
         let sp = ctx.program_s(at);
         let ph = w.phase(sp);
         let t = ctx.slow_t(at);
-        let c = w.coords(ph);
-        let mut e = w.capball_truth.error_um(&c, t);
+        let mut e = w.capball_error_um(ph, t);
         let ring = w.ringing_um(ph) * self.cfg.ringing_gain;
         for (ei, r) in e.iter_mut().zip(RING_DIR) {
             *ei += ring * r;
@@ -118,6 +117,10 @@ impl Cb3 {
         };
         count_fate(ctx.faults, fate);
         match fate {
+            Fate::NotConnected if ctx.keep_unsent => {
+                ctx.unsent.clear();
+                protocol::cb3::encode(&frame, ctx.unsent);
+            }
             Fate::Sent => protocol::cb3::encode(&frame, ctx.out),
             Fate::BadChecksum => {
                 let mut enc = Vec::new();

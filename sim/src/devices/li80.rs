@@ -203,6 +203,10 @@ impl Li80 {
         };
         count_fate(ctx.faults, fate);
         match fate {
+            Fate::NotConnected if ctx.keep_unsent => {
+                ctx.unsent.clear();
+                protocol::li80::encode_pos(&frame, ctx.unsent);
+            }
             Fate::Sent => protocol::li80::encode_pos(&frame, ctx.out),
             Fate::BadChecksum => {
                 let mut line = Vec::new();

@@ -28,7 +28,21 @@ fn start<M: Model>(
     ppm: f64,
     start_us: u64,
 ) -> Result<tokio::task::JoinHandle<()>, SimError> {
+    let mid_frame = match M::DEVICE {
+        Device::Interferometer => {
+            shared
+                .world
+                .scenario
+                .faults
+                .interferometer
+                .mid_frame_on_open
+        }
+        Device::Capball => shared.world.scenario.faults.capball.mid_frame_on_open,
+        Device::Psd => shared.world.scenario.faults.psd.mid_frame_on_open,
+        Device::Trigger => false,
+    };
     let mut r = Runner::new(model, shared, link, rng, ppm, start_us);
+    r.set_mid_frame_on_open(mid_frame);
     r.plug()?;
     r.publish();
     Ok(rt.spawn(r.run(ctl)))

@@ -131,6 +131,10 @@ impl Psd2 {
         };
         count_fate(ctx.faults, fate);
         match fate {
+            Fate::NotConnected if ctx.keep_unsent => {
+                ctx.unsent.clear();
+                protocol::psd::encode_data(&d, ctx.unsent);
+            }
             Fate::Sent => protocol::psd::encode_data(&d, ctx.out),
             Fate::Truncated => {
                 let mut line = Vec::new();

@@ -1,0 +1,184 @@
+//! `metrolog analyze positioning` and `metrolog diagnose` end to end on dataset files.
+
+use std::path::Path;
+use std::process::Command;
+
+use metrology::axis_model::{AxisModel, Effect};
+use metrology::positioning_data::{simulate, standard_schedule};
+
+fn metrolog(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn write_run(dir: &Path, effects: Vec<Effect>, drop_one: bool) -> String {
+    let m = AxisModel {
+        axis: "Y".into(),
+        targets_mm: (0..11)
+            .map(|i| 30.0 * i as f64 + (i % 4) as f64 * 0.7)
+            .collect(),
+        systematic_up_um: (0..11).map(|i| (i as f64 * 0.8).sin() * 2.0).collect(),
+        systematic_down_um: (0..11)
+            .map(|i| (i as f64 * 0.8).sin() * 2.0 - 1.2)
+            .collect(),
+        noise_um: 0.3,
+        effects,
+    };
+    let mut d = simulate(&m, &standard_schedule(11, 12, 12.0), 7);
+    if drop_one {
+        d.readings.retain(|r| !(r.cycle == 3 && r.index == 5));
+    }
+    let path = dir.join("run.csv");
+    std::fs::write(&path, d.to_csv_string()).unwrap();
+    path.to_string_lossy().into_owned()
+}
+
+#[test]
+fn analyze_json_has_the_contract_keys_and_says_what_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = write_run(dir.path(), vec![], true);
+    let (ok, out, err) = metrolog(&["analyze", "positioning", &csv, "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let mut keys: Vec<String> = v["iso230_2"].as_object().unwrap().keys().cloned().collect();
+    keys.sort();
+    let mut want: Vec<String> = [
+        "B", "B_mean", "R_up", "R_down", "R", "E_up", "E_down", "E", "M", "A_up", "A_down", "A",
+    ]
+    .map(String::from)
+    .to_vec();
+    want.sort();
+    assert_eq!(keys, want);
+    assert!(v["iso230_2"]["A"].as_f64().unwrap() > 0.0);
+    let t = v["targets"].as_array().unwrap();
+    assert_eq!(t.len(), 11);
+    assert_eq!(t[4]["n_up"], 11);
+    assert_eq!(v["missing"].as_array().unwrap().len(), 2);
+    assert!(
+        v["drift_elimination"]["directions"]
+            .as_array()
+            .unwrap()
+            .len()
+            == 2
+    );
+}
+
+#[test]
+fn analyze_text_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = write_run(
+        dir.path(),
+        vec![Effect::LinearDrift { rate_um_per_h: 3.0 }],
+        false,
+    );
+    let svg = dir.path().join("chart.svg");
+    let png = dir.path().join("chart.png");
+    let (ok, out, err) = metrolog(&[
+        "analyze",
+        "positioning",
+        &csv,
+        "--plot",
+        svg.to_str().unwrap(),
+        "--reference-cycle",
+        "6",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("bidirectional accuracy") && out.contains("µm"),
+        "{out}"
+    );
+    assert!(out.contains("anchored on target 1 of cycle 6"), "{out}");
+    assert!(out.contains("Student t, 12 cycles"), "{out}");
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    let (ok, _, err) = metrolog(&[
+        "analyze",
+        "positioning",
+        &csv,
+        "--plot",
+        png.to_str().unwrap(),
+        "--plot-target",
+        "3",
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+}
+
+#[test]
+fn diagnose_finds_the_hidden_drift_and_writes_a_model_the_simulator_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = write_run(
+        dir.path(),
+        vec![Effect::CyclicDrift {
+            period_s: 900.0,
+            amplitude_um: 1.0,
+            phase_rad: 0.3,
+        }],
+        false,
+    );
+    let model = dir.path().join("model.toml");
+    let plot = dir.path().join("diag.svg");
+    let (ok, out, err) = metrolog(&[
+        "diagnose",
+        &csv,
+        "--json",
+        "--write-model",
+        model.to_str().unwrap(),
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["kind"], "positioning");
+    assert_eq!(v["baseline"]["model"], "static");
+    let f = &v["findings"][0];
+    assert_eq!(f["effect"], "cyclic_drift");
+    assert!((f["params"]["period_s"].as_f64().unwrap() - 900.0).abs() < 30.0);
+    assert!(
+        f["heldout_rms_after_um"].as_f64().unwrap() < f["heldout_rms_before_um"].as_f64().unwrap()
+    );
+    assert_eq!(v["extended_model"], model.to_str().unwrap());
+    #[derive(serde::Deserialize)]
+    struct Scenario {
+        axis: AxisModel,
+    }
+    let m = toml::from_str::<Scenario>(&std::fs::read_to_string(&model).unwrap())
+        .unwrap()
+        .axis;
+    assert!(matches!(m.effects[0], Effect::CyclicDrift { .. }));
+    assert!(
+        v["reproduction"]["s_rms_um"].as_f64().unwrap()
+            < v["reproduction"]["baseline_s_rms_um"].as_f64().unwrap()
+    );
+    assert!(plot.exists());
+}
+
+#[test]
+fn bad_input_gets_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(
+        &bad,
+        "cycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n1,+,2,5,oops\n",
+    )
+    .unwrap();
+    let (ok, _, err) = metrolog(&["analyze", "positioning", bad.to_str().unwrap()]);
+    assert!(
+        !ok && err.contains("line 3") && err.contains("deviation_um"),
+        "{err}"
+    );
+    let (ok, _, err) = metrolog(&["analyze", "positioning", "/nonexistent/run.csv"]);
+    assert!(!ok && err.contains("/nonexistent/run.csv"), "{err}");
+    let csv = write_run(dir.path(), vec![], false);
+    let (ok, _, err) = metrolog(&["analyze", "positioning", &csv, "--reference-cycle", "99"]);
+    assert!(!ok && err.contains("--reference-cycle 99"), "{err}");
+    let (ok, _, err) = metrolog(&["analyze", "positioning", &csv, "--plot", "x.gif"]);
+    assert!(!ok && err.contains(".svg or .png"), "{err}");
+    assert!(!err.contains("panicked"));
+}

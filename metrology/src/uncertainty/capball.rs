@@ -1,0 +1,500 @@
+//! Multi-output adaptive Monte Carlo of the CapBall link and setup errors (paper 001).
+//!
+//! The identification is linear, `p̂ = J⁺·ΔE` (paper 001, pseudo-inverse of the stacked
+//! Jacobian), so one trial is `p = p̂ + J⁺·e + J⁺·d(φ)`: `e` is the per-point noise (sensor
+//! noise and frame-transform dispersion, and for the *statistical* drift model the ISO/TR 230-9
+//! drift term, all normal and independent per point and direction), `d(φ)` the *cyclic* drift of
+//! the measuring loop at the measurement times of the poses with a random start phase φ.
+//!
+//! Why the cyclic drift costs almost nothing per trial: the drift is a Fourier series in time,
+//! so `J⁺·d(φ) = Σ_k cos(kφ)·A_k + sin(kφ)·B_k` with the 14-vectors `A_k`, `B_k` computed once.
+//! The per-point noise is generated in full (2421 normals per trial for 807 poses) and
+//! projected in batches with one matrix product.
+//!
+//! Any Jacobian plugs in ([`CapballMc::new`] takes `J` as a matrix); [`Paper001Case`] uses the
+//! machine's own (`crate::capball`, the WCAYFXZT machine of paper 001).
+
+use nalgebra::DMatrix;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution as _, StandardNormal};
+use serde::Serialize;
+
+use super::UncertaintyError;
+use super::mc::{McResult, TrialSource};
+
+/// One harmonic of a periodic drift: `cos_um·cos(kωt) + sin_um·sin(kωt)` per direction x, y, z.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DriftHarmonic {
+    pub order: u32,
+    pub cos_um: [f64; 3],
+    pub sin_um: [f64; 3],
+}
+
+/// The measuring loop's drift as a periodic function of time (paper 001, cyclic method: the
+/// spindle's cooling cycles).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CyclicDrift {
+    pub period_s: f64,
+    pub harmonics: Vec<DriftHarmonic>,
+}
+
+impl CyclicDrift {
+    /// A sinusoidal drift with the given peak-to-valley per direction.
+    pub fn sine(period_s: f64, peak_to_valley_um: [f64; 3]) -> CyclicDrift {
+        CyclicDrift {
+            period_s,
+            harmonics: vec![DriftHarmonic {
+                order: 1,
+                cos_um: [0.0; 3],
+                sin_um: peak_to_valley_um.map(|v| v / 2.0),
+            }],
+        }
+    }
+
+    /// A cooling-cycle shape: a slow rise and a faster fall (first three harmonics of a
+    /// sawtooth, scaled to the given peak-to-valley per direction).
+    pub fn cooling_cycle(period_s: f64, peak_to_valley_um: [f64; 3]) -> CyclicDrift {
+        // Sawtooth Fourier coefficients 1/k; three harmonics span about 1.63 peak to valley
+        // (sampled numerically below), scaled to the requested range.
+        let raw = |t: f64| -> f64 {
+            (1..=3)
+                .map(|k| (std::f64::consts::TAU * k as f64 * t).sin() / k as f64)
+                .sum()
+        };
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for i in 0..4000 {
+            let v = raw(i as f64 / 4000.0);
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        let scale = 1.0 / (hi - lo);
+        CyclicDrift {
+            period_s,
+            harmonics: (1..=3)
+                .map(|k| DriftHarmonic {
+                    order: k,
+                    cos_um: [0.0; 3],
+                    sin_um: peak_to_valley_um.map(|v| v * scale / k as f64),
+                })
+                .collect(),
+        }
+    }
+
+    /// The drift at time `t_s`.
+    pub fn value_um(&self, t_s: f64) -> [f64; 3] {
+        let w = std::f64::consts::TAU / self.period_s;
+        let mut d = [0.0; 3];
+        for h in &self.harmonics {
+            let (s, c) = (h.order as f64 * w * t_s).sin_cos();
+            for a in 0..3 {
+                d[a] += h.cos_um[a] * c + h.sin_um[a] * s;
+            }
+        }
+        d
+    }
+
+    /// Peak-to-valley per direction (sampled over one period): E_VE of ISO/TR 230-9.
+    pub fn peak_to_valley_um(&self) -> [f64; 3] {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for i in 0..2000 {
+            let v = self.value_um(self.period_s * i as f64 / 2000.0);
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+        [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]
+    }
+}
+
+/// How the drift of the measuring loop enters the simulation.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum DriftModel {
+    None,
+    /// ISO/TR 230-9 statistical treatment: a normal term of standard deviation `u_um` per
+    /// direction, drawn independently for every point.
+    Statistical {
+        u_um: [f64; 3],
+    },
+    /// Periodic function of time with a random start phase per trial.
+    Cyclic(CyclicDrift),
+}
+
+impl DriftModel {
+    /// The statistical model from the drift range E_VE (peak to valley) per direction:
+    /// u_EVE = E_VE/(2√3), the range read as the full width of a rectangular distribution
+    /// (ISO/TR 230-9's treatment of an environmental variation error).
+    pub fn statistical_from_range(e_ve_um: [f64; 3]) -> DriftModel {
+        DriftModel::Statistical {
+            u_um: e_ve_um.map(|e| e / (2.0 * 3f64.sqrt())),
+        }
+    }
+}
+
+/// The uncertainty sources of paper 001.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CapballSources {
+    /// Standard uncertainty of the sensor outputs (Type A), per direction, per point.
+    pub sensor_u_um: [f64; 3],
+    /// Dispersion of the sensor-to-machine frame transformation, per direction, per point
+    /// (paper 001 models it as normal with the standard deviations of 500 calibration points).
+    pub frame_u_um: [f64; 3],
+    pub drift: DriftModel,
+}
+
+impl CapballSources {
+    /// The same sources with only one kept (for the contribution of each source, Table 5).
+    pub fn only(&self, source: Source) -> CapballSources {
+        CapballSources {
+            sensor_u_um: if source == Source::Sensor {
+                self.sensor_u_um
+            } else {
+                [0.0; 3]
+            },
+            frame_u_um: if source == Source::Frame {
+                self.frame_u_um
+            } else {
+                [0.0; 3]
+            },
+            drift: if source == Source::Drift {
+                self.drift.clone()
+            } else {
+                DriftModel::None
+            },
+        }
+    }
+}
+
+/// One uncertainty source.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum Source {
+    Sensor,
+    Frame,
+    Drift,
+}
+
+/// Trials are projected in batches of this many (one matrix product per batch).
+const BATCH: usize = 50;
+
+/// The CapBall Monte Carlo model: a [`TrialSource`] with 14 (or `J.ncols()`) outputs.
+#[derive(Debug, Clone)]
+pub struct CapballMc {
+    names: Vec<String>,
+    p_hat: Vec<f64>,
+    /// J⁺ (n_params × 3·n_poses).
+    pinv: DMatrix<f64>,
+    /// Standard deviation of the per-point normal noise for each row of ΔE.
+    sigma: Vec<f64>,
+    /// (order k, A_k, B_k): the cyclic drift's projection.
+    drift_terms: Vec<(f64, Vec<f64>, Vec<f64>)>,
+}
+
+/// Worker scratch: the noise batch and its projection.
+pub struct CapballScratch {
+    noise: DMatrix<f64>,
+    proj: DMatrix<f64>,
+    phase: Vec<f64>,
+}
+
+/// Moore–Penrose pseudo-inverse of a full-column-rank `J` by SVD.
+pub fn pseudo_inverse(j: &DMatrix<f64>) -> Result<DMatrix<f64>, UncertaintyError> {
+    let n = j.ncols();
+    let svd = j.clone().svd(true, true);
+    let smax = svd.singular_values.max();
+    let smin = svd.singular_values.min();
+    if !(smin > smax * 1e-12) {
+        return Err(UncertaintyError::Invalid(format!(
+            "the identification Jacobian is rank deficient ({n} parameters, condition number {:.3e}): \
+             the poses do not separate all parameters",
+            smax / smin
+        )));
+    }
+    svd.pseudo_inverse(smax * 1e-13)
+        .map_err(|e| UncertaintyError::Invalid(format!("pseudo-inverse failed: {e}")))
+}
+
+impl CapballMc {
+    /// `j`: identification Jacobian (3 rows per pose, x y z; µm per parameter unit); `p_hat`:
+    /// the identified parameters (the mean of the repeated identifications in paper 001);
+    /// `times_s`: measurement time of each pose from the start of the trajectory.
+    pub fn new(
+        j: &DMatrix<f64>,
+        p_hat: &[f64],
+        names: &[String],
+        times_s: &[f64],
+        sources: &CapballSources,
+    ) -> Result<CapballMc, UncertaintyError> {
+        let n_params = j.ncols();
+        if j.nrows() != 3 * times_s.len() {
+            return Err(UncertaintyError::Invalid(format!(
+                "the Jacobian has {} rows for {} poses (3 rows per pose expected)",
+                j.nrows(),
+                times_s.len()
+            )));
+        }
+        if p_hat.len() != n_params || names.len() != n_params {
+            return Err(UncertaintyError::Invalid(format!(
+                "{} parameter values and {} names for a Jacobian with {n_params} columns",
+                p_hat.len(),
+                names.len()
+            )));
+        }
+        let all = sources
+            .sensor_u_um
+            .iter()
+            .chain(&sources.frame_u_um)
+            .copied()
+            .chain(match &sources.drift {
+                DriftModel::Statistical { u_um } => u_um.to_vec(),
+                _ => vec![],
+            });
+        if all.clone().any(|u| !(u >= 0.0 && u.is_finite())) {
+            return Err(UncertaintyError::Invalid(
+                "standard uncertainties must be finite and ≥ 0".into(),
+            ));
+        }
+        let pinv = pseudo_inverse(j)?;
+        let stat = match &sources.drift {
+            DriftModel::Statistical { u_um } => *u_um,
+            _ => [0.0; 3],
+        };
+        let sigma = (0..j.nrows())
+            .map(|r| {
+                let a = r % 3;
+                (sources.sensor_u_um[a].powi(2) + sources.frame_u_um[a].powi(2) + stat[a].powi(2))
+                    .sqrt()
+            })
+            .collect();
+        let mut drift_terms = Vec::new();
+        if let DriftModel::Cyclic(cd) = &sources.drift {
+            if !(cd.period_s > 0.0) {
+                return Err(UncertaintyError::Invalid(
+                    "the drift period must be positive".into(),
+                ));
+            }
+            let w = std::f64::consts::TAU / cd.period_s;
+            for h in &cd.harmonics {
+                let k = h.order as f64;
+                let mut u = nalgebra::DVector::zeros(j.nrows());
+                let mut v = nalgebra::DVector::zeros(j.nrows());
+                for (i, t) in times_s.iter().enumerate() {
+                    let (s, c) = (k * w * t).sin_cos();
+                    for a in 0..3 {
+                        // d(t + φ/ω) = cos(kφ)·(a·cos + b·sin) + sin(kφ)·(−a·sin + b·cos).
+                        u[3 * i + a] = h.cos_um[a] * c + h.sin_um[a] * s;
+                        v[3 * i + a] = -h.cos_um[a] * s + h.sin_um[a] * c;
+                    }
+                }
+                let pa = &pinv * u;
+                let pb = &pinv * v;
+                drift_terms.push((k, pa.as_slice().to_vec(), pb.as_slice().to_vec()));
+            }
+        }
+        Ok(CapballMc {
+            names: names.to_vec(),
+            p_hat: p_hat.to_vec(),
+            pinv,
+            sigma,
+            drift_terms,
+        })
+    }
+
+    /// J⁺, for simulations that identify from simulated measurements.
+    pub fn pseudo_inverse(&self) -> &DMatrix<f64> {
+        &self.pinv
+    }
+}
+
+impl TrialSource for CapballMc {
+    type Scratch = CapballScratch;
+
+    fn n_outputs(&self) -> usize {
+        self.p_hat.len()
+    }
+
+    fn output_names(&self) -> Vec<String> {
+        self.names.clone()
+    }
+
+    fn scratch(&self) -> CapballScratch {
+        CapballScratch {
+            noise: DMatrix::zeros(self.sigma.len(), BATCH),
+            proj: DMatrix::zeros(self.p_hat.len(), BATCH),
+            phase: vec![0.0; BATCH],
+        }
+    }
+
+    fn fill(&self, rng: &mut ChaCha8Rng, s: &mut CapballScratch, out: &mut [f64]) {
+        let n_out = self.p_hat.len();
+        let n_trials = out.len() / n_out;
+        let mut done = 0;
+        while done < n_trials {
+            let nb = BATCH.min(n_trials - done);
+            for t in 0..nb {
+                s.phase[t] = rng.random::<f64>() * std::f64::consts::TAU;
+                let col = s.noise.column_mut(t);
+                for (e, sd) in col.into_iter().zip(&self.sigma) {
+                    let z: f64 = StandardNormal.sample(rng);
+                    *e = sd * z;
+                }
+            }
+            s.proj.gemm(1.0, &self.pinv, &s.noise, 0.0);
+            for t in 0..nb {
+                let y = &mut out[(done + t) * n_out..(done + t + 1) * n_out];
+                for (j, yj) in y.iter_mut().enumerate() {
+                    *yj = self.p_hat[j] + s.proj[(j, t)];
+                }
+                for (k, a, b) in &self.drift_terms {
+                    let (sn, cs) = (k * s.phase[t]).sin_cos();
+                    for j in 0..n_out {
+                        y[j] += cs * a[j] + sn * b[j];
+                    }
+                }
+            }
+            done += nb;
+        }
+    }
+}
+
+/// Simulated repeated identifications on a machine whose measuring loop drifts cyclically:
+/// run `r` starts at `first_start_s + r·run_period_s` (back-to-back trajectories, as the ten
+/// runs of paper 001 over about three hours), each with fresh sensor and frame noise.
+/// Returns the identified parameter vectors.
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_identifications(
+    j: &DMatrix<f64>,
+    p_true: &[f64],
+    times_s: &[f64],
+    sensor_u_um: [f64; 3],
+    frame_u_um: [f64; 3],
+    drift: &CyclicDrift,
+    first_start_s: f64,
+    run_period_s: f64,
+    n_runs: usize,
+    seed: u64,
+) -> Result<Vec<Vec<f64>>, UncertaintyError> {
+    let pinv = pseudo_inverse(j)?;
+    let p = nalgebra::DVector::from_column_slice(p_true);
+    let clean = j * p;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut runs = Vec::with_capacity(n_runs);
+    for r in 0..n_runs {
+        let t0 = first_start_s + r as f64 * run_period_s;
+        let mut de = clean.clone();
+        for (i, t) in times_s.iter().enumerate() {
+            let d = drift.value_um(t0 + t);
+            for a in 0..3 {
+                let zs: f64 = StandardNormal.sample(&mut rng);
+                let zf: f64 = StandardNormal.sample(&mut rng);
+                de[3 * i + a] += d[a] + sensor_u_um[a] * zs + frame_u_um[a] * zf;
+            }
+        }
+        runs.push((&pinv * de).as_slice().to_vec());
+    }
+    Ok(runs)
+}
+
+/// How often observed values fall inside the Monte Carlo coverage intervals.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CoverageCheck {
+    /// Per parameter: the fraction of runs inside its probabilistically symmetric interval.
+    pub per_parameter: Vec<f64>,
+    /// Over all parameters and runs.
+    pub overall: f64,
+    /// Per parameter: the runs' standard deviation divided by the Monte Carlo u.
+    pub spread_ratio: Vec<f64>,
+}
+
+/// Compares repeated identifications with the Monte Carlo intervals (paper 001, figures of
+/// the statistical and cyclic methods against ten identifications).
+pub fn coverage_check(mc: &McResult, runs: &[Vec<f64>]) -> CoverageCheck {
+    let n = mc.outputs.len();
+    let mut per = vec![0.0; n];
+    let mut ratio = vec![0.0; n];
+    for (j, o) in mc.outputs.iter().enumerate() {
+        let [lo, hi] = o.symmetric_interval;
+        let inside = runs.iter().filter(|r| r[j] >= lo && r[j] <= hi).count();
+        per[j] = inside as f64 / runs.len().max(1) as f64;
+        let m = runs.iter().map(|r| r[j]).sum::<f64>() / runs.len() as f64;
+        let sd = (runs.iter().map(|r| (r[j] - m).powi(2)).sum::<f64>()
+            / (runs.len() as f64 - 1.0).max(1.0))
+        .sqrt();
+        ratio[j] = sd / o.standard_uncertainty;
+    }
+    CoverageCheck {
+        overall: per.iter().sum::<f64>() / n.max(1) as f64,
+        per_parameter: per,
+        spread_ratio: ratio,
+    }
+}
+
+/// The case of paper 001 on our model of its machine: the identification Jacobian of the
+/// WCAYFXZT machine along the 807-pose trajectory (`crate::capball`), poses 0.75 s apart (about
+/// 10 minutes per trajectory), and sources of the magnitudes the paper describes (its exact
+/// values are not in the text we have). Used by the tests, the benchmark and the report.
+#[derive(Debug, Clone)]
+pub struct Paper001Case {
+    pub jacobian: DMatrix<f64>,
+    pub times_s: Vec<f64>,
+    pub names: Vec<String>,
+    /// The parameters the simulated machine really has (µm, µrad).
+    pub p_true: Vec<f64>,
+    pub sensor_u_um: [f64; 3],
+    pub frame_u_um: [f64; 3],
+    /// The measuring loop's real drift: a cooling cycle of 25 min, 2/2/6 µm peak to valley
+    /// (x, y, z; the paper saw a larger drift along z than along x and y).
+    pub drift: CyclicDrift,
+    /// Start-to-start time of back-to-back identification runs (18 min, paper 001: ten runs in
+    /// about three hours).
+    pub run_period_s: f64,
+}
+
+impl Paper001Case {
+    pub fn paper001() -> Paper001Case {
+        use crate::capball::{CapballSetup, PARAM_NAMES, TrajectorySpec};
+        let setup = CapballSetup::paper_default();
+        let poses = setup.trajectory(&TrajectorySpec::default());
+        let times_s = (0..poses.len()).map(|i| i as f64 * 0.75).collect();
+        Paper001Case {
+            jacobian: setup.stacked_jacobian(&poses),
+            times_s,
+            names: PARAM_NAMES.iter().map(|s| s.to_string()).collect(),
+            p_true: vec![
+                12.0, -8.0, 25.0, -15.0, 20.0, -30.0, 18.0, 40.0, 5.0, -3.0, 7.0, 2.0, -4.0, 6.0,
+            ],
+            sensor_u_um: [0.1, 0.1, 0.1],
+            frame_u_um: [0.3, 0.3, 0.3],
+            drift: CyclicDrift::cooling_cycle(1500.0, [2.0, 2.0, 6.0]),
+            run_period_s: 1080.0,
+        }
+    }
+
+    /// Sources with the cyclic drift model.
+    pub fn cyclic_sources(&self) -> CapballSources {
+        CapballSources {
+            sensor_u_um: self.sensor_u_um,
+            frame_u_um: self.frame_u_um,
+            drift: DriftModel::Cyclic(self.drift.clone()),
+        }
+    }
+
+    /// Sources with the ISO/TR 230-9 statistical drift model from the same drift's range.
+    pub fn statistical_sources(&self) -> CapballSources {
+        CapballSources {
+            sensor_u_um: self.sensor_u_um,
+            frame_u_um: self.frame_u_um,
+            drift: DriftModel::statistical_from_range(self.drift.peak_to_valley_um()),
+        }
+    }
+
+    /// The Monte Carlo model around `p_hat` with `sources`.
+    pub fn monte_carlo_model(
+        &self,
+        p_hat: &[f64],
+        sources: &CapballSources,
+    ) -> Result<CapballMc, UncertaintyError> {
+        CapballMc::new(&self.jacobian, p_hat, &self.names, &self.times_s, sources)
+    }
+}

@@ -9,8 +9,19 @@
 //! - [`Instrument`];
 //! - `li80::spawn`, `cb3::spawn`, `psd::spawn`, `trigger::spawn_slcan`, `trigger::spawn_socketcan`
 //!   — start a driver task (see each module);
-//! - [`clock::ClockFit`] — device-clock against host-clock fit;
+//! - [`trigger::trigger_from_frame`] — the one decoding path of SLCAN and SocketCAN frames;
+//! - [`clock::ClockFit`] — device-clock against host-clock fit; [`clock::Unwrap`] — wrapping
+//!   counters to u64;
 //! - [`HostClock`] — the host monotonic clock as ns since the Unix epoch.
+//!
+//! Every serial driver runs the same loop: open the port (8N1, no flow control), stop a stream
+//! the device may still be sending, identify, configure, start streaming; then read in large
+//! batches (about every 10 ms, every second read waiting for fresh bytes so the clock fit gets
+//! precise arrival times), decode, convert with `protocol::convert`, stamp and count. A read
+//! error, end of file or silence while streaming reports `Disconnected` and reopens the port
+//! with backoff (100 ms doubling to 2 s); a device that answers `ERR` or nothing reports
+//! `Error` naming the port, the command and the answer, and is retried. Cancelling stops the
+//! stream and still delivers every sample sent before the device's answer.
 
 use serde::Serialize;
 
@@ -131,20 +142,29 @@ pub struct Trigger {
 /// Per-instrument counters. Every field only grows during a run.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Counters {
+    /// Samples handed on (LI-80: `$POS` and `$ENV`; triggers: trigger frames).
     pub samples: u64,
     /// Samples missing according to the sequence numbers.
     pub gap_samples: u64,
     /// Number of gaps (events), each of one or more samples.
     pub gaps: u64,
+    /// Lines or frames discarded by the decoder (and trigger frames with a bad payload), by
+    /// kind, once streaming. What a device sends before we start its stream is discarded
+    /// uncounted.
     pub rejections: std::collections::BTreeMap<protocol::RejectKind, u64>,
+    /// Sequence number or device clock stepped back within one connection (the device
+    /// restarted under us): counting and the clock fit start afresh; not a gap.
     pub resyncs: u64,
+    /// Connections identified again after a disconnect.
     pub reconnects: u64,
     pub disconnects: u64,
     /// Samples that could not be delivered because the consumer's queue was full.
     pub dropped: u64,
+    /// Samples marked invalid (beam low or datum lost, over-range, photocurrent below minimum).
     pub invalid: u64,
-    /// Asynchronous device errors (`$ERR`).
+    /// Asynchronous device errors (`$ERR`; CAN error frames on SocketCAN).
     pub device_errors: u64,
+    /// Answer lines or frames routed to commands.
     pub answers: u64,
     /// Fitted drift of the device clock against the host clock, ppm (None until fitted).
     pub clock_drift_ppm: Option<f64>,

@@ -29,7 +29,7 @@ const BATCH_WAIT: Duration = Duration::from_millis(10);
 /// pause: its arrival time is then the write time plus the wake-up latency only, which gives
 /// the clock fit ([`crate::clock`]) the least-delayed points it needs (a batched read dates
 /// everything in it by the read, up to `BATCH_WAIT` late).
-const PROBE_EVERY: u32 = 4;
+const PROBE_EVERY: u32 = 2;
 
 /// Why a session ended.
 #[derive(Debug)]

@@ -173,6 +173,7 @@ fn faults() -> StreamFaults {
         truncated_rate: 0.003,
         drop_rate: 0.003,
         max_each: 8,
+        ..Default::default()
     }
 }
 
@@ -353,11 +354,13 @@ async fn every_sample_arrives_once_and_counters_match_injected_faults() {
 }
 
 /// The clock fit against the simulated device clocks (LI-80 +35 ppm, CB-3 −42 ppm with its
-/// u32 clock wrapping 1 s in, PSD-2 +20 ppm): within 5 ppm after 20 s of streaming.
+/// u32 clock wrapping 1 s in, PSD-2 +20 ppm): within 5 ppm after 30 s of streaming.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn clock_fit_recovers_the_simulated_drift_within_5_ppm() {
     let mut sc = Scenario::demo();
     sc.faults = Default::default();
+    // Devices that write every millisecond (a USB full-speed frame), not in 2 ms batches.
+    sc.batch_ms = 1.0;
     let which = [
         Instrument::Interferometer,
         Instrument::Capball,
@@ -374,7 +377,7 @@ async fn clock_fit_recovers_the_simulated_drift_within_5_ppm() {
     )
     .await;
     rig.all_connected().await;
-    rig.run_for(Duration::from_secs(20)).await;
+    rig.run_for(Duration::from_secs(30)).await;
     let (sim, by) = rig.stop().await;
     let mut report = Vec::new();
     for (i, drift_ppm) in [
@@ -387,6 +390,30 @@ async fn clock_fit_recovers_the_simulated_drift_within_5_ppm() {
     ] {
         let c = &by[&i];
         let k = c.counters.clone().unwrap();
+        if let Ok(d) = std::env::var("METROLOG_HIL_DUMP") {
+            // For a look at the arrival delays: device µs, host ns, fitted ns.
+            let rec = sim.record();
+            let dev = match i {
+                Instrument::Interferometer => Device::Interferometer,
+                Instrument::Capball => Device::Capball,
+                _ => Device::Psd,
+            };
+            let true_s: BTreeMap<u64, f64> = rec
+                .device(dev)
+                .samples
+                .iter()
+                .map(|s| (s.seq, s.true_s))
+                .collect();
+            let mut out = String::new();
+            for s in c.stream() {
+                let t = true_s.get(&s.seq).copied().unwrap_or(f64::NAN);
+                out.push_str(&format!(
+                    "{},{},{t},{}\n",
+                    s.device_t_us, s.host_ns, s.fitted_ns
+                ));
+            }
+            let _ = std::fs::write(format!("{d}/{}.csv", i.name()), out);
+        }
         let est = k.clock_drift_ppm.expect("clock fitted");
         report.push(format!(
             "{}: simulated {drift_ppm} ppm, fitted {est:.2} ppm",
@@ -572,4 +599,93 @@ async fn triggers_from_the_simulated_slcan_adapter() {
         assert_eq!((g.event, g.pose, g.nc_ms), (s.event, s.pose, s.nc_ms));
     }
     sim.shutdown().await;
+}
+
+/// A device still streaming from an earlier host (which went away without stopping it) is
+/// opened mid-frame: the driver stops it, discards what it sent, configures it and streams;
+/// nothing of the old stream is counted as a fault.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn device_found_streaming_mid_frame_is_taken_over_cleanly() {
+    let mut sc = Scenario::demo();
+    sc.faults = Default::default();
+    sc.faults.interferometer.mid_frame_on_open = true;
+    sc.faults.capball.mid_frame_on_open = true;
+    let which = [Instrument::Interferometer, Instrument::Capball];
+    let rates = Rates {
+        li80: 2000,
+        cb3: 5000,
+        psd: 100,
+    };
+    let mut first = Rig::start(sc.clone(), &which, rates).await;
+    first.all_connected().await;
+    first.run_for(Duration::from_millis(500)).await;
+    // The first host vanishes without stopping the streams.
+    for t in std::mem::take(&mut first.tasks) {
+        t.abort();
+        let _ = t.await;
+    }
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    // A second host on the same devices.
+    let (tx, mut rx) = tokio::sync::mpsc::channel(200_000);
+    let cancel = CancellationToken::new();
+    let clock = HostClock::new();
+    let t1 = drivers::li80::spawn(
+        drivers::li80::Config {
+            port: first.sim.port(Device::Interferometer).display().to_string(),
+            rate_hz: 1000,
+            alpha_um_per_m_k: 11.7,
+        },
+        clock,
+        tx.clone(),
+        cancel.clone(),
+    );
+    let t2 = drivers::cb3::spawn(
+        drivers::cb3::Config {
+            port: first.sim.port(Device::Capball).display().to_string(),
+            rate_hz: 1000,
+            poly: sc.capball.poly,
+            transform: IDENTITY,
+        },
+        clock,
+        tx,
+        cancel.clone(),
+    );
+    let mut by: BTreeMap<Instrument, Collected> = BTreeMap::new();
+    let deadline = tokio::time::Instant::now() + Duration::from_millis(2500);
+    while let Ok(Some(ev)) = tokio::time::timeout_at(deadline, rx.recv()).await {
+        let i = match &ev {
+            DriverEvent::Sample(s) => s.instrument,
+            DriverEvent::Connected { instrument, .. }
+            | DriverEvent::Disconnected { instrument, .. }
+            | DriverEvent::Error { instrument, .. }
+            | DriverEvent::Counters { instrument, .. } => *instrument,
+            DriverEvent::Trigger(_) => Instrument::Trigger,
+        };
+        by.entry(i).or_default().push(ev);
+    }
+    cancel.cancel();
+    let _ = t1.await;
+    let _ = t2.await;
+    while let Ok(ev) = rx.try_recv() {
+        if let DriverEvent::Counters {
+            instrument,
+            counters,
+        } = ev
+        {
+            by.entry(instrument).or_default().counters = Some(counters);
+        }
+    }
+    for i in which {
+        let c = &by[&i];
+        assert_eq!(c.connected.len(), 1, "{i:?}: {:?}", c.errors);
+        assert!(c.stream().count() > 1000, "{i:?} streams at the new rate");
+        let k = c.counters.clone().unwrap();
+        assert_eq!(k.rejections.values().sum::<u64>(), 0, "{i:?}: {k:?}");
+        assert_eq!(
+            (k.gaps, k.resyncs, k.disconnects),
+            (0, 0, 0),
+            "{i:?}: {k:?}"
+        );
+    }
+    first.sim.shutdown().await;
 }

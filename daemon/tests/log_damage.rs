@@ -222,6 +222,9 @@ fn failed_write_is_reported_and_keeps_the_flushed_part() {
     let (msgs, s) = messages(&path);
     assert!(!s.clean_close);
     assert!(!msgs.is_empty());
+    // The half-written chunk was cut off: the file ends at a record boundary.
+    assert_eq!(s.error.as_deref(), Some("the file ends without a footer"));
+    assert!(s.file_bytes < 200_000);
 }
 
 #[test]

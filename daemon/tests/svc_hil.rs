@@ -28,7 +28,7 @@ fn scenario() -> Scenario {
         bad_checksum_rate: 2e-4,
         truncated_rate: 1e-4,
         drop_rate: 1e-4,
-        max_each: 0,
+        ..StreamFaults::default()
     };
     s.faults.interferometer = stream;
     s.faults.capball = stream;

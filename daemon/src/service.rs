@@ -40,13 +40,11 @@ pub fn init_tracing_with_default(default: &str) {
         if std::env::var_os("JOURNAL_STREAM").is_some()
             && let Ok(journald) = tracing_journald::layer()
         {
-            {
-                let _ = tracing_subscriber::registry()
-                    .with(filter)
-                    .with(journald.with_syslog_identifier("metrolog".into()))
-                    .try_init();
-                return;
-            }
+            let _ = tracing_subscriber::registry()
+                .with(filter)
+                .with(journald.with_syslog_identifier("metrolog".into()))
+                .try_init();
+            return;
         }
         let _ = tracing_subscriber::fmt()
             .with_env_filter(filter)

@@ -269,7 +269,9 @@ fn print_report(report: &RunReport, truth: &[PoseTruth], home_x_mm: f64, reversa
             c.rms_err_um
         );
     }
-    println!("\ncounters:");
+    println!(
+        "\ncounters (the demo scenario injects garbage, bad checksums and dropped samples; they are caught and counted here):"
+    );
     println!(
         "  {:<15} {:>9} {:>6} {:>11} {:>8} {:>10} {:>8} {:>8}",
         "instrument",

@@ -50,11 +50,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             handle_signals: true,
         },
     ))?;
+    let st = &report.outcome.status;
     tracing::info!(
-        "run ended ({}); log {}; {}",
+        "run ended ({}); log {}; {}; queue at most {} of {}; pose latency at most {:.1} ms",
         report.reason_text(),
         report.log_path.display(),
-        report.outcome.status.summary()
+        st.summary(),
+        st.queue_max,
+        st.queue_capacity,
+        st.pose_latency_max_ms
     );
     Ok(())
 }
@@ -135,8 +139,8 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
-    let mut recorder = crate::pipeline::open_log(cfg, &clock)?;
-    let log_path = recorder.writer().path().to_path_buf();
+    let recorder = crate::pipeline::open_log(cfg, &clock)?;
+    let log_path = recorder.path().to_path_buf();
     tracing::info!("logging to {}", log_path.display());
 
     let (tx, rx) = mpsc::channel::<DriverEvent>(pipeline::QUEUE_CAPACITY);

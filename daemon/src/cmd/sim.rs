@@ -38,6 +38,23 @@ pub fn write_daemon_config(
     output_dir: &Path,
     stop_at_program_end: bool,
 ) -> anyhow::Result<String> {
+    write_daemon_config_with_rates(
+        sim,
+        dir,
+        output_dir,
+        stop_at_program_end,
+        [SIM_LI80_RATE_HZ, SIM_CB3_RATE_HZ, SIM_PSD_RATE_HZ],
+    )
+}
+
+/// [`write_daemon_config`] with the LI-80, CB-3 and PSD-2 rates given (benchmarks).
+pub fn write_daemon_config_with_rates(
+    sim: &SimHandle,
+    dir: &Path,
+    output_dir: &Path,
+    stop_at_program_end: bool,
+    rates_hz: [u32; 3],
+) -> anyhow::Result<String> {
     let sc = sim.scenario();
     let trajectory = dir.join("trajectory.csv");
     std::fs::write(&trajectory, sc.trajectory_csv())
@@ -104,13 +121,13 @@ can_id = {can_id:#x}
         traj = q(&trajectory),
         stop = stop_at_program_end,
         li80 = q(&sim.port(Device::Interferometer)),
-        li80_rate = SIM_LI80_RATE_HZ,
+        li80_rate = rates_hz[0],
         alpha = sc.interferometer.alpha_um_per_m_k,
         cb3 = q(&sim.port(Device::Capball)),
-        cb3_rate = SIM_CB3_RATE_HZ,
+        cb3_rate = rates_hz[1],
         tf = q(&transform),
         psd = q(&sim.port(Device::Psd)),
-        psd_rate = SIM_PSD_RATE_HZ,
+        psd_rate = rates_hz[2],
         slcan = q(&sim.port(Device::Trigger)),
         can_id = sc.trigger.can_id,
     ))

@@ -40,6 +40,13 @@ pub struct ClockFit {
 /// Windows needed before the fit is used (with fewer, [`ClockFit::map`] gives `None`).
 pub const MIN_WINDOWS: usize = 3;
 
+/// Largest drift the fit will believe, ppm. The data sheets promise at most ±100 ppm; a fit
+/// steeper than twice that comes from a few windows of which one was stalled (a loaded host
+/// early in a run), and extrapolating such a slope moves samples by hundreds of milliseconds
+/// against the triggers. Such a fit is replaced by the highest line of the bounding slope under
+/// all windows.
+pub const MAX_DRIFT_PPM: f64 = 200.0;
+
 impl Default for ClockFit {
     /// Windows of 0.5 s of device time, the last 600 of them (5 minutes) in the fit.
     fn default() -> Self {
@@ -121,8 +128,23 @@ impl ClockFit {
         if self.minima.len() < MIN_WINDOWS {
             return;
         }
-        if let Some(line) = lower_envelope_line(self.minima.make_contiguous()) {
-            self.line = Some(line);
+        let points = self.minima.make_contiguous();
+        // Slope excess c (ns per device µs) of a device MAX_DRIFT_PPM fast or slow.
+        let c_max = 1000.0 * MAX_DRIFT_PPM * 1e-6;
+        let c = match lower_envelope_line(points) {
+            Some((a, c)) if c.abs() <= c_max => {
+                self.line = Some((a, c));
+                return;
+            }
+            Some((_, c)) => c.clamp(-c_max, c_max),
+            None => 0.0,
+        };
+        let a = points
+            .iter()
+            .map(|&(x, r)| r - c * x)
+            .fold(f64::INFINITY, f64::min);
+        if a.is_finite() {
+            self.line = Some((a, c));
         }
     }
 
@@ -344,6 +366,33 @@ mod tests {
         }
         let est = fit.drift_ppm().unwrap();
         assert!((est - drift_ppm).abs() < 2.0, "{est}");
+    }
+
+    #[test]
+    fn a_stalled_window_early_in_a_run_cannot_tilt_the_fit_beyond_the_data_sheet() {
+        // A device with no drift; the host stalls 60 ms through the first counted window
+        // (0.5-1.0 s), so every sample of it arrives late. With three windows the envelope
+        // edge from that window down to the next has a slope of -60 ms per 0.5 s; the bound
+        // keeps the error of the mapping 5 s later to what 200 ppm can do.
+        let mut fit = ClockFit::new(500_000, 600);
+        for i in 0..2_100u64 {
+            let dev_us = i * 1_000; // 1 kHz
+            let stall_ns = if (500_000..1_000_000).contains(&dev_us) {
+                60_000_000
+            } else {
+                0
+            };
+            fit.push(dev_us, 1_000_000_000 + dev_us * 1_000 + 200_000 + stall_ns);
+        }
+        let drift = fit.drift_ppm().unwrap();
+        assert!(drift.abs() <= MAX_DRIFT_PPM * 1.001, "{drift}");
+        let mapped = fit.map(5_000_000).unwrap() as f64;
+        let truth = (1_000_000_000u64 + 5_000_000 * 1_000 + 200_000) as f64;
+        assert!(
+            (mapped - truth).abs() < 2e6,
+            "mapping off by {} ns",
+            mapped - truth
+        );
     }
 
     #[test]

@@ -570,6 +570,12 @@ pub fn spawn(
 /// plateaus in the signal otherwise.
 pub fn detector_settings(cfg: &crate::config::Config) -> DetectorSettings {
     let mut s = DetectorSettings::default().with_samples(cfg.detector.samples);
+    // Only the configured instruments get pose values: one left out of the run is not "away".
+    s.instruments.retain(|i| match i {
+        crate::log::topics::PoseInstrument::Interferometer => cfg.interferometer.is_some(),
+        crate::log::topics::PoseInstrument::Capball => cfg.capball.is_some(),
+        crate::log::topics::PoseInstrument::Psd => cfg.psd.is_some(),
+    });
     if cfg.trigger.is_none() {
         for c in [&mut s.interferometer, &mut s.capball, &mut s.psd] {
             c.mode = metrology::steady::DetectorMode::Plateaus;

@@ -81,6 +81,13 @@ fn truncated_logs_give_their_intact_prefix() {
             // Everything logged in the prefix is reproduced; only the end can differ.
             assert_eq!(r.logged[..], full_replay.logged[..r.logged.len()]);
             assert_eq!(r.identical, r.logged.len(), "cut at {at}");
+            // Nothing invented for the dwell the cut left open.
+            assert!(r.replayed.len() <= full_replay.replayed.len());
+            assert_eq!(
+                r.replayed[..],
+                full_replay.replayed[..r.replayed.len()],
+                "cut at {at}"
+            );
         }
     }
     // Most of the file is recovered from a cut near its end.
@@ -215,6 +222,9 @@ fn failed_write_is_reported_and_keeps_the_flushed_part() {
     let (msgs, s) = messages(&path);
     assert!(!s.clean_close);
     assert!(!msgs.is_empty());
+    // The half-written chunk was cut off: the file ends at a record boundary.
+    assert_eq!(s.error.as_deref(), Some("the file ends without a footer"));
+    assert!(s.file_bytes < 200_000);
 }
 
 #[test]

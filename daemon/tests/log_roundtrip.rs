@@ -396,3 +396,41 @@ fn dark_psd_samples_round_trip_as_nan_and_replay_exactly() {
     let out = replay(&w.path, &ReplayOptions::default()).unwrap();
     assert!(out.reproduces_log());
 }
+
+#[test]
+fn only_the_instruments_of_the_run_get_pose_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = SyntheticRun {
+        targets_mm: vec![0.0, 10.0],
+        ..SyntheticRun::default()
+    };
+    let mut meta = log_common::meta(&run);
+    meta.detector.instruments = vec![PoseInstrument::Interferometer];
+    let path = dir.path().join("li80.mcap");
+    let mut rec =
+        metrolog::log::Recorder::create(&path, &meta, metrolog::log::LogOptions::default())
+            .unwrap();
+    let mut poses = Vec::new();
+    for ev in run.events() {
+        // Only the interferometer and the triggers are part of this run.
+        match &ev {
+            DriverEvent::Sample(s) if s.instrument != Instrument::Interferometer => continue,
+            _ => {}
+        }
+        poses.extend(rec.record(&ev, run.start_ns).unwrap());
+    }
+    poses.extend(rec.finish(run.start_ns + 20_000_000_000).unwrap().1);
+    assert_eq!(poses.len(), 2, "{poses:?}");
+    assert!(
+        poses
+            .iter()
+            .all(|p| p.instrument == PoseInstrument::Interferometer
+                && p.status == PoseStatusName::Ok)
+    );
+    let out = replay(&path, &ReplayOptions::default()).unwrap();
+    assert!(out.reproduces_log());
+    assert_eq!(
+        out.detector.instruments,
+        vec![PoseInstrument::Interferometer]
+    );
+}

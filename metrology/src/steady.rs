@@ -36,7 +36,8 @@
 //!
 //! `ExactStop(k)` opens the dwell of pose k (samples with `t_ns ≥` the trigger's time);
 //! `MotionStart`, `DwellEnd`, `FeedHold`, `ProgramStart`, `ProgramEnd` close an open dwell.
-//! A pose value is emitted as soon as its window is found; a dwell that closes without one
+//! The pose number of a motion start is not used (controllers differ on whether it names the
+//! pose left or the pose approached). A pose value is emitted as soon as its window is found; a dwell that closes without one
 //! gets a status: [`PoseStatus::DeviceAway`] (no samples in the dwell),
 //! [`PoseStatus::BeamInvalid`] (no run of `samples` consecutive valid samples),
 //! [`PoseStatus::NeverSteady`] otherwise.
@@ -1120,5 +1121,86 @@ mod tests {
             SteadyDetector::new(SteadyConfig::default(), 0).unwrap_err(),
             SteadyError::NoChannels
         );
+    }
+
+    mod prop {
+        use super::super::*;
+        use proptest::prelude::*;
+
+        #[derive(Debug, Clone)]
+        enum In {
+            S(u64, f64, f64, bool),
+            T(u8, u32, u64),
+        }
+
+        fn input() -> impl Strategy<Value = In> {
+            prop_oneof![
+                8 => (0u64..5_000_000, prop_oneof![Just(f64::NAN), Just(f64::INFINITY), -1e3f64..1e3], -1.0f64..1.0, any::<bool>())
+                    .prop_map(|(t, a, b, v)| In::S(t, a, b, v)),
+                1 => (0u8..6, 0u32..5, 0u64..5_000_000).prop_map(|(k, p, t)| In::T(k, p, t)),
+            ]
+        }
+
+        fn kind(k: u8) -> TriggerKind {
+            [
+                TriggerKind::MotionStart,
+                TriggerKind::ExactStop,
+                TriggerKind::DwellEnd,
+                TriggerKind::ProgramStart,
+                TriggerKind::ProgramEnd,
+                TriggerKind::FeedHold,
+            ][k as usize]
+        }
+
+        fn feed(mode: DetectorMode, ins: &[In]) -> Vec<PoseValue> {
+            let cfg = SteadyConfig {
+                samples: 5,
+                mode,
+                max_history: 64,
+                ..SteadyConfig::default()
+            };
+            let mut d = SteadyDetector::new(cfg, 2).unwrap();
+            let mut out = Vec::new();
+            let mut t_sorted = 0u64;
+            for i in ins {
+                match *i {
+                    In::S(dt, a, b, v) => {
+                        // Mostly increasing times with occasional steps back.
+                        t_sorted = (t_sorted + dt / 1000).saturating_sub(if dt % 17 == 0 {
+                            dt
+                        } else {
+                            0
+                        });
+                        out.extend(d.push_sample(t_sorted, &[a, b], v));
+                    }
+                    In::T(k, p, dt) => out.extend(d.push_trigger(kind(k), p, t_sorted + dt % 3000)),
+                }
+            }
+            out.extend(d.finish(t_sorted));
+            out
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+            /// Any input, in any order: no panic, well-formed values, the same output twice.
+            #[test]
+            fn any_input_gives_well_formed_values(ins in prop::collection::vec(input(), 0..400)) {
+                for mode in [DetectorMode::Triggers, DetectorMode::Plateaus] {
+                    let out = feed(mode, &ins);
+                    for v in &out {
+                        if v.n == 0 {
+                            prop_assert!(v.mean.is_empty() && v.std.is_empty());
+                            prop_assert!(v.status != PoseStatus::Ok);
+                        } else {
+                            prop_assert_eq!(v.n, 5);
+                            prop_assert_eq!(v.mean.len(), 2);
+                            prop_assert!(v.mean.iter().chain(&v.std).all(|x| x.is_finite()));
+                        }
+                    }
+                    let again = feed(mode, &ins);
+                    prop_assert_eq!(format!("{out:?}"), format!("{again:?}"));
+                }
+            }
+        }
     }
 }

@@ -175,8 +175,13 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
         return Err(e);
     }
     // A cleanly closed log's last records are the poses of its final dwells and the last
-    // /status, all at the finish time; a killed one ends where it ends.
-    let tail = engine.finish(last_ns);
+    // /status, all at the finish time. A log whose writer was killed never finished: its open
+    // dwell stays open (closing it would invent a status the run never had).
+    let tail = if read.clean_close {
+        engine.finish(last_ns)
+    } else {
+        Vec::new()
+    };
     if let Some(w) = writer.as_mut() {
         for p in &tail {
             w.write_pose(last_ns, p)?;

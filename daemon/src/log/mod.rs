@@ -60,12 +60,26 @@ pub const INSTRUMENT_METADATA: &str = "metrolog.instrument";
 pub const DETECTOR_KEY: &str = "detector";
 
 /// Steady-value detector settings of each instrument.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DetectorSettings {
+    /// The instruments of the run: only these get pose values (an instrument that is not
+    /// part of the run would otherwise get a `device_away` at every pose).
+    pub instruments: Vec<topics::PoseInstrument>,
     pub interferometer: SteadyConfig,
     pub capball: SteadyConfig,
     pub psd: SteadyConfig,
+}
+
+impl Default for DetectorSettings {
+    fn default() -> Self {
+        DetectorSettings {
+            instruments: topics::PoseInstrument::ALL.to_vec(),
+            interferometer: SteadyConfig::default(),
+            capball: SteadyConfig::default(),
+            psd: SteadyConfig::default(),
+        }
+    }
 }
 
 impl DetectorSettings {

@@ -29,13 +29,17 @@ impl PoseEngine {
         let mk = |i: PoseInstrument, cfg: &metrology::steady::SteadyConfig| {
             SteadyDetector::new(cfg.clone(), i.channels().len()).map(|d| (i, d))
         };
-        Ok(PoseEngine {
-            detectors: vec![
-                mk(PoseInstrument::Interferometer, &settings.interferometer)?,
-                mk(PoseInstrument::Capball, &settings.capball)?,
-                mk(PoseInstrument::Psd, &settings.psd)?,
-            ],
-        })
+        let mut detectors = Vec::new();
+        for (inst, cfg) in [
+            (PoseInstrument::Interferometer, &settings.interferometer),
+            (PoseInstrument::Capball, &settings.capball),
+            (PoseInstrument::Psd, &settings.psd),
+        ] {
+            if settings.instruments.contains(&inst) {
+                detectors.push(mk(inst, cfg)?);
+            }
+        }
+        Ok(PoseEngine { detectors })
     }
 
     /// Feeds a sample to its instrument's detector (environment records are not).

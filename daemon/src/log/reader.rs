@@ -51,6 +51,15 @@ pub struct ReadSummary {
     pub last_log_ns: Option<u64>,
 }
 
+/// Whether the file's last bytes are the MCAP magic (the writer's very last write).
+fn ends_with_magic(file: &mut File) -> bool {
+    use std::io::{Seek, SeekFrom};
+    let mut tail = [0u8; 8];
+    file.seek(SeekFrom::End(-8)).is_ok()
+        && file.read_exact(&mut tail).is_ok()
+        && tail == mcap::MAGIC
+}
+
 /// Reads `path`, calling `on` for every record, until the end or the first damage.
 ///
 /// `Err` only when the file cannot be opened or read at all; damage inside the file is
@@ -69,6 +78,9 @@ pub fn read_log(path: &Path, mut on: impl FnMut(LogItem<'_>)) -> Result<ReadSumm
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
+            // A file cut at a record boundary ends cleanly (no footer); cut inside a record it
+            // is an unexpected end. The footer is checked for separately.
+            .with_skip_end_magic(true)
             // A damaged record must not make the reader allocate without bound.
             .with_record_length_limit(1 << 30),
     );
@@ -77,9 +89,12 @@ pub fn read_log(path: &Path, mut on: impl FnMut(LogItem<'_>)) -> Result<ReadSumm
     loop {
         let ev = match reader.next_event() {
             None => {
-                summary.clean_close = saw_footer;
                 if !saw_footer {
                     summary.error = Some("the file ends without a footer".into());
+                } else if !ends_with_magic(&mut file) {
+                    summary.error = Some("the file ends inside the closing magic".into());
+                } else {
+                    summary.clean_close = true;
                 }
                 break;
             }

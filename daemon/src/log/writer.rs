@@ -42,28 +42,35 @@ impl Default for LogOptions {
     }
 }
 
-/// The file under the MCAP writer: buffered, and its `flush` reaches the disk.
+/// The file under the MCAP writer: buffered, its `flush` reaches the disk, and it knows how
+/// much of the file is durable (everything up to the end of the last flushed chunk).
 struct SyncFile {
     inner: BufWriter<File>,
     fsync: bool,
+    pos: u64,
+    durable: u64,
 }
 
 impl Write for SyncFile {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.inner.write(buf)
+        let n = self.inner.write(buf)?;
+        self.pos += n as u64;
+        Ok(n)
     }
     fn flush(&mut self) -> std::io::Result<()> {
         self.inner.flush()?;
         if self.fsync {
             self.inner.get_ref().sync_data()?;
         }
+        self.durable = self.pos;
         Ok(())
     }
 }
 
 impl Seek for SyncFile {
     fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
-        self.inner.seek(pos)
+        self.pos = self.inner.seek(pos)?;
+        Ok(self.pos)
     }
 }
 
@@ -129,6 +136,8 @@ impl LogWriter {
         let sink = SyncFile {
             inner: BufWriter::with_capacity(1 << 20, file),
             fsync: opts.fsync,
+            pos: 0,
+            durable: 0,
         };
         let wopts = WriteOptions::new()
             .compression(Some(Compression::Zstd))
@@ -232,6 +241,17 @@ impl LogWriter {
         let hint = hint_for(&e);
         if self.failed.is_none() {
             self.failed = Some((describe(&e), hint));
+            // Close the file as well as possible: drop what was not flushed and cut a
+            // half-written chunk off, so the file ends at a record boundary after the last
+            // complete chunk (readers then stop cleanly; nothing flushed is lost).
+            if let Some(w) = self.mcap.take() {
+                let sink = w.into_inner();
+                let durable = sink.durable;
+                let (file, _unwritten) = sink.inner.into_parts();
+                if file.set_len(durable).is_ok() {
+                    let _ = file.sync_all();
+                }
+            }
         }
         self.failed_error()
     }
@@ -410,5 +430,18 @@ impl Drop for LogWriter {
         if self.failed.is_none() && self.mcap.is_some() {
             let _ = self.close();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_full_disk_says_so() {
+        let e = McapError::Io(std::io::Error::from(std::io::ErrorKind::StorageFull));
+        assert!(hint_for(&e).starts_with("the disk is full"));
+        let e = McapError::Io(std::io::Error::from(std::io::ErrorKind::PermissionDenied));
+        assert!(hint_for(&e).contains("writable"));
     }
 }

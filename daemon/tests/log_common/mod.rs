@@ -69,6 +69,10 @@ pub fn write_run_with(dir: &Path, name: &str, run: &SyntheticRun, opts: LogOptio
     }
     let end = now + 1_000_000;
     poses.extend(rec.finish(end).unwrap().1);
+    // To look at a test's log: METROLOG_TEST_KEEP=/some/dir.
+    if let Ok(keep) = std::env::var("METROLOG_TEST_KEEP") {
+        std::fs::copy(&path, Path::new(&keep).join(name)).unwrap();
+    }
     Written {
         path,
         events,

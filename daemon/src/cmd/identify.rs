@@ -35,7 +35,7 @@ pub enum Command {
 
 #[derive(Debug, clap::Args)]
 pub struct CapballArgs {
-    /// CapBall dataset (CSV). MCAP logs: not read here yet (export a CSV).
+    /// CapBall dataset (CSV) or MCAP log of a run.
     pub data: PathBuf,
     /// Validation dataset (e.g. the trajectory with A reversed): RMS of its residuals.
     #[arg(long)]
@@ -121,6 +121,20 @@ fn read(p: &Path) -> anyhow::Result<String> {
     std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))
 }
 
+/// CapBall records from a CSV dataset or an MCAP log (the poses that hold the tool on the
+/// ball, see [`crate::analysis::capball`]).
+fn load_capball(p: &Path, machine: &Machine) -> anyhow::Result<Vec<capball::CapballRecord>> {
+    if crate::analysis::is_mcap(p) {
+        let cb = crate::analysis::capball::capball_from_log_with(p, machine)
+            .with_context(|| format!("reading the CapBall poses of {}", p.display()))?;
+        for (pose, status) in &cb.skipped {
+            eprintln!("{}: CapBall pose {pose} skipped ({status})", p.display());
+        }
+        return Ok(cb.records);
+    }
+    capball::parse_dataset(&read(p)?).with_context(|| format!("{}", p.display()))
+}
+
 fn machine_from(p: &Option<PathBuf>) -> anyhow::Result<Machine> {
     Ok(match p {
         Some(p) => {
@@ -154,8 +168,7 @@ fn split_runs(recs: &[capball::CapballRecord]) -> Vec<(u32, Vec<Pose>, Vec<[f64;
 
 fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     let machine = machine_from(&a.machine)?;
-    let recs =
-        capball::parse_dataset(&read(&a.data)?).with_context(|| format!("{}", a.data.display()))?;
+    let recs = load_capball(&a.data, &machine)?;
     let mut runs = split_runs(&recs);
     if let Some(r) = a.run {
         runs.retain(|x| x.0 == r);
@@ -165,8 +178,7 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     }
     let validation = match &a.validate {
         Some(p) => {
-            let v =
-                capball::parse_dataset(&read(p)?).with_context(|| format!("{}", p.display()))?;
+            let v = load_capball(p, &machine)?;
             Some(split_runs(&v))
         }
         None => None,

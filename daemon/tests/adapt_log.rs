@@ -6,12 +6,12 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use metrology::axis_model::Direction;
-use metrology::capball::{CapballErrors, CapballSetup, TrajectorySpec};
-use metrology::kinematics::Pose;
 use metrolog::analysis::{self, PositioningOptions};
 use metrolog::log::topics::{EnvironmentMsg, PoseInstrument, PoseMsg, PoseStatusName};
 use metrolog::log::{LogOptions, LogWriter, RunMetadata};
+use metrology::axis_model::Direction;
+use metrology::capball::{CapballErrors, CapballSetup, TrajectorySpec};
+use metrology::kinematics::Pose;
 
 const T0_NS: u64 = 1_795_305_600_000_000_000;
 const TARGETS_MM: [f64; 5] = [2.312, 101.871, 198.544, 302.197, 399.050];
@@ -176,8 +176,13 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
     )
     .unwrap();
     if spec.attach_trajectory {
-        w.attach("trajectory.csv", "text/csv", trajectory_csv(&rows).as_bytes(), T0_NS)
-            .unwrap();
+        w.attach(
+            "trajectory.csv",
+            "text/csv",
+            trajectory_csv(&rows).as_bytes(),
+            T0_NS,
+        )
+        .unwrap();
     }
     // Environment every 0.5 s, material sensors 20.5 and 20.7 °C.
     for k in 0..2 * (rows.len() + 2) {
@@ -205,9 +210,12 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
         let log_ns = t_ns + 200_000_000;
         // Interferometer: position from the datum at home (x = 0).
         let li = match r.iso {
-            Some((i, d, c)) if spec.missing == Some((c, d, i)) => {
-                no_value(PoseInstrument::Interferometer, no, t_ns, PoseStatusName::BeamInvalid)
-            }
+            Some((i, d, c)) if spec.missing == Some((c, d, i)) => no_value(
+                PoseInstrument::Interferometer,
+                no,
+                t_ns,
+                PoseStatusName::BeamInvalid,
+            ),
             Some((i, d, c)) => value(
                 PoseInstrument::Interferometer,
                 no,
@@ -221,9 +229,12 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
                 t_ns,
                 &[("position_um", r.p.x_mm * 1000.0 + 9.0)],
             ),
-            None if k < 36 => {
-                no_value(PoseInstrument::Interferometer, no, t_ns, PoseStatusName::NeverSteady)
-            }
+            None if k < 36 => no_value(
+                PoseInstrument::Interferometer,
+                no,
+                t_ns,
+                PoseStatusName::NeverSteady,
+            ),
             None => value(
                 PoseInstrument::Interferometer,
                 no,
@@ -240,7 +251,12 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
             [300.0, -200.0, 100.0]
         };
         let cb = if spec.capball_bad_pose == Some(no) {
-            no_value(PoseInstrument::Capball, no, t_ns, PoseStatusName::NeverSteady)
+            no_value(
+                PoseInstrument::Capball,
+                no,
+                t_ns,
+                PoseStatusName::NeverSteady,
+            )
         } else {
             value(
                 PoseInstrument::Capball,
@@ -256,8 +272,11 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
         } else {
             (0.3 * k as f64, -0.2 * k as f64)
         };
-        w.write_pose(log_ns, &value(PoseInstrument::Psd, no, t_ns, &[("x_um", x), ("y_um", y)]))
-            .unwrap();
+        w.write_pose(
+            log_ns,
+            &value(PoseInstrument::Psd, no, t_ns, &[("x_um", x), ("y_um", y)]),
+        )
+        .unwrap();
     }
     w.finish().unwrap();
     path
@@ -298,13 +317,13 @@ fn positioning_from_log_gives_the_iso_run() {
     for r in &d.readings {
         let i = r.index - 1;
         let want = dev_um(i, r.direction, r.cycle);
-        assert!(
-            (r.deviation_um - want).abs() < 1e-6,
-            "{r:?}: want {want}"
-        );
+        assert!((r.deviation_um - want).abs() < 1e-6, "{r:?}: want {want}");
         // Pose 1 is the run's first pose value, measured at T0 + 1 s.
         let no = pose_of(i, r.direction, r.cycle);
-        assert!((r.time_s - (no as f64 - 1.0)).abs() < 1e-9, "{r:?} pose {no}");
+        assert!(
+            (r.time_s - (no as f64 - 1.0)).abs() < 1e-9,
+            "{r:?} pose {no}"
+        );
         // Nearest environment record: mid-dwell at no + 0.075 s → the 0.5 s grid point no.
         let air = air_c_at(no as f64);
         assert!((r.air_c.unwrap() - air).abs() < 1e-9, "{r:?}");
@@ -369,7 +388,8 @@ fn analyze_and_diagnose_commands_read_the_log() {
         xs.iter().sum::<f64>() / xs.len() as f64
     };
     let up: Vec<f64> = (0..5).map(|i| mean(i, Direction::Up)).collect();
-    let e_up = up.iter().cloned().fold(f64::MIN, f64::max) - up.iter().cloned().fold(f64::MAX, f64::min);
+    let e_up =
+        up.iter().cloned().fold(f64::MIN, f64::max) - up.iter().cloned().fold(f64::MAX, f64::min);
     let b = (0..5)
         .map(|i| (mean(i, Direction::Up) - mean(i, Direction::Down)).abs())
         .fold(0.0, f64::max);
@@ -440,4 +460,41 @@ fn demo_report_has_every_part() {
     ] {
         assert!(r.contains(needle), "missing `{needle}` in:\n{r}");
     }
+}
+
+/// Manual check on a real log: `ADAPT_DEMO_LOG=path.mcap cargo nextest run -p metrolog
+/// --test adapt_log --no-capture print_demo_report_of_a_real_log` (skipped without it).
+#[test]
+fn print_demo_report_of_a_real_log() {
+    let Ok(p) = std::env::var("ADAPT_DEMO_LOG") else {
+        return;
+    };
+    let r = analysis::demo_report(Path::new(&p)).unwrap();
+    println!("{r}");
+}
+
+/// The demo scenario's CapBall poses (sim/scenarios/demo.toml, ball at 100, 0, 50 mm) hold
+/// the tool on one ball in the simulator-convention machine, not in paper 001's.
+#[test]
+fn simulator_convention_machine_fits_the_demo_poses() {
+    let demo = [
+        (100.0, 0.0, 50.0, 0.0, 0.0),
+        (0.0, 100.0, 50.0, 0.0, 90.0),
+        (100.0, 25.0, 43.301, -30.0, 0.0),
+        (0.0, 111.603, -6.699, -30.0, 90.0),
+        (-0.0, -6.699, 111.603, -60.0, 270.0),
+        (-0.0, 50.0, 100.0, -90.0, 270.0),
+    ];
+    let m = analysis::capball::machine_candidates();
+    for (x, y, z, a, c) in demo {
+        let w = m[1].1.nominal_work_point_mm(&pose(x, y, z, a, c));
+        assert!(
+            (w - nalgebra::Vector3::new(100.0, 0.0, 50.0)).norm() < 2e-3,
+            "{w:?}"
+        );
+    }
+    let w0 = m[0]
+        .1
+        .nominal_work_point_mm(&pose(0.0, 100.0, 50.0, 0.0, 90.0));
+    assert!((w0 - nalgebra::Vector3::new(100.0, 0.0, 50.0)).norm() > 1.0);
 }

@@ -3,10 +3,11 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use metrology::capball::{CapballSetup, PARAM_NAMES};
+use metrology::capball::CapballSetup;
 use metrology::diagnose::{self, Options};
 use metrology::kinematics::Pose;
 
+use super::capball::identify_subset;
 use super::{AnalysisError, LogContents, PositioningOptions};
 
 fn opt(v: Option<f64>) -> String {
@@ -102,16 +103,16 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
     }
 
     // CapBall.
-    let setup0 = CapballSetup::paper_default();
-    match super::capball::capball_from_contents(&log, &setup0.machine) {
+    match super::capball::capball_from_contents_auto(&log) {
         Err(e) => {
             let _ = writeln!(s, "\nCapBall: not available: {e}");
         }
         Ok(cb) => {
             let poses: Vec<Pose> = cb.records.iter().map(|r| r.pose).collect();
             let meas: Vec<[f64; 3]> = cb.records.iter().map(|r| r.e_um).collect();
-            let res = CapballSetup::with_ball_from_poses(setup0.machine.clone(), &poses)
-                .and_then(|st| st.identify(&poses, &meas));
+            let res = CapballSetup::with_ball_from_poses(cb.machine.clone(), &poses)
+                .map_err(AnalysisError::from)
+                .and_then(|st| identify_subset(&st, &poses, &meas));
             match res {
                 Err(e) => {
                     let _ = writeln!(
@@ -123,8 +124,8 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
                 Ok(id) => {
                     let _ = writeln!(
                         s,
-                        "\nCapBall identification ({} poses{}, ball at {:.1}, {:.1}, {:.1} mm): \
-                         condition number {:.1}",
+                        "\nCapBall identification ({} poses{}, ball at {:.1}, {:.1}, {:.1} mm, \
+                         machine {}): condition number {:.1}",
                         id.n_poses,
                         if cb.skipped.is_empty() {
                             String::new()
@@ -134,18 +135,22 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
                         cb.ball_mm.x,
                         cb.ball_mm.y,
                         cb.ball_mm.z,
+                        cb.machine_name,
                         id.condition_number
                     );
-                    for (chunk_names, chunk) in PARAM_NAMES
-                        .chunks(4)
-                        .zip(id.params.chunks(4).zip(id.std_uncertainty.chunks(4)))
-                    {
-                        let cells: Vec<String> = chunk_names
+                    for chunk in id.params.chunks(4) {
+                        let cells: Vec<String> = chunk
                             .iter()
-                            .zip(chunk.0.iter().zip(chunk.1))
-                            .map(|(n, (p, u))| format!("{n} {p:.2} ± {u:.2}"))
+                            .map(|(n, p, u)| format!("{n} {p:.2} ± {u:.2}"))
                             .collect();
                         let _ = writeln!(s, "  {}", cells.join("   "));
+                    }
+                    if !id.fixed.is_empty() {
+                        let _ = writeln!(
+                            s,
+                            "  not separable with these poses (held at 0): {}",
+                            id.fixed.join(", ")
+                        );
                     }
                     let r = id.residual_rms_um;
                     let _ = writeln!(

@@ -266,7 +266,7 @@ pub fn identify_subset(
             }
             .into());
         };
-        if !(condition < MAX_CONDITION) {
+        if condition.is_nan() || condition >= MAX_CONDITION {
             let v = vt.row(imin);
             let worst = (0..keep.len())
                 .max_by(|&a, &c| v[a].abs().total_cmp(&v[c].abs()))

@@ -39,8 +39,9 @@
 //! The pose number of a motion start is not used (controllers differ on whether it names the
 //! pose left or the pose approached). A pose value is emitted as soon as its window is found; a dwell that closes without one
 //! gets a status: [`PoseStatus::DeviceAway`] (no samples in the dwell),
-//! [`PoseStatus::BeamInvalid`] (no run of `samples` consecutive valid samples),
-//! [`PoseStatus::NeverSteady`] otherwise.
+//! [`PoseStatus::BeamInvalid`] (invalid samples broke every run of `samples` consecutive
+//! valid ones), [`PoseStatus::NeverSteady`] otherwise (including a dwell too short for a
+//! window).
 //!
 //! Triggers that are processed after samples with later times (queues of different lengths)
 //! are handled: the detector keeps the samples since the last motion start and starts the
@@ -489,7 +490,7 @@ impl SteadyDetector {
         if d.done {
             return;
         }
-        let (mut samples, mut run, mut max_run) = (0u64, 0usize, 0usize);
+        let (mut samples, mut invalid, mut run, mut max_run) = (0u64, 0u64, 0usize, 0usize);
         let start = d.first.max(self.base);
         for i in start..self.end() {
             let k = (i - self.base) as usize;
@@ -502,13 +503,15 @@ impl SteadyDetector {
                 max_run = max_run.max(run);
             } else {
                 run = 0;
+                invalid += 1;
             }
         }
         let status = if samples == 0 {
             PoseStatus::DeviceAway
-        } else if max_run < self.cfg.samples {
+        } else if max_run < self.cfg.samples && invalid > 0 {
             PoseStatus::BeamInvalid
         } else {
+            // Long enough but never steady, or all valid but too short to settle and average.
             PoseStatus::NeverSteady
         };
         out.push(PoseValue {
@@ -1021,6 +1024,26 @@ mod tests {
         let out = run(cfg, 1, &merge(evs));
         assert_eq!(out.len(), 1);
         assert_eq!((out[0].pose, out[0].status), (1, PoseStatus::NeverSteady));
+    }
+
+    #[test]
+    fn feed_hold_and_program_end_close_the_dwell() {
+        // Feed hold 0.1 s after the stop, while it still rings: never steady, and nothing
+        // after the hold is taken for the pose even though the axis then stands still.
+        let f = axis(0.0, 10.0, 0.0, 0.5, 2.0, 0.1, 0.0);
+        let mut evs = sampled(&f, 0.0, 3.0, 15);
+        evs.push(trig(TriggerKind::ExactStop, 1, 0.5));
+        evs.push(trig(TriggerKind::FeedHold, 0, 0.6));
+        evs.push(trig(TriggerKind::ExactStop, 2, 1.5));
+        evs.push(trig(TriggerKind::ProgramEnd, 0, 1.55));
+        let out = run(SteadyConfig::default(), 1, &merge(evs));
+        assert_eq!(out.len(), 2, "{out:?}");
+        assert_eq!(
+            (out[0].pose, out[0].status, out[0].t_last_ns),
+            (1, PoseStatus::NeverSteady, t_ns(0.6))
+        );
+        // Pose 2: only 50 samples before the program end: too short, not a beam problem.
+        assert_eq!((out[1].pose, out[1].status), (2, PoseStatus::NeverSteady));
     }
 
     #[test]

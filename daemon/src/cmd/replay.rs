@@ -13,7 +13,7 @@ use serde::Serialize;
 use crate::log::topics::{Decoded, PoseMsg, RawMsg, TopicMessage, decode};
 use crate::log::{
     DetectorSettings, LogItem, LogOptions, LogWriter, PoseEngine, RUN_METADATA, ReadSummary,
-    RunMetadata, read_log,
+    RunMetadata, read_log, read_run_metadata,
 };
 
 #[derive(Debug, clap::Args)]
@@ -67,16 +67,8 @@ fn json(p: &PoseMsg) -> Vec<u8> {
 
 /// Replays `path`.
 pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome> {
-    // First pass: the run metadata (settings), so the detectors exist before the first sample.
-    let mut run_map = None;
-    read_log(path, |item| {
-        if let LogItem::Metadata { name, map } = item
-            && name == RUN_METADATA
-            && run_map.is_none()
-        {
-            run_map = Some(map.clone());
-        }
-    })?;
+    // The run metadata (settings) first, so the detectors exist before the first sample.
+    let run_map = read_run_metadata(path)?;
     let run = match &run_map {
         Some(m) => RunMetadata::from_map(m)?,
         None => RunMetadata::default(),

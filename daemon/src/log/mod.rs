@@ -49,7 +49,7 @@ use metrology::steady::SteadyConfig;
 use serde::{Deserialize, Serialize};
 
 pub use poses::{PoseEngine, Recorder};
-pub use reader::{LogItem, ReadSummary, read_log};
+pub use reader::{LogItem, ReadSummary, read_log, read_log_until, read_run_metadata};
 pub use writer::{LogOptions, LogWriter};
 
 /// Name of the metadata record describing the run.

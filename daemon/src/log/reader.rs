@@ -8,6 +8,7 @@
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::Read;
+use std::ops::ControlFlow;
 use std::path::Path;
 
 use mcap::records::Record;
@@ -65,6 +66,33 @@ fn ends_with_magic(file: &mut File) -> bool {
 /// `Err` only when the file cannot be opened or read at all; damage inside the file is
 /// reported in [`ReadSummary::error`].
 pub fn read_log(path: &Path, mut on: impl FnMut(LogItem<'_>)) -> Result<ReadSummary, LogError> {
+    read_log_until(path, |item| {
+        on(item);
+        ControlFlow::Continue(())
+    })
+}
+
+/// The run metadata record (written at the start of a log), without reading the rest.
+pub fn read_run_metadata(path: &Path) -> Result<Option<BTreeMap<String, String>>, LogError> {
+    let mut found = None;
+    read_log_until(path, |item| match item {
+        LogItem::Metadata { name, map } if name == super::RUN_METADATA => {
+            found = Some(map.clone());
+            ControlFlow::Break(())
+        }
+        // The writer puts it before the first message.
+        LogItem::Message { .. } => ControlFlow::Break(()),
+        _ => ControlFlow::Continue(()),
+    })?;
+    Ok(found)
+}
+
+/// Like [`read_log`], stopping early when `on` says [`ControlFlow::Break`] (the summary then
+/// covers what was read).
+pub fn read_log_until(
+    path: &Path,
+    mut on: impl FnMut(LogItem<'_>) -> ControlFlow<()>,
+) -> Result<ReadSummary, LogError> {
     let open_err = |source| LogError::Open {
         path: path.to_path_buf(),
         source,
@@ -131,9 +159,10 @@ pub fn read_log(path: &Path, mut on: impl FnMut(LogItem<'_>)) -> Result<ReadSumm
                         break;
                     }
                 };
-                match rec {
+                let flow = match rec {
                     Record::Channel(c) => {
                         topics.insert(c.id, c.topic.clone());
+                        ControlFlow::Continue(())
                     }
                     Record::Message { header, data } => {
                         let Some(topic) = topics.get(&header.channel_id) else {
@@ -148,7 +177,7 @@ pub fn read_log(path: &Path, mut on: impl FnMut(LogItem<'_>)) -> Result<ReadSumm
                             topic,
                             log_ns: header.log_time,
                             data: &data,
-                        });
+                        })
                     }
                     Record::Attachment { header, data, .. } => on(LogItem::Attachment {
                         name: &header.name,
@@ -160,8 +189,14 @@ pub fn read_log(path: &Path, mut on: impl FnMut(LogItem<'_>)) -> Result<ReadSumm
                         name: &m.name,
                         map: &m.metadata,
                     }),
-                    Record::Footer(_) => saw_footer = true,
-                    _ => {}
+                    Record::Footer(_) => {
+                        saw_footer = true;
+                        ControlFlow::Continue(())
+                    }
+                    _ => ControlFlow::Continue(()),
+                };
+                if flow.is_break() {
+                    break;
                 }
             }
         }

@@ -114,7 +114,9 @@ fn read(p: &Path) -> anyhow::Result<String> {
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
     {
         anyhow::bail!(
-            "{}: reading CapBall/PSD values from MCAP logs is not wired in yet; export the dataset as CSV",
+            "{}: this input must be a CSV file (`identify capball` reads MCAP logs; the PSD \
+             13-error identification needs the 51-point laser frame and a reference run as CSV — \
+             a log's single PSD segment gives its straightness, printed by `metrolog demo`)",
             p.display()
         );
     }

@@ -129,12 +129,16 @@ fn load_capball(p: &Path, machine: &Machine) -> anyhow::Result<Vec<capball::Capb
     if crate::analysis::is_mcap(p) {
         let cb = crate::analysis::capball::capball_from_log_with(p, machine)
             .with_context(|| format!("reading the CapBall poses of {}", p.display()))?;
-        for (pose, status) in &cb.skipped {
-            eprintln!("{}: CapBall pose {pose} skipped ({status})", p.display());
-        }
+        report_skipped(p, &cb.skipped);
         return Ok(cb.records);
     }
     capball::parse_dataset(&read(p)?).with_context(|| format!("{}", p.display()))
+}
+
+fn report_skipped(p: &Path, skipped: &[(u32, String)]) {
+    for (pose, status) in skipped {
+        eprintln!("{}: CapBall pose {pose} skipped ({status})", p.display());
+    }
 }
 
 fn machine_from(p: &Option<PathBuf>) -> anyhow::Result<Machine> {
@@ -169,8 +173,18 @@ fn split_runs(recs: &[capball::CapballRecord]) -> Vec<(u32, Vec<Pose>, Vec<[f64;
 }
 
 fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
-    let machine = machine_from(&a.machine)?;
-    let recs = load_capball(&a.data, &machine)?;
+    let mut machine = machine_from(&a.machine)?;
+    let recs = if crate::analysis::is_mcap(&a.data) && a.machine.is_none() {
+        // No machine given: the log's poses choose the kinematic convention.
+        let cb = crate::analysis::capball_from_log(&a.data)
+            .with_context(|| format!("reading the CapBall poses of {}", a.data.display()))?;
+        report_skipped(&a.data, &cb.skipped);
+        eprintln!("{}: machine {}", a.data.display(), cb.machine_name);
+        machine = cb.machine;
+        cb.records
+    } else {
+        load_capball(&a.data, &machine)?
+    };
     let mut runs = split_runs(&recs);
     if let Some(r) = a.run {
         runs.retain(|x| x.0 == r);

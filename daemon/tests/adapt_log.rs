@@ -112,6 +112,8 @@ struct Spec {
     /// CapBall pose (1-based in the log) whose value is not ok.
     capball_bad_pose: Option<u32>,
     attach_trajectory: bool,
+    /// Run metadata `time_scale`.
+    time_scale: Option<f64>,
 }
 
 fn value(inst: PoseInstrument, pose_no: u32, t_ns: u64, ch: &[(&str, f64)]) -> PoseMsg {
@@ -162,11 +164,14 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
     let errors = CapballErrors::from_slice(&CAPBALL_P);
     let rows = rows(&setup);
     let path = dir.join("run.mcap");
-    let meta = RunMetadata {
+    let mut meta = RunMetadata {
         machine: "synthetic".into(),
         started_ns: T0_NS,
         ..Default::default()
     };
+    if let Some(k) = spec.time_scale {
+        meta.extra.insert("time_scale".into(), k.to_string());
+    }
     let mut w = LogWriter::create(&path, &meta, LogOptions::default()).unwrap();
     w.attach(
         "metrolog.toml",
@@ -287,6 +292,7 @@ fn default_spec() -> Spec {
         missing: Some((2, Direction::Down, 2)),
         capball_bad_pose: Some(50),
         attach_trajectory: true,
+        time_scale: None,
     }
 }
 
@@ -338,6 +344,7 @@ fn explicit_range_and_trajectory_override() {
         missing: None,
         capball_bad_pose: None,
         attach_trajectory: false,
+        time_scale: Some(120.0),
     };
     let path = write_log(dir.path(), &spec);
     let err = analysis::positioning_from_log(&path, &PositioningOptions::default()).unwrap_err();
@@ -353,6 +360,11 @@ fn explicit_range_and_trajectory_override() {
     let d = analysis::positioning_from_log(&path, &opts).unwrap();
     assert_eq!((d.n_targets(), d.n_cycles(), d.readings.len()), (5, 1, 10));
     assert!(d.missing().is_empty());
+    // Time scale 120: pose k at (k − 1)·120 s.
+    for r in &d.readings {
+        let no = pose_of(r.index - 1, r.direction, r.cycle);
+        assert!((r.time_s - 120.0 * (no as f64 - 1.0)).abs() < 1e-6, "{r:?}");
+    }
     assert!(analysis::parse_pose_range("12-1").is_err());
     assert!(analysis::parse_pose_range("x").is_err());
 }

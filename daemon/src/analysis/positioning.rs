@@ -19,6 +19,9 @@
 //! whose value is not `ok` (beam interruption, never steady) keeps its cycle number and shows
 //! up as a missing reading in the analysis.
 //!
+//! `time_s` counts from the run's first `ok` value (`t_first_ns`), times the run metadata's
+//! `time_scale` when present (a simulated run whose slow effects run faster than real time).
+//!
 //! # Deviation
 //!
 //! The LI-80 reads the displacement from its datum, taken at connect (the driver sends
@@ -145,6 +148,21 @@ pub fn positioning_from_contents(
         },
     };
 
+    // A simulated run may compress time (sim `time_scale`: slow effects run that much
+    // faster); the readings' times are then given in the simulated machine's seconds.
+    let time_scale = match log.run_metadata.get("time_scale") {
+        Some(s) => s
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .ok_or_else(|| AnalysisError::NoData {
+                path: log.path.clone(),
+                what: format!("metadata time_scale = `{s}` is not a positive number"),
+                hint: "the log's metadata is damaged".into(),
+            })?,
+        None => 1.0,
+    };
     // Visits: (trajectory index, direction).
     let mut visits: Vec<(usize, Direction)> = Vec::new();
     let mut prev_dir = Direction::Up;
@@ -232,7 +250,7 @@ pub fn positioning_from_contents(
             index,
             target_mm: row.x_mm,
             deviation_um: pos_um - (row.x_mm - datum_x_mm) * 1000.0,
-            time_s: p.t_first_ns.saturating_sub(t0_ns) as f64 * 1e-9,
+            time_s: p.t_first_ns.saturating_sub(t0_ns) as f64 * 1e-9 * time_scale,
             air_c,
             material_c,
         });

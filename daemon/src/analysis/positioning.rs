@@ -285,3 +285,93 @@ pub fn positioning_from_contents(
     data.validate()?;
     Ok(data)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::LoggedPose;
+    use crate::log::topics::{PoseMsg, PoseStatusName};
+
+    /// A log in memory: trajectory of x values (y = z = 0), interferometer value at each pose
+    /// = `pos_um(pose)` (None: never steady), pose k measured at k seconds.
+    fn log(xs: &[f64], pos_um: impl Fn(u32, f64) -> Option<f64>) -> LogContents {
+        let mut traj = String::from("pose,x_mm,y_mm,z_mm\n");
+        let mut poses = Vec::new();
+        for (k, x) in xs.iter().enumerate() {
+            let no = k as u32 + 1;
+            traj += &format!("{no},{x},0,0\n");
+            let v = pos_um(no, *x);
+            poses.push(LoggedPose {
+                log_ns: 0,
+                msg: PoseMsg {
+                    instrument: PoseInstrument::Interferometer,
+                    pose: no,
+                    status: if v.is_some() {
+                        PoseStatusName::Ok
+                    } else {
+                        PoseStatusName::NeverSteady
+                    },
+                    n: 10,
+                    mean: v
+                        .map(|v| [("position_um".to_string(), v)].into())
+                        .unwrap_or_default(),
+                    std: BTreeMap::new(),
+                    t_first_ns: no as u64 * 1_000_000_000,
+                    t_last_ns: no as u64 * 1_000_000_000,
+                },
+            });
+        }
+        LogContents {
+            path: "mem.mcap".into(),
+            poses,
+            attachments: [(
+                super::super::TRAJECTORY_ATTACHMENT.to_string(),
+                traj.into_bytes(),
+            )]
+            .into(),
+            ..LogContents::default()
+        }
+    }
+
+    #[test]
+    fn unidirectional_run_takes_every_measured_position() {
+        // Two cycles up 10, 20, 30 with a return to 0 (not measured) in between.
+        let xs = [10.0, 20.0, 30.0, 0.0, 10.0, 20.0, 30.0];
+        let l = log(&xs, |no, x| (x > 0.0).then(|| x * 1000.0 + no as f64 * 0.1));
+        let d = positioning_from_contents(&l, &PositioningOptions::default()).unwrap();
+        assert_eq!((d.n_targets(), d.n_cycles(), d.readings.len()), (3, 2, 6));
+        assert!(d.readings.iter().all(|r| r.direction == Direction::Up));
+        // Pose 6 = 20 mm in cycle 2: 0.6 µm.
+        let r = d
+            .readings
+            .iter()
+            .find(|r| r.cycle == 2 && r.index == 2)
+            .unwrap();
+        assert!((r.deviation_um - 0.6).abs() < 1e-9);
+        assert!((r.time_s - 5.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn datum_from_metadata_and_repeated_pose_keeps_direction() {
+        // Datum at x = 5 mm: reading = (x − 5)·1000 + 0.25. Pose 3 repeats pose 2 (no move):
+        // a second up visit of 20 mm.
+        let xs = [10.0, 20.0, 20.0, 25.0, 20.0, 10.0, 5.0];
+        let mut l = log(&xs, |_, x| Some((x - 5.0) * 1000.0 + 0.25));
+        l.run_metadata.insert("datum_x_mm".into(), "5".into());
+        let d = positioning_from_contents(&l, &PositioningOptions::default()).unwrap();
+        // Targets approached both ways: 10 and 20 (25 and 5 are reversals).
+        assert_eq!(d.targets_mm(), vec![10.0, 20.0]);
+        let up20: Vec<usize> = d
+            .readings
+            .iter()
+            .filter(|r| r.index == 2 && r.direction == Direction::Up)
+            .map(|r| r.cycle)
+            .collect();
+        assert_eq!(up20, vec![1, 2]);
+        assert!(
+            d.readings
+                .iter()
+                .all(|r| (r.deviation_um - 0.25).abs() < 1e-9)
+        );
+    }
+}

@@ -337,7 +337,9 @@ mod tests {
     fn unidirectional_run_takes_every_measured_position() {
         // Two cycles up 10, 20, 30 with a return to 0 (not measured) in between.
         let xs = [10.0, 20.0, 30.0, 0.0, 10.0, 20.0, 30.0];
-        let l = log(&xs, |no, x| (x > 0.0).then(|| x * 1000.0 + no as f64 * 0.1));
+        let l = log(&xs, |no, x| {
+            (x > 0.0).then_some(x * 1000.0 + no as f64 * 0.1)
+        });
         let d = positioning_from_contents(&l, &PositioningOptions::default()).unwrap();
         assert_eq!((d.n_targets(), d.n_cycles(), d.readings.len()), (3, 2, 6));
         assert!(d.readings.iter().all(|r| r.direction == Direction::Up));

@@ -4,7 +4,8 @@
 //!
 //! The run is a block of consecutive trajectory poses in which only `x` changes: it starts at
 //! the first pose that has an interferometer `/pose` value and ends before the first pose
-//! whose `y`, `z`, `a` or `c` differs from the first pose's (`--poses A-B` overrides this).
+//! whose `y`, `z`, `a` or `c` differs from the first pose's (`--poses A-B` gives the block
+//! instead; poses in it off the first pose's line are left out).
 //!
 //! The direction of a visit is the sign of the move into it (from the previous trajectory
 //! pose, or from the datum for pose 1); a pose with no move keeps the previous direction.
@@ -177,7 +178,10 @@ pub fn positioning_from_contents(
             prev_dir
         };
         prev_dir = dir;
-        visits.push((i, dir));
+        // In an explicit range, poses off the line of the first one are not part of the run.
+        if same_off_axis(&traj[lo], &traj[i]) {
+            visits.push((i, dir));
+        }
     }
     // Directions and ok values per position.
     let mut dirs: BTreeMap<i64, (bool, bool, bool)> = BTreeMap::new();

@@ -128,7 +128,12 @@ fn read(p: &Path) -> anyhow::Result<String> {
 fn load_capball(p: &Path, machine: &Machine) -> anyhow::Result<Vec<capball::CapballRecord>> {
     if crate::analysis::is_mcap(p) {
         let cb = crate::analysis::capball::capball_from_log_with(p, machine)
-            .with_context(|| format!("reading the CapBall poses of {}", p.display()))?;
+            .with_context(|| {
+                format!(
+                    "reading the CapBall poses of {} (identify capball reads a run's MCAP log or a CSV dataset)",
+                    p.display()
+                )
+            })?;
         report_skipped(p, &cb.skipped);
         return Ok(cb.records);
     }
@@ -177,7 +182,12 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     let recs = if crate::analysis::is_mcap(&a.data) && a.machine.is_none() {
         // No machine given: the log's poses choose the kinematic convention.
         let cb = crate::analysis::capball_from_log(&a.data)
-            .with_context(|| format!("reading the CapBall poses of {}", a.data.display()))?;
+            .with_context(|| {
+                format!(
+                    "reading the CapBall poses of {} (identify capball reads a run's MCAP log or a CSV dataset)",
+                    a.data.display()
+                )
+            })?;
         report_skipped(&a.data, &cb.skipped);
         eprintln!("{}: machine {}", a.data.display(), cb.machine_name);
         machine = cb.machine;

@@ -34,6 +34,13 @@ pub struct PositioningArgs {
     /// scatter].
     #[arg(long, value_name = "INDEX")]
     pub plot_target: Option<usize>,
+    /// MCAP log only: trajectory CSV of the run instead of the log's attachment.
+    #[arg(long, value_name = "FILE")]
+    pub trajectory: Option<PathBuf>,
+    /// MCAP log only: the poses of the positioning run, `A-B` [default: the first block of
+    /// poses in which only x changes].
+    #[arg(long, value_name = "A-B")]
+    pub poses: Option<String>,
 }
 
 pub fn run(c: Command) -> anyhow::Result<()> {
@@ -42,20 +49,20 @@ pub fn run(c: Command) -> anyhow::Result<()> {
     }
 }
 
-/// Reads a positioning run from a CSV dataset (or, once the log reader is merged, an MCAP
-/// log: the adapter goes here and must return the same [`PositioningData`]).
+/// Reads a positioning run from a CSV dataset or an MCAP log (see
+/// [`crate::analysis::positioning`] for how the run is found in a log).
 pub fn load_positioning(path: &Path) -> anyhow::Result<PositioningData> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    if ext == "mcap" {
-        anyhow::bail!(
-            "{}: reading positioning runs from MCAP logs is not available in this build; \
-             export the run as a CSV dataset (datasets.md) and analyse that",
-            path.display()
-        );
+    load_positioning_with(path, &crate::analysis::PositioningOptions::default())
+}
+
+/// [`load_positioning`] with the options of the MCAP adapter (ignored for CSV).
+pub fn load_positioning_with(
+    path: &Path,
+    opts: &crate::analysis::PositioningOptions,
+) -> anyhow::Result<PositioningData> {
+    if crate::analysis::is_mcap(path) {
+        return crate::analysis::positioning_from_log(path, opts)
+            .with_context(|| format!("reading the positioning run of {}", path.display()));
     }
     PositioningData::from_csv_path(path).with_context(|| format!("reading {}", path.display()))
 }
@@ -134,7 +141,16 @@ pub fn analyze_positioning(
 }
 
 fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
-    let data = load_positioning(&a.input)?;
+    let opts = crate::analysis::PositioningOptions {
+        trajectory: a.trajectory.clone(),
+        poses: a
+            .poses
+            .as_deref()
+            .map(crate::analysis::parse_pose_range)
+            .transpose()?,
+        datum_x_mm: None,
+    };
+    let data = load_positioning_with(&a.input, &opts)?;
     if let Some(r) = a.reference_cycle {
         anyhow::ensure!(
             (1..=data.n_cycles()).contains(&r),

@@ -35,7 +35,7 @@ pub enum Command {
 
 #[derive(Debug, clap::Args)]
 pub struct CapballArgs {
-    /// CapBall dataset (CSV). MCAP logs: not read here yet (export a CSV).
+    /// CapBall dataset (CSV) or MCAP log of a run.
     pub data: PathBuf,
     /// Validation dataset (e.g. the trajectory with A reversed): RMS of its residuals.
     #[arg(long)]
@@ -114,11 +114,36 @@ fn read(p: &Path) -> anyhow::Result<String> {
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
     {
         anyhow::bail!(
-            "{}: reading CapBall/PSD values from MCAP logs is not wired in yet; export the dataset as CSV",
+            "{}: this input must be a CSV file (`identify capball` reads MCAP logs; the PSD \
+             13-error identification needs the 51-point laser frame and a reference run as CSV — \
+             a log's single PSD segment gives its straightness, printed by `metrolog demo`)",
             p.display()
         );
     }
     std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))
+}
+
+/// CapBall records from a CSV dataset or an MCAP log (the poses that hold the tool on the
+/// ball, see [`crate::analysis::capball`]).
+fn load_capball(p: &Path, machine: &Machine) -> anyhow::Result<Vec<capball::CapballRecord>> {
+    if crate::analysis::is_mcap(p) {
+        let cb = crate::analysis::capball::capball_from_log_with(p, machine)
+            .with_context(|| {
+                format!(
+                    "reading the CapBall poses of {} (identify capball reads a run's MCAP log or a CSV dataset)",
+                    p.display()
+                )
+            })?;
+        report_skipped(p, &cb.skipped);
+        return Ok(cb.records);
+    }
+    capball::parse_dataset(&read(p)?).with_context(|| format!("{}", p.display()))
+}
+
+fn report_skipped(p: &Path, skipped: &[(u32, String)]) {
+    for (pose, status) in skipped {
+        eprintln!("{}: CapBall pose {pose} skipped ({status})", p.display());
+    }
 }
 
 fn machine_from(p: &Option<PathBuf>) -> anyhow::Result<Machine> {
@@ -153,9 +178,23 @@ fn split_runs(recs: &[capball::CapballRecord]) -> Vec<(u32, Vec<Pose>, Vec<[f64;
 }
 
 fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
-    let machine = machine_from(&a.machine)?;
-    let recs =
-        capball::parse_dataset(&read(&a.data)?).with_context(|| format!("{}", a.data.display()))?;
+    let mut machine = machine_from(&a.machine)?;
+    let recs = if crate::analysis::is_mcap(&a.data) && a.machine.is_none() {
+        // No machine given: the log's poses choose the kinematic convention.
+        let cb = crate::analysis::capball_from_log(&a.data)
+            .with_context(|| {
+                format!(
+                    "reading the CapBall poses of {} (identify capball reads a run's MCAP log or a CSV dataset)",
+                    a.data.display()
+                )
+            })?;
+        report_skipped(&a.data, &cb.skipped);
+        eprintln!("{}: machine {}", a.data.display(), cb.machine_name);
+        machine = cb.machine;
+        cb.records
+    } else {
+        load_capball(&a.data, &machine)?
+    };
     let mut runs = split_runs(&recs);
     if let Some(r) = a.run {
         runs.retain(|x| x.0 == r);
@@ -165,8 +204,7 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     }
     let validation = match &a.validate {
         Some(p) => {
-            let v =
-                capball::parse_dataset(&read(p)?).with_context(|| format!("{}", p.display()))?;
+            let v = load_capball(p, &machine)?;
             Some(split_runs(&v))
         }
         None => None,

@@ -1,0 +1,199 @@
+//! Analysis inputs from a run's MCAP log: the adapters between the log (`/pose` values,
+//! `/interferometer/environment`, the trajectory and config attachments) and the pure
+//! analyses of the `metrology` crate.
+//!
+//! - [`positioning_from_log`]: the ISO 230-2 positioning run on X as a [`PositioningData`]
+//!   (`analyze positioning`, `diagnose`);
+//! - [`capball_from_log`]: the CapBall poses with their volumetric errors (`identify capball`);
+//! - [`psd_from_log`]: a PSD straightness segment, offset and slope removed;
+//! - [`demo_report`]: all of it as the compact text the `demo` command prints at its end.
+//!
+//! [`PositioningData`]: metrology::positioning_data::PositioningData
+
+pub mod capball;
+pub mod positioning;
+pub mod psd;
+pub mod report;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::config::{TrajectoryRow, parse_trajectory};
+use crate::log::topics::{
+    Decoded, EnvironmentMsg, PoseInstrument, PoseMsg, PoseStatusName, decode,
+};
+use crate::log::{LogError, RUN_METADATA, ReadSummary, read_log};
+
+pub use capball::{CapballFromLog, capball_from_log};
+pub use positioning::{PositioningOptions, parse_pose_range, positioning_from_log};
+pub use psd::{PsdSegment, psd_from_log, psd_from_log_with};
+pub use report::demo_report;
+
+/// Name of the trajectory attachment (`pipeline::open_log`).
+pub const TRAJECTORY_ATTACHMENT: &str = "trajectory.csv";
+/// Name of the config attachment (`pipeline::open_log`).
+pub const CONFIG_ATTACHMENT: &str = "metrolog.toml";
+
+/// Why a log could not be turned into an analysis input. Each says what to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum AnalysisError {
+    /// {0}
+    #[error(transparent)]
+    Log(#[from] LogError),
+    /// {path}: the log has no `trajectory.csv` attachment; give the run's trajectory with `--trajectory FILE`
+    #[error(
+        "{}: the log has no `trajectory.csv` attachment; give the run's trajectory with `--trajectory FILE`",
+        path.display()
+    )]
+    NoTrajectory { path: PathBuf },
+    /// trajectory {source_name}: {message}
+    #[error("trajectory {source_name}: {message}")]
+    BadTrajectory {
+        source_name: String,
+        message: String,
+    },
+    /// {path}: {what} — {hint}
+    #[error("{}: {what} — {hint}", path.display())]
+    NoData {
+        path: PathBuf,
+        what: String,
+        hint: String,
+    },
+    /// bad option: {0}
+    #[error("bad option: {0}")]
+    BadOption(String),
+    /// {0}
+    #[error("{0}")]
+    Dataset(#[from] metrology::positioning_data::DatasetError),
+    /// {0}
+    #[error("{0}")]
+    Capball(#[from] metrology::capball::CapballError),
+}
+
+/// One `/pose` value with the log time it was written at.
+#[derive(Debug, Clone)]
+pub struct LoggedPose {
+    pub log_ns: u64,
+    pub msg: PoseMsg,
+}
+
+/// What the analyses need from a log, read once.
+#[derive(Debug, Clone, Default)]
+pub struct LogContents {
+    pub path: PathBuf,
+    /// `/pose` values in file order.
+    pub poses: Vec<LoggedPose>,
+    /// `/interferometer/environment` records in file order.
+    pub environment: Vec<EnvironmentMsg>,
+    /// Attachments by name (the last one of a name wins).
+    pub attachments: BTreeMap<String, Vec<u8>>,
+    /// The `metrolog.run` metadata record.
+    pub run_metadata: BTreeMap<String, String>,
+    pub summary: ReadSummary,
+    /// Messages that did not decode (counted, skipped).
+    pub undecodable: u64,
+}
+
+impl LogContents {
+    /// Reads `path` (the intact prefix of a damaged file; see [`read_log`]).
+    pub fn read(path: &Path) -> Result<LogContents, AnalysisError> {
+        let mut c = LogContents {
+            path: path.to_path_buf(),
+            ..LogContents::default()
+        };
+        let summary = read_log(path, |item| match item {
+            crate::log::LogItem::Message {
+                topic,
+                log_ns,
+                data,
+            } => {
+                if topic != "/pose" && topic != "/interferometer/environment" {
+                    return;
+                }
+                match decode(topic, data) {
+                    Ok(Some(Decoded::Pose(msg))) => c.poses.push(LoggedPose { log_ns, msg }),
+                    Ok(Some(Decoded::Environment(e))) => c.environment.push(e),
+                    Ok(_) => {}
+                    Err(_) => c.undecodable += 1,
+                }
+            }
+            crate::log::LogItem::Attachment { name, data, .. } => {
+                c.attachments.insert(name.to_string(), data.to_vec());
+            }
+            crate::log::LogItem::Metadata { name, map } => {
+                if name == RUN_METADATA {
+                    c.run_metadata = map.clone();
+                }
+            }
+        })?;
+        c.summary = summary;
+        Ok(c)
+    }
+
+    /// The trajectory: `override_path` if given, else the log's attachment.
+    pub fn trajectory(
+        &self,
+        override_path: Option<&Path>,
+    ) -> Result<Vec<TrajectoryRow>, AnalysisError> {
+        let (name, text) = match override_path {
+            Some(p) => (
+                p.display().to_string(),
+                std::fs::read_to_string(p).map_err(|e| AnalysisError::BadTrajectory {
+                    source_name: p.display().to_string(),
+                    message: format!("cannot be read: {e}"),
+                })?,
+            ),
+            None => {
+                let data = self.attachments.get(TRAJECTORY_ATTACHMENT).ok_or_else(|| {
+                    AnalysisError::NoTrajectory {
+                        path: self.path.clone(),
+                    }
+                })?;
+                (
+                    format!("attachment {TRAJECTORY_ATTACHMENT}"),
+                    String::from_utf8_lossy(data).into_owned(),
+                )
+            }
+        };
+        parse_trajectory(&text).map_err(|message| AnalysisError::BadTrajectory {
+            source_name: name,
+            message,
+        })
+    }
+
+    /// The config attachment parsed as TOML (None when absent or unreadable).
+    pub fn config(&self) -> Option<toml::Table> {
+        let data = self.attachments.get(CONFIG_ATTACHMENT)?;
+        std::str::from_utf8(data).ok()?.parse::<toml::Table>().ok()
+    }
+
+    /// The first `/pose` value of `instrument` for every pose number.
+    pub fn pose_values(&self, instrument: PoseInstrument) -> BTreeMap<u32, &PoseMsg> {
+        let mut m = BTreeMap::new();
+        for p in &self.poses {
+            if p.msg.instrument == instrument {
+                m.entry(p.msg.pose).or_insert(&p.msg);
+            }
+        }
+        m
+    }
+
+    /// The environment record nearest in time to `t_ns` (by its clock-fitted time).
+    pub fn environment_at(&self, t_ns: u64) -> Option<&EnvironmentMsg> {
+        self.environment
+            .iter()
+            .filter(|e| e.valid)
+            .min_by_key(|e| e.fitted_ns.abs_diff(t_ns))
+    }
+}
+
+/// Whether a pose value can be used.
+pub(crate) fn is_ok(p: &PoseMsg) -> bool {
+    p.status == PoseStatusName::Ok
+}
+
+/// Whether a log path is an MCAP log (by extension).
+pub fn is_mcap(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+}

@@ -1,0 +1,383 @@
+//! The ISO 230-2 positioning run of a log as a [`PositioningData`].
+//!
+//! # Selection and the target rule
+//!
+//! The run is a block of consecutive trajectory poses in which only `x` changes: it starts at
+//! the first pose that has an interferometer `/pose` value and ends before the first pose
+//! whose `y`, `z`, `a` or `c` differs from the first pose's (`--poses A-B` gives the block
+//! instead; poses in it off the first pose's line are left out).
+//!
+//! The direction of a visit is the sign of the move into it (from the previous trajectory
+//! pose, or from the datum for pose 1); a pose with no move keeps the previous direction.
+//!
+//! A target is an `x` (to 1 µm) that is approached from **both** directions in the run and has
+//! at least one `ok` value. The reversal (overtravel) poses of an ISO 230-2 cycle are reached
+//! from one side only — the extreme ones by construction — and so are never targets, whatever
+//! their dwell. A run with no position approached from both sides is unidirectional: then
+//! every position with an `ok` value is a target.
+//!
+//! The cycle of a visit is the count of visits of its (target, direction) so far, so a visit
+//! whose value is not `ok` (beam interruption, never steady) keeps its cycle number and shows
+//! up as a missing reading in the analysis.
+//!
+//! `time_s` counts from the run's first `ok` value (`t_first_ns`), times the run metadata's
+//! `time_scale` when present (a simulated run whose slow effects run faster than real time).
+//!
+//! # Deviation
+//!
+//! The LI-80 reads the displacement from its datum, taken at connect (the driver sends
+//! `DATUM`) with the machine at home; the driver compensates it for air and normalises it to
+//! 20 °C with the material temperature (`position_um` is the 20 °C length). So
+//! `deviation_um = position_um − (x_mm − x_datum_mm)·1000`, with `x_datum_mm` = 0 (home) unless
+//! the run metadata gives `datum_x_mm`, and the data carry `material_compensation = true`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use metrology::axis_model::Direction;
+use metrology::positioning_data::{PositioningData, Reading};
+
+use super::{AnalysisError, LogContents, is_ok};
+use crate::config::TrajectoryRow;
+use crate::log::topics::PoseInstrument;
+
+/// Options of [`positioning_from_log`].
+#[derive(Debug, Clone, Default)]
+pub struct PositioningOptions {
+    /// Trajectory file instead of the log's attachment.
+    pub trajectory: Option<PathBuf>,
+    /// Explicit pose range (inclusive) of the positioning run.
+    pub poses: Option<(u32, u32)>,
+    /// Datum position of the interferometer on X, mm (default: metadata `datum_x_mm`, else 0).
+    pub datum_x_mm: Option<f64>,
+}
+
+/// `A-B` (inclusive, 1 ≤ A ≤ B).
+pub fn parse_pose_range(s: &str) -> Result<(u32, u32), AnalysisError> {
+    let bad = || AnalysisError::BadOption(format!("--poses `{s}`: expected A-B, e.g. 1-36"));
+    let (a, b) = s.split_once('-').ok_or_else(bad)?;
+    let a: u32 = a.trim().parse().map_err(|_| bad())?;
+    let b: u32 = b.trim().parse().map_err(|_| bad())?;
+    if a == 0 || b < a {
+        return Err(bad());
+    }
+    Ok((a, b))
+}
+
+/// Tolerances of "the same position": 1 µm on linear axes, 0.001° on rotary ones.
+const LIN_TOL_MM: f64 = 1e-3;
+const ROT_TOL_DEG: f64 = 1e-3;
+
+fn same_off_axis(a: &TrajectoryRow, b: &TrajectoryRow) -> bool {
+    let rot =
+        |x: Option<f64>, y: Option<f64>| (x.unwrap_or(0.0) - y.unwrap_or(0.0)).abs() <= ROT_TOL_DEG;
+    (a.y_mm - b.y_mm).abs() <= LIN_TOL_MM
+        && (a.z_mm - b.z_mm).abs() <= LIN_TOL_MM
+        && rot(a.a_deg, b.a_deg)
+        && rot(a.c_deg, b.c_deg)
+}
+
+/// Position key at 1 µm resolution.
+fn key_um(x_mm: f64) -> i64 {
+    (x_mm * 1000.0).round() as i64
+}
+
+/// Reads the positioning run of the log at `path` (see the module doc for the rules).
+pub fn positioning_from_log(
+    path: &Path,
+    opts: &PositioningOptions,
+) -> Result<PositioningData, AnalysisError> {
+    let log = LogContents::read(path)?;
+    positioning_from_contents(&log, opts)
+}
+
+/// [`positioning_from_log`] on a log already read.
+pub fn positioning_from_contents(
+    log: &LogContents,
+    opts: &PositioningOptions,
+) -> Result<PositioningData, AnalysisError> {
+    let traj = log.trajectory(opts.trajectory.as_deref())?;
+    let values = log.pose_values(PoseInstrument::Interferometer);
+    let no_data = |what: String, hint: &str| AnalysisError::NoData {
+        path: log.path.clone(),
+        what,
+        hint: hint.into(),
+    };
+    if values.is_empty() {
+        return Err(no_data(
+            "the log has no interferometer pose values".into(),
+            "was the LI-80 connected and listed in the detector's instruments?",
+        ));
+    }
+    // Range of the run, as 0-based trajectory indices [lo, hi].
+    let (lo, hi) = match opts.poses {
+        Some((a, b)) => {
+            if b as usize > traj.len() {
+                return Err(AnalysisError::BadOption(format!(
+                    "--poses {a}-{b}: the trajectory has {} poses",
+                    traj.len()
+                )));
+            }
+            (a as usize - 1, b as usize - 1)
+        }
+        None => {
+            let lo = traj
+                .iter()
+                .position(|r| values.contains_key(&r.pose))
+                .ok_or_else(|| {
+                    no_data(
+                        "no interferometer pose value matches a trajectory pose".into(),
+                        "is this the trajectory of the run? (give it with --trajectory)",
+                    )
+                })?;
+            let mut hi = lo;
+            while hi + 1 < traj.len() && same_off_axis(&traj[lo], &traj[hi + 1]) {
+                hi += 1;
+            }
+            (lo, hi)
+        }
+    };
+    let datum_x_mm = match opts.datum_x_mm {
+        Some(d) => d,
+        None => match log.run_metadata.get("datum_x_mm") {
+            Some(s) => s.trim().parse::<f64>().map_err(|_| AnalysisError::NoData {
+                path: log.path.clone(),
+                what: format!("metadata datum_x_mm = `{s}` is not a number"),
+                hint: "give the datum with the option instead".into(),
+            })?,
+            None => 0.0,
+        },
+    };
+
+    // A simulated run may compress time (sim `time_scale`: slow effects run that much
+    // faster); the readings' times are then given in the simulated machine's seconds.
+    let time_scale = match log.run_metadata.get("time_scale") {
+        Some(s) => s
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .ok_or_else(|| AnalysisError::NoData {
+                path: log.path.clone(),
+                what: format!("metadata time_scale = `{s}` is not a positive number"),
+                hint: "the log's metadata is damaged".into(),
+            })?,
+        None => 1.0,
+    };
+    // Visits: (trajectory index, direction).
+    let mut visits: Vec<(usize, Direction)> = Vec::new();
+    let mut prev_dir = Direction::Up;
+    for i in lo..=hi {
+        let from = if i == 0 { datum_x_mm } else { traj[i - 1].x_mm };
+        let dx = traj[i].x_mm - from;
+        let dir = if dx > LIN_TOL_MM / 2.0 {
+            Direction::Up
+        } else if dx < -LIN_TOL_MM / 2.0 {
+            Direction::Down
+        } else {
+            prev_dir
+        };
+        prev_dir = dir;
+        // In an explicit range, poses off the line of the first one are not part of the run.
+        if same_off_axis(&traj[lo], &traj[i]) {
+            visits.push((i, dir));
+        }
+    }
+    // Directions and ok values per position.
+    let mut dirs: BTreeMap<i64, (bool, bool, bool)> = BTreeMap::new();
+    for &(i, d) in &visits {
+        let e = dirs.entry(key_um(traj[i].x_mm)).or_default();
+        match d {
+            Direction::Up => e.0 = true,
+            Direction::Down => e.1 = true,
+        }
+        if values.get(&traj[i].pose).is_some_and(|p| is_ok(p)) {
+            e.2 = true;
+        }
+    }
+    let bidirectional = dirs.values().any(|(u, d, _)| *u && *d);
+    let targets: Vec<i64> = dirs
+        .iter()
+        .filter(|(_, (u, d, ok))| *ok && (!bidirectional || (*u && *d)))
+        .map(|(k, _)| *k)
+        .collect();
+    if targets.len() < 2 {
+        return Err(no_data(
+            format!(
+                "poses {}-{} hold {} measured target(s); a positioning run needs at least 2",
+                traj[lo].pose,
+                traj[hi].pose,
+                targets.len()
+            ),
+            "choose the run with --poses A-B",
+        ));
+    }
+    let t0_ns = visits
+        .iter()
+        .filter_map(|(i, _)| values.get(&traj[*i].pose))
+        .filter(|p| is_ok(p))
+        .map(|p| p.t_first_ns)
+        .min()
+        .unwrap_or(0);
+    let mut counts: BTreeMap<(i64, bool), usize> = BTreeMap::new();
+    let mut readings = Vec::new();
+    for &(i, d) in &visits {
+        let row = &traj[i];
+        let k = key_um(row.x_mm);
+        let Some(index) = targets.iter().position(|t| *t == k).map(|p| p + 1) else {
+            continue;
+        };
+        let c = counts.entry((k, d == Direction::Up)).or_default();
+        *c += 1;
+        let cycle = *c;
+        let Some(p) = values.get(&row.pose).filter(|p| is_ok(p)) else {
+            continue; // missing reading: the analysis reports it
+        };
+        let Some(pos_um) = p.mean.get("position_um").copied().filter(|v| v.is_finite()) else {
+            continue;
+        };
+        let mid_ns = p.t_first_ns / 2 + p.t_last_ns / 2;
+        let env = log.environment_at(mid_ns);
+        let air_c = env.map(|e| e.air_c).filter(|v| v.is_finite());
+        let material_c = env.and_then(|e| {
+            let m: Vec<f64> = e
+                .material_c
+                .iter()
+                .copied()
+                .filter(|v| v.is_finite())
+                .collect();
+            (!m.is_empty()).then(|| m.iter().sum::<f64>() / m.len() as f64)
+        });
+        readings.push(Reading {
+            cycle,
+            direction: d,
+            index,
+            target_mm: row.x_mm,
+            deviation_um: pos_um - (row.x_mm - datum_x_mm) * 1000.0,
+            time_s: p.t_first_ns.saturating_sub(t0_ns) as f64 * 1e-9 * time_scale,
+            air_c,
+            material_c,
+        });
+    }
+    let alpha = log
+        .config()
+        .and_then(|c| c.get("interferometer")?.get("alpha_um_per_m_k")?.as_float())
+        .or_else(|| {
+            log.run_metadata
+                .get("alpha_um_per_m_k")
+                .and_then(|s| s.parse().ok())
+        });
+    let mut metadata = log.run_metadata.clone();
+    metadata.insert("axis".into(), "X".into());
+    metadata.insert("source".into(), log.path.display().to_string());
+    metadata.insert(
+        "poses".into(),
+        format!("{}-{}", traj[lo].pose, traj[hi].pose),
+    );
+    metadata.insert("datum_x_mm".into(), datum_x_mm.to_string());
+    if let Some(a) = alpha {
+        metadata.insert("alpha_um_per_m_k".into(), a.to_string());
+    }
+    let data = PositioningData {
+        axis: Some("X".into()),
+        alpha_um_per_m_k: alpha,
+        material_compensation: true,
+        has_times: true,
+        metadata,
+        readings,
+    };
+    data.validate()?;
+    Ok(data)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::LoggedPose;
+    use crate::log::topics::{PoseMsg, PoseStatusName};
+
+    /// A log in memory: trajectory of x values (y = z = 0), interferometer value at each pose
+    /// = `pos_um(pose)` (None: never steady), pose k measured at k seconds.
+    fn log(xs: &[f64], pos_um: impl Fn(u32, f64) -> Option<f64>) -> LogContents {
+        let mut traj = String::from("pose,x_mm,y_mm,z_mm\n");
+        let mut poses = Vec::new();
+        for (k, x) in xs.iter().enumerate() {
+            let no = k as u32 + 1;
+            traj += &format!("{no},{x},0,0\n");
+            let v = pos_um(no, *x);
+            poses.push(LoggedPose {
+                log_ns: 0,
+                msg: PoseMsg {
+                    instrument: PoseInstrument::Interferometer,
+                    pose: no,
+                    status: if v.is_some() {
+                        PoseStatusName::Ok
+                    } else {
+                        PoseStatusName::NeverSteady
+                    },
+                    n: 10,
+                    mean: v
+                        .map(|v| [("position_um".to_string(), v)].into())
+                        .unwrap_or_default(),
+                    std: BTreeMap::new(),
+                    t_first_ns: no as u64 * 1_000_000_000,
+                    t_last_ns: no as u64 * 1_000_000_000,
+                },
+            });
+        }
+        LogContents {
+            path: "mem.mcap".into(),
+            poses,
+            attachments: [(
+                super::super::TRAJECTORY_ATTACHMENT.to_string(),
+                traj.into_bytes(),
+            )]
+            .into(),
+            ..LogContents::default()
+        }
+    }
+
+    #[test]
+    fn unidirectional_run_takes_every_measured_position() {
+        // Two cycles up 10, 20, 30 with a return to 0 (not measured) in between.
+        let xs = [10.0, 20.0, 30.0, 0.0, 10.0, 20.0, 30.0];
+        let l = log(&xs, |no, x| {
+            (x > 0.0).then_some(x * 1000.0 + no as f64 * 0.1)
+        });
+        let d = positioning_from_contents(&l, &PositioningOptions::default()).unwrap();
+        assert_eq!((d.n_targets(), d.n_cycles(), d.readings.len()), (3, 2, 6));
+        assert!(d.readings.iter().all(|r| r.direction == Direction::Up));
+        // Pose 6 = 20 mm in cycle 2: 0.6 µm.
+        let r = d
+            .readings
+            .iter()
+            .find(|r| r.cycle == 2 && r.index == 2)
+            .unwrap();
+        assert!((r.deviation_um - 0.6).abs() < 1e-9);
+        assert!((r.time_s - 5.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn datum_from_metadata_and_repeated_pose_keeps_direction() {
+        // Datum at x = 5 mm: reading = (x − 5)·1000 + 0.25. Pose 3 repeats pose 2 (no move):
+        // a second up visit of 20 mm.
+        let xs = [10.0, 20.0, 20.0, 25.0, 20.0, 10.0, 5.0];
+        let mut l = log(&xs, |_, x| Some((x - 5.0) * 1000.0 + 0.25));
+        l.run_metadata.insert("datum_x_mm".into(), "5".into());
+        let d = positioning_from_contents(&l, &PositioningOptions::default()).unwrap();
+        // Targets approached both ways: 10 and 20 (25 and 5 are reversals).
+        assert_eq!(d.targets_mm(), vec![10.0, 20.0]);
+        let up20: Vec<usize> = d
+            .readings
+            .iter()
+            .filter(|r| r.index == 2 && r.direction == Direction::Up)
+            .map(|r| r.cycle)
+            .collect();
+        assert_eq!(up20, vec![1, 2]);
+        assert!(
+            d.readings
+                .iter()
+                .all(|r| (r.deviation_um - 0.25).abs() < 1e-9)
+        );
+    }
+}

@@ -1,0 +1,190 @@
+//! The text the `demo` command prints at its end: every analysis of the run's log.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use metrology::capball::CapballSetup;
+use metrology::diagnose::{self, Options};
+use metrology::kinematics::Pose;
+
+use super::capball::identify_subset;
+use super::{AnalysisError, LogContents, PositioningOptions};
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or_else(|| "—".into(), |v| format!("{v:.2}"))
+}
+
+/// The analyses of the log at `path` as compact text. A part that cannot be computed says why
+/// in its place; `Err` only when the log cannot be read at all.
+pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
+    let log = LogContents::read(path)?;
+    let mut s = String::new();
+    let _ = writeln!(s, "Analysis of {}", path.display());
+    if let Some(e) = &log.summary.error {
+        let _ = writeln!(s, "  (log read up to damage: {e})");
+    }
+
+    // ISO 230-2 and the diagnosis.
+    match super::positioning::positioning_from_contents(&log, &PositioningOptions::default()) {
+        Err(e) => {
+            let _ = writeln!(s, "\nISO 230-2: not available: {e}");
+        }
+        Ok(data) => {
+            let an = crate::cmd::analyze::analyze_positioning(&data, None);
+            let a = &an.iso230_2;
+            let _ = writeln!(
+                s,
+                "\nISO 230-2, axis X (poses {}, {} targets × {} cycles, {} missing), µm:",
+                data.metadata.get("poses").map_or("?", String::as_str),
+                an.n_targets,
+                an.n_cycles,
+                an.missing.len()
+            );
+            let _ = writeln!(
+                s,
+                "  A {}  A↑ {}  A↓ {}  E {}  E↑ {}  E↓ {}",
+                opt(a.a),
+                opt(a.a_up),
+                opt(a.a_down),
+                opt(a.e),
+                opt(a.e_up),
+                opt(a.e_down)
+            );
+            let _ = writeln!(
+                s,
+                "  R {}  R↑ {}  R↓ {}  B {}  B̄ {}  M {}",
+                opt(a.r),
+                opt(a.r_up),
+                opt(a.r_down),
+                opt(a.b),
+                opt(a.b_mean),
+                opt(a.m)
+            );
+            for n in &an.notes {
+                let _ = writeln!(s, "  note: {n}");
+            }
+            match diagnose::diagnose(&data, &Options::default()) {
+                Err(e) => {
+                    let _ = writeln!(s, "\nDiagnosis: not available: {e}");
+                }
+                Ok(d) => {
+                    let r = &d.report;
+                    let _ = writeln!(
+                        s,
+                        "\nDiagnosis (baseline RMS {:.3} µm, held-out {:.3} µm):",
+                        r.baseline.rms_um, r.baseline.heldout_rms_um
+                    );
+                    if r.findings.is_empty() {
+                        let _ = writeln!(s, "  no finding: the baseline explains the data");
+                    }
+                    for (k, f) in r.findings.iter().enumerate() {
+                        let params: Vec<String> = f
+                            .params
+                            .iter()
+                            .map(|(n, v)| match f.params_u.get(n) {
+                                Some(u) => format!("{n} = {v:.3} ± {u:.3}"),
+                                None => format!("{n} = {v:.3}"),
+                            })
+                            .collect();
+                        let _ = writeln!(
+                            s,
+                            "  {}. {}: {}\n     held-out {:.3} → {:.3} µm; cause: {}",
+                            k + 1,
+                            f.effect,
+                            params.join(", "),
+                            f.heldout_rms_before_um,
+                            f.heldout_rms_after_um,
+                            f.cause
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    // CapBall.
+    match super::capball::capball_from_contents_auto(&log) {
+        Err(e) => {
+            let _ = writeln!(s, "\nCapBall: not available: {e}");
+        }
+        Ok(cb) => {
+            let poses: Vec<Pose> = cb.records.iter().map(|r| r.pose).collect();
+            let meas: Vec<[f64; 3]> = cb.records.iter().map(|r| r.e_um).collect();
+            let res = CapballSetup::with_ball_from_poses(cb.machine.clone(), &poses)
+                .map_err(AnalysisError::from)
+                .and_then(|st| identify_subset(&st, &poses, &meas));
+            match res {
+                Err(e) => {
+                    let _ = writeln!(
+                        s,
+                        "\nCapBall ({} poses): identification failed: {e}",
+                        poses.len()
+                    );
+                }
+                Ok(id) => {
+                    let _ = writeln!(
+                        s,
+                        "\nCapBall identification ({} poses{}, ball at {:.1}, {:.1}, {:.1} mm, \
+                         machine {}): condition number {:.1}",
+                        id.n_poses,
+                        if cb.skipped.is_empty() {
+                            String::new()
+                        } else {
+                            format!(", {} skipped", cb.skipped.len())
+                        },
+                        cb.ball_mm.x,
+                        cb.ball_mm.y,
+                        cb.ball_mm.z,
+                        cb.machine_name,
+                        id.condition_number
+                    );
+                    for chunk in id.params.chunks(4) {
+                        let cells: Vec<String> = chunk
+                            .iter()
+                            .map(|(n, p, u)| format!("{n} {p:.2} ± {u:.2}"))
+                            .collect();
+                        let _ = writeln!(s, "  {}", cells.join("   "));
+                    }
+                    if !id.fixed.is_empty() {
+                        let _ = writeln!(
+                            s,
+                            "  not separable with these poses (held at 0): {}",
+                            id.fixed.join(", ")
+                        );
+                    }
+                    let r = id.residual_rms_um;
+                    let _ = writeln!(
+                        s,
+                        "  residual RMS x {:.3} y {:.3} z {:.3} µm",
+                        r[0], r[1], r[2]
+                    );
+                }
+            }
+        }
+    }
+
+    // PSD.
+    match super::psd::psd_from_contents(&log, None) {
+        Err(e) => {
+            let _ = writeln!(s, "\nPSD: not available: {e}");
+        }
+        Ok(seg) => {
+            let (nx, ny) = seg.error_names();
+            let _ = writeln!(
+                s,
+                "\nPSD straightness along {} (poses {}-{}, {} points, offset and slope removed):\n  \
+                 {nx} {:.2} µm, {ny} {:.2} µm (slopes {:.4}, {:.4} µm/mm); the 13-error frame \
+                 identification needs the 51-point frame and a reference run",
+                seg.axis,
+                seg.first_pose,
+                seg.last_pose,
+                seg.points.len(),
+                seg.straightness_x_um,
+                seg.straightness_y_um,
+                seg.slope_x_um_per_mm,
+                seg.slope_y_um_per_mm
+            );
+        }
+    }
+    Ok(s)
+}

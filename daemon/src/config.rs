@@ -90,6 +90,7 @@ struct RawRun {
     trajectory: Option<Spanned<String>>,
     #[serde(default)]
     stop_at_program_end: bool,
+    time_scale: Option<Spanned<f64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -158,6 +159,9 @@ pub struct RunConfig {
     pub trajectory: Option<Trajectory>,
     /// End the run when the CNC sends program end.
     pub stop_at_program_end: bool,
+    /// For simulated runs only: how many times faster than real time the simulator's slow
+    /// effects (drift, environment) run; the analyses multiply times by it. 1 on a machine.
+    pub time_scale: f64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -506,11 +510,25 @@ impl Ctx<'_> {
                 Some(Trajectory { path, text, rows })
             }
         };
+        let time_scale = match r.time_scale {
+            None => 1.0,
+            Some(t) => {
+                let v = *t.get_ref();
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(self.err(
+                        t.span(),
+                        format!("time_scale = {v} must be a positive number (1 on a real machine)"),
+                    ));
+                }
+                v
+            }
+        };
         Ok(RunConfig {
             machine: r.machine.into_inner(),
             output_dir,
             trajectory,
             stop_at_program_end: r.stop_at_program_end,
+            time_scale,
         })
     }
 

@@ -599,6 +599,9 @@ pub fn open_log(cfg: &crate::config::Config, clock: &HostClock) -> anyhow::Resul
         "stop_at_program_end".to_string(),
         cfg.run.stop_at_program_end.to_string(),
     );
+    if cfg.run.time_scale != 1.0 {
+        extra.insert("time_scale".to_string(), cfg.run.time_scale.to_string());
+    }
     extra.insert(
         "instruments_configured".to_string(),
         cfg.instruments()

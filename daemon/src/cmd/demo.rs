@@ -309,13 +309,13 @@ fn print_report(report: &RunReport, truth: &[PoseTruth], home_x_mm: f64, reversa
     );
 }
 
-/// ANALYSIS HOOK (for the integrator): print the analysis of the demo's log here once the
-/// commands exist — ISO 230-2 positioning accuracy of the interferometer run
-/// (`metrolog analyze`), the diagnosis against the simulation model (`metrolog diagnose`), and
-/// the CapBall / PSD identification (`metrolog identify`). Each reads `report.log_path`.
+/// The analysis of the demo's own log, exactly as the analysis commands compute it: ISO 230-2
+/// positioning accuracy of the interferometer run, the diagnosis against the simulation model,
+/// the CapBall identification and the PSD segment's straightness.
 fn print_analysis(report: &RunReport) {
-    let _ = &report.log_path;
-    println!(
-        "\nanalysis: (ISO 230-2, diagnosis and CapBall/PSD identification are printed here once wired)"
-    );
+    println!("\nanalysis of {}:", report.log_path.display());
+    match crate::analysis::demo_report(&report.log_path) {
+        Ok(text) => println!("{text}"),
+        Err(e) => println!("  the analysis could not run: {e:#}"),
+    }
 }

@@ -91,6 +91,7 @@ machine = "sim"
 output_dir = {out}
 trajectory = {traj}
 stop_at_program_end = {stop}
+time_scale = {time_scale:?}       # the simulator's slow effects run this much faster than real time
 
 [detector]
 samples = 150
@@ -120,6 +121,7 @@ can_id = {can_id:#x}
         out = q(output_dir),
         traj = q(&trajectory),
         stop = stop_at_program_end,
+        time_scale = sc.time_scale,
         li80 = q(&sim.port(Device::Interferometer)),
         li80_rate = rates_hz[0],
         alpha = sc.interferometer.alpha_um_per_m_k,

@@ -865,7 +865,7 @@ mod tests {
     #[test]
     fn demo_parses_and_round_trips() {
         let d = Scenario::demo();
-        assert_eq!(d.program.poses.len(), 65);
+        assert_eq!(d.program.poses.len(), 89);
         let text = d.to_toml().expect("serialise");
         assert_eq!(Scenario::from_toml(&text).expect("parse back"), d);
     }
@@ -932,7 +932,7 @@ mod tests {
         assert_eq!(lines[0], "pose,x_mm,y_mm,z_mm,a_deg,c_deg");
         assert_eq!(lines.len(), 66);
         assert_eq!(lines[1], "1,2.312,0,0,0,0");
-        assert!(lines[65].starts_with("65,200,0,400,"));
+        assert!(lines[89].starts_with("89,200,0,400,"));
     }
 
     #[test]

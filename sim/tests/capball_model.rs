@@ -38,9 +38,9 @@ fn demo_capball_poses_hold_the_tool_on_the_ball() {
     let sc = Scenario::demo();
     let truth = truth_of(&sc);
     let cb = capball_poses(&truth);
-    // Poses 37-56 of demo.toml, and no others.
+    // Poses 61-80 of demo.toml, and no others.
     let idx: Vec<u16> = cb.iter().map(|t| t.pose).collect();
-    assert_eq!(idx, (37..=56).collect::<Vec<u16>>());
+    assert_eq!(idx, (61..=80).collect::<Vec<u16>>());
     // What `metrolog identify capball` does: find the ball from the poses on the paper machine.
     let poses: Vec<Pose> = cb.iter().map(|t| pose_of(t)).collect();
     let s =

@@ -80,7 +80,50 @@ pub struct PositioningAnalysis {
     /// ISO 230-2 per-target results, µm.
     pub targets: Vec<iso230::TargetStats>,
     pub drift_elimination: DriftReport,
+    /// Uncertainty of one LI-80 reading at each target (ISO/TR 230-9 style length budget).
+    pub measurement_uncertainty: Option<MeasurementUncertainty>,
     pub notes: Vec<String>,
+}
+
+/// The LI-80 length budget attached to the ISO 230-2 results: the uncertainty of a single
+/// compensated reading at each target from the environment sensors, the expansion coefficient,
+/// the dead path and the cosine error (`metrology::uncertainty::length`). The budget's sensor
+/// accuracies are the defaults documented there; the material temperature and α are the run's.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct MeasurementUncertainty {
+    pub budget: metrology::uncertainty::length::LengthBudget,
+    /// Per target (in target order): standard uncertainty u and expanded U (k = 2), µm.
+    pub u_um: Vec<f64>,
+    #[serde(rename = "U_k2_um")]
+    pub u_k2_um: Vec<f64>,
+}
+
+fn measurement_uncertainty(data: &PositioningData) -> Option<MeasurementUncertainty> {
+    let mut budget = metrology::uncertainty::length::LengthBudget::default();
+    if let Some(a) = data.alpha_um_per_m_k {
+        budget.alpha_per_k = a * 1e-6;
+    }
+    let temps: Vec<f64> = data.readings.iter().filter_map(|r| r.material_c).collect();
+    if !temps.is_empty() {
+        budget.material_temp_c = temps.iter().sum::<f64>() / temps.len() as f64;
+    }
+    let mut targets: Vec<(usize, f64)> = data
+        .readings
+        .iter()
+        .map(|r| (r.index, r.target_mm))
+        .collect();
+    targets.sort_by_key(|t| t.0);
+    targets.dedup_by_key(|t| t.0);
+    let u_um: Vec<f64> = targets
+        .iter()
+        .map(|t| budget.standard_uncertainty_um(t.1.abs()).ok())
+        .collect::<Option<Vec<f64>>>()?;
+    let u_k2_um = u_um.iter().map(|u| 2.0 * u).collect();
+    Some(MeasurementUncertainty {
+        budget,
+        u_um,
+        u_k2_um,
+    })
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -136,6 +179,7 @@ pub fn analyze_positioning(
         iso230_2: iso.axis,
         targets: iso.targets,
         drift_elimination: drift,
+        measurement_uncertainty: measurement_uncertainty(data),
         notes,
     }
 }
@@ -297,6 +341,22 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
     ];
     for (sym, name, v) in rows {
         let _ = writeln!(s, "  {sym:<3} {name:<40} {} µm", f(v, 8));
+    }
+    if let Some(mu) = an
+        .measurement_uncertainty
+        .as_ref()
+        .filter(|m| !m.u_k2_um.is_empty())
+    {
+        let max = mu.u_k2_um.iter().copied().fold(0.0, f64::max);
+        let min = mu.u_k2_um.iter().copied().fold(f64::INFINITY, f64::min);
+        let _ = writeln!(
+            s,
+            "\nUncertainty of one LI-80 reading (ISO/TR 230-9 style budget, α {:.1} µm/(m·K), \
+             material {:.2} °C): U (k = 2) from {min:.2} to {max:.2} µm over the targets \
+             (per target in --json: measurement_uncertainty)",
+            mu.budget.alpha_per_k * 1e6,
+            mu.budget.material_temp_c
+        );
     }
     let d = &an.drift_elimination;
     let _ = writeln!(

@@ -51,6 +51,8 @@ fn pose(x: f64, y: f64, z: f64, a: f64, c: f64) -> Pose {
 
 /// The demo's layout: poses 1-36 ISO (3 cycles, reversals at 404.05 and -2.688), 40 CapBall
 /// poses, then 9 PSD poses along Z.
+// The target index `i` is data of the row (the ISO target number), not only an index.
+#[allow(clippy::needless_range_loop)]
 fn rows(setup: &CapballSetup) -> Vec<Row> {
     let mut v = Vec::new();
     for cycle in 1..=3 {

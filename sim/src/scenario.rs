@@ -930,7 +930,7 @@ mod tests {
         let csv = d.trajectory_csv();
         let lines: Vec<&str> = csv.lines().collect();
         assert_eq!(lines[0], "pose,x_mm,y_mm,z_mm,a_deg,c_deg");
-        assert_eq!(lines.len(), 66);
+        assert_eq!(lines.len(), 90);
         assert_eq!(lines[1], "1,2.312,0,0,0,0");
         assert!(lines[89].starts_with("89,200,0,400,"));
     }

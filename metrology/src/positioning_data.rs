@@ -54,8 +54,8 @@ pub struct PositioningData {
 /// Why a dataset could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum DatasetError {
-    /// cannot read the dataset: {0}
-    #[error("cannot read the dataset: {0}")]
+    /// cannot read the dataset (the cause follows)
+    #[error("cannot read the dataset")]
     Io(#[from] std::io::Error),
     /// the dataset has no header row (expected e.g. `cycle,direction,index,target_mm,deviation_um`)
     #[error(

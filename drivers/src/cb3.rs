@@ -72,10 +72,6 @@ impl Handler for Cb3 {
     }
 }
 
-fn is_ok(a: &str) -> bool {
-    a.trim() == "OK"
-}
-
 impl Device for Cb3 {
     fn acq(&mut self) -> &mut Acq {
         &mut self.acq
@@ -90,20 +86,26 @@ impl Device for Cb3 {
         crate::li80::idle_timeout(self.cfg.rate_hz)
     }
     async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
-        link.expect(self, "STOP\n", is_ok).await.map(drop)
+        link.expect(self, "STOP\n", crate::link::is_ok)
+            .await
+            .map(drop)
     }
 
     async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
         self.acq.set_rate(self.cfg.rate_hz);
-        link.expect(self, "STOP\n", is_ok).await?;
+        link.expect(self, "STOP\n", crate::link::is_ok).await?;
         link.reset_decoder();
         let id = link
             .expect(self, "ID?\n", |a| a.starts_with("CB-3,"))
             .await?;
-        link.expect(self, &format!("RATE {}\n", self.cfg.rate_hz), is_ok)
-            .await?;
+        link.expect(
+            self,
+            &format!("RATE {}\n", self.cfg.rate_hz),
+            crate::link::is_ok,
+        )
+        .await?;
         self.acq.accepting = true;
-        link.expect(self, "START\n", is_ok).await?;
+        link.expect(self, "START\n", crate::link::is_ok).await?;
         Ok(id.trim().to_string())
     }
 }

@@ -115,10 +115,6 @@ impl Handler for Li80 {
     }
 }
 
-fn is_ok(a: &str) -> bool {
-    a.trim() == "OK"
-}
-
 impl Device for Li80 {
     fn acq(&mut self) -> &mut Acq {
         &mut self.acq
@@ -134,26 +130,33 @@ impl Device for Li80 {
         idle_timeout(self.cfg.rate_hz)
     }
     async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
-        link.expect(self, "STREAM OFF\n", is_ok).await.map(drop)
+        link.expect(self, "STREAM OFF\n", crate::link::is_ok)
+            .await
+            .map(drop)
     }
 
     async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
         self.acq.set_rate(self.cfg.rate_hz);
-        link.expect(self, "STREAM OFF\n", is_ok).await?;
+        link.expect(self, "STREAM OFF\n", crate::link::is_ok)
+            .await?;
         link.reset_decoder();
         let idn = link
             .expect(self, "*IDN?\n", |a| a.starts_with("LI-80,"))
             .await?;
-        link.expect(self, &format!("RATE {}\n", self.cfg.rate_hz), is_ok)
-            .await?;
-        link.expect(self, "DATUM\n", is_ok).await?;
+        link.expect(
+            self,
+            &format!("RATE {}\n", self.cfg.rate_hz),
+            crate::link::is_ok,
+        )
+        .await?;
+        link.expect(self, "DATUM\n", crate::link::is_ok).await?;
         self.env_seen = false;
         self.env_seq.reset();
         link.send("ENV?\n").await?;
         link.wait_for(self, "`$ENV` line in answer to `ENV?`", |h| h.env_seen)
             .await?;
         self.acq.accepting = true;
-        link.expect(self, "STREAM ON\n", is_ok).await?;
+        link.expect(self, "STREAM ON\n", crate::link::is_ok).await?;
         Ok(idn.trim().to_string())
     }
 }

@@ -15,6 +15,11 @@ use crate::clock::{ClockFit, Unwrap};
 use crate::{Counters, DriverEvent, EventSender, HostClock, Instrument, Sample};
 
 /// How long a command waits for its answer.
+/// The LI-80 and CB-3 acknowledge a command with a plain `OK` (instruments.md §1, §2).
+pub(crate) fn is_ok(answer: &str) -> bool {
+    answer.trim() == "OK"
+}
+
 pub(crate) const ANSWER_TIMEOUT: Duration = Duration::from_secs(1);
 /// First and longest wait between attempts to open a vanished port.
 const BACKOFF_MIN: Duration = Duration::from_millis(100);

@@ -1,5 +1,5 @@
 //! The daemon's configuration file (TOML): parsing, validation against the instruments' data
-//! sheets (`shared/instruments.md`), and loading of the files it points to (CapBall transform,
+//! sheets (`docs/instruments.md`), and loading of the files it points to (CapBall transform,
 //! trajectory).
 //!
 //! Every error names the file, the line and column, and says in one sentence what is wrong;

@@ -4,7 +4,7 @@
 //!
 //! The baseline (what the simulation assumed before any diagnosis) is a static systematic
 //! deviation per target and approach direction plus stationary white noise. Effects add
-//! behaviour the baseline lacks; their vocabulary is that of `shared/datasets.md`.
+//! behaviour the baseline lacks; their vocabulary is that of `docs/datasets.md`.
 
 use serde::{Deserialize, Serialize};
 
@@ -27,7 +27,7 @@ pub struct AxisModel {
     pub effects: Vec<Effect>,
 }
 
-/// An effect beyond the static baseline (names and parameters of `shared/datasets.md`).
+/// An effect beyond the static baseline (names and parameters of `docs/datasets.md`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "effect", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Effect {

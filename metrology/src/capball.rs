@@ -761,7 +761,7 @@ pub fn sensor_readings_um(
 }
 
 // ---------------------------------------------------------------------------------------------
-// Datasets (shared/datasets.md): `run,pose,time_s,x_mm,y_mm,z_mm,a_deg,c_deg,ex_um,ey_um,ez_um`.
+// Datasets (docs/datasets.md): `run,pose,time_s,x_mm,y_mm,z_mm,a_deg,c_deg,ex_um,ey_um,ez_um`.
 
 /// One row of a CapBall dataset.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -873,7 +873,7 @@ pub fn split_run(records: &[CapballRecord], run: u32) -> (Vec<Pose>, Vec<[f64; 3
         .unzip()
 }
 
-/// Parse a trajectory CSV (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`, `shared/instruments.md`);
+/// Parse a trajectory CSV (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`, `docs/instruments.md`);
 /// rows must be numbered 1, 2, 3, … in order.
 pub fn parse_trajectory(text: &str) -> Result<Vec<Pose>, CapballError> {
     let err = |m: String| CapballError::Dataset(format!("trajectory: {m}"));
@@ -965,7 +965,7 @@ pub fn write_dataset(records: &[CapballRecord]) -> String {
     s
 }
 
-/// A trajectory as the CSV of `shared/instruments.md`: `pose,x_mm,y_mm,z_mm,a_deg,c_deg`.
+/// A trajectory as the CSV of `docs/instruments.md`: `pose,x_mm,y_mm,z_mm,a_deg,c_deg`.
 pub fn write_trajectory(poses: &[Pose]) -> String {
     let mut s = String::from("pose,x_mm,y_mm,z_mm,a_deg,c_deg\n");
     for (i, p) in poses.iter().enumerate() {

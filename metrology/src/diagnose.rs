@@ -70,7 +70,7 @@ pub struct Baseline {
 /// One effect found in the data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Finding {
-    /// Effect name (`shared/datasets.md`).
+    /// Effect name (`docs/datasets.md`).
     pub effect: String,
     /// Fitted parameters.
     pub params: BTreeMap<String, f64>,
@@ -99,7 +99,7 @@ pub struct Reproduction {
     pub seeds: usize,
 }
 
-/// The diagnosis report (`shared/datasets.md`, "Diagnosis report").
+/// The diagnosis report (`docs/datasets.md`, "Diagnosis report").
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DiagnosisReport {
     pub kind: String,

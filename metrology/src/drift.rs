@@ -2,7 +2,7 @@
 //! adjacent targets of one cycle see almost no drift, so their scatter is the repeatability
 //! without the drift, and the deviation chart can be rebuilt from a reference reading.
 //!
-//! Choices where the paper leaves a detail open (written down as `shared/methods.md` asks):
+//! Choices where the paper leaves a detail open (written down as `docs/methods.md` asks):
 //! - The scatter of the adjacent differences is the per-difference sample standard deviation
 //!   (divisor n − 1), which is what compares with the classic ISO 230-2 `s`; the paper's eq. 6
 //!   (divisor n(n − 1), the standard error of the mean difference) is reported beside it.

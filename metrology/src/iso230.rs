@@ -1,5 +1,5 @@
 //! ISO 230-2:2014 evaluation of positioning accuracy and repeatability of one linear axis
-//! (clauses 3.x of the standard, as summarised in `shared/methods.md` §000).
+//! (clauses 3.x of the standard, as summarised in `docs/methods.md` §000).
 //!
 //! Readings missing from a target (beam interruption) only reduce that target's sample; a
 //! statistic that cannot be computed (fewer than two readings for a scatter, no reading in one

@@ -1,4 +1,4 @@
-//! A positioning measurement of one linear axis (`shared/datasets.md`): the readings of an
+//! A positioning measurement of one linear axis (`docs/datasets.md`): the readings of an
 //! interferometer at programmed targets, over repeated bidirectional cycles, with their times
 //! and the environment. Read from the CSV dataset format, or built by an adapter (MCAP log) or
 //! by [`simulate`] from an [`AxisModel`].
@@ -92,7 +92,7 @@ impl PositioningData {
         Self::from_csv_str(&text)
     }
 
-    /// Reads a dataset from CSV text (`shared/datasets.md`).
+    /// Reads a dataset from CSV text (`docs/datasets.md`).
     pub fn from_csv_str(text: &str) -> Result<Self, DatasetError> {
         let mut metadata = BTreeMap::new();
         for line in text.lines() {
@@ -328,7 +328,7 @@ impl PositioningData {
         out
     }
 
-    /// Writes the dataset as CSV (`shared/datasets.md`).
+    /// Writes the dataset as CSV (`docs/datasets.md`).
     pub fn to_csv_string(&self) -> String {
         use std::fmt::Write;
         let mut s = String::new();

@@ -1,4 +1,4 @@
-//! The positioning dataset CSV contract (`shared/datasets.md`).
+//! The positioning dataset CSV contract (`docs/datasets.md`).
 
 use metrology::axis_model::Direction;
 use metrology::positioning_data::PositioningData;

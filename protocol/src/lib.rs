@@ -2,7 +2,7 @@
 //! rejections out. No I/O and no async here, so every decoder can be fed from a port, a file, a
 //! fuzzer or a property test alike (the sans-IO shape of the `mcap` crate).
 //!
-//! One module per instrument of `shared/instruments.md`:
+//! One module per instrument of `docs/instruments.md`:
 //! - [`li80`]: LI-80 laser interferometer, NMEA-style ASCII lines with XOR checksum;
 //! - [`cb3`]: CB-3 CapBall ADC, COBS-framed binary payloads with CRC-16/CCITT-FALSE;
 //! - [`psd`]: PSD-2 transimpedance board, SCPI commands and unchecked CSV data lines;

@@ -1,5 +1,5 @@
 //! Simulated instruments of metrolog, speaking the exact wire formats of
-//! `shared/instruments.md` on pseudo-terminals, driven by one [`Scenario`].
+//! `docs/instruments.md` on pseudo-terminals, driven by one [`Scenario`].
 //!
 //! Four devices run as tokio tasks, each behind its own pty published under a stable symlink
 //! in a directory of your choice (as a udev rule would publish a real adapter):

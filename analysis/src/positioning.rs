@@ -38,7 +38,7 @@ use metrology::axis_model::Direction;
 use metrology::positioning_data::{PositioningData, Reading};
 
 use super::{AnalysisError, LogContents, is_ok};
-use metrolog_log::topics::PoseInstrument;
+use metrolog_log::topics::{PoseInstrument, PoseMsg};
 use metrolog_log::trajectory::TrajectoryRow;
 
 /// Options of [`positioning_from_log`].
@@ -98,111 +98,21 @@ pub fn positioning_from_contents(
 ) -> Result<PositioningData, AnalysisError> {
     let traj = log.trajectory(opts.trajectory.as_deref())?;
     let values = log.pose_values(PoseInstrument::Interferometer);
-    let no_data = |what: String, hint: &str| AnalysisError::NoData {
-        path: log.path.clone(),
-        what,
-        hint: hint.into(),
-    };
     if values.is_empty() {
         return Err(no_data(
+            log,
             "the log has no interferometer pose values".into(),
             "was the LI-80 connected and listed in the detector's instruments?",
         ));
     }
-    // Range of the run, as 0-based trajectory indices [lo, hi].
-    let (lo, hi) = match opts.poses {
-        Some((a, b)) => {
-            if b as usize > traj.len() {
-                return Err(AnalysisError::BadOption(format!(
-                    "--poses {a}-{b}: the trajectory has {} poses",
-                    traj.len()
-                )));
-            }
-            (a as usize - 1, b as usize - 1)
-        }
-        None => {
-            let lo = traj
-                .iter()
-                .position(|r| values.contains_key(&r.pose))
-                .ok_or_else(|| {
-                    no_data(
-                        "no interferometer pose value matches a trajectory pose".into(),
-                        "is this the trajectory of the run? (give it with --trajectory)",
-                    )
-                })?;
-            let mut hi = lo;
-            while hi + 1 < traj.len() && same_off_axis(&traj[lo], &traj[hi + 1]) {
-                hi += 1;
-            }
-            (lo, hi)
-        }
-    };
-    let datum_x_mm = match opts.datum_x_mm {
-        Some(d) => d,
-        None => match log.run_metadata.get("datum_x_mm") {
-            Some(s) => s.trim().parse::<f64>().map_err(|_| AnalysisError::NoData {
-                path: log.path.clone(),
-                what: format!("metadata datum_x_mm = `{s}` is not a number"),
-                hint: "give the datum with the option instead".into(),
-            })?,
-            None => 0.0,
-        },
-    };
-
-    // A simulated run may compress time (sim `time_scale`: slow effects run that much
-    // faster); the readings' times are then given in the simulated machine's seconds.
-    let time_scale = match log.run_metadata.get("time_scale") {
-        Some(s) => s
-            .trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .ok_or_else(|| AnalysisError::NoData {
-                path: log.path.clone(),
-                what: format!("metadata time_scale = `{s}` is not a positive number"),
-                hint: "the log's metadata is damaged".into(),
-            })?,
-        None => 1.0,
-    };
-    // Visits: (trajectory index, direction).
-    let mut visits: Vec<(usize, Direction)> = Vec::new();
-    let mut prev_dir = Direction::Up;
-    for i in lo..=hi {
-        let from = if i == 0 { datum_x_mm } else { traj[i - 1].x_mm };
-        let dx = traj[i].x_mm - from;
-        let dir = if dx > LIN_TOL_MM / 2.0 {
-            Direction::Up
-        } else if dx < -LIN_TOL_MM / 2.0 {
-            Direction::Down
-        } else {
-            prev_dir
-        };
-        prev_dir = dir;
-        // In an explicit range, poses off the line of the first one are not part of the run.
-        if same_off_axis(&traj[lo], &traj[i]) {
-            visits.push((i, dir));
-        }
-    }
-    // Directions and ok values per position.
-    let mut dirs: BTreeMap<i64, (bool, bool, bool)> = BTreeMap::new();
-    for &(i, d) in &visits {
-        let e = dirs.entry(key_um(traj[i].x_mm)).or_default();
-        match d {
-            Direction::Up => e.0 = true,
-            Direction::Down => e.1 = true,
-        }
-        if values.get(&traj[i].pose).is_some_and(|p| is_ok(p)) {
-            e.2 = true;
-        }
-    }
-    let bidirectional = dirs.values().any(|(u, d, _)| *u && *d);
-    let targets: Vec<i64> = dirs
-        .iter()
-        .filter(|(_, (u, d, ok))| *ok && (!bidirectional || (*u && *d)))
-        .map(|(k, _)| *k)
-        .collect();
+    let (lo, hi) = run_range(log, &traj, &values, opts)?;
+    let datum_x_mm = datum_x_mm(log, opts)?;
+    let time_scale = time_scale(log)?;
+    let visits = visits(&traj, lo, hi, datum_x_mm);
+    let targets = measured_targets(&traj, &visits, &values);
     if targets.len() < 2 {
         return Err(no_data(
+            log,
             format!(
                 "poses {}-{} hold {} measured target(s); a positioning run needs at least 2",
                 traj[lo].pose,
@@ -236,18 +146,7 @@ pub fn positioning_from_contents(
         let Some(pos_um) = p.mean.get("position_um").copied().filter(|v| v.is_finite()) else {
             continue;
         };
-        let mid_ns = p.t_first_ns / 2 + p.t_last_ns / 2;
-        let env = log.environment_at(mid_ns);
-        let air_c = env.map(|e| e.air_c).filter(|v| v.is_finite());
-        let material_c = env.and_then(|e| {
-            let m: Vec<f64> = e
-                .material_c
-                .iter()
-                .copied()
-                .filter(|v| v.is_finite())
-                .collect();
-            (!m.is_empty()).then(|| m.iter().sum::<f64>() / m.len() as f64)
-        });
+        let (air_c, material_c) = environment_of(log, p);
         readings.push(Reading {
             cycle,
             direction: d,
@@ -288,6 +187,154 @@ pub fn positioning_from_contents(
     };
     data.validate()?;
     Ok(data)
+}
+
+fn no_data(log: &LogContents, what: String, hint: &str) -> AnalysisError {
+    AnalysisError::NoData {
+        path: log.path.clone(),
+        what,
+        hint: hint.into(),
+    }
+}
+
+/// The run's range as 0-based trajectory indices `[lo, hi]`: the option's, or the first block
+/// of poses with a value in which only x changes.
+fn run_range(
+    log: &LogContents,
+    traj: &[TrajectoryRow],
+    values: &BTreeMap<u32, &PoseMsg>,
+    opts: &PositioningOptions,
+) -> Result<(usize, usize), AnalysisError> {
+    if let Some((a, b)) = opts.poses {
+        if b as usize > traj.len() {
+            return Err(AnalysisError::BadOption(format!(
+                "--poses {a}-{b}: the trajectory has {} poses",
+                traj.len()
+            )));
+        }
+        return Ok((a as usize - 1, b as usize - 1));
+    }
+    let lo = traj
+        .iter()
+        .position(|r| values.contains_key(&r.pose))
+        .ok_or_else(|| {
+            no_data(
+                log,
+                "no interferometer pose value matches a trajectory pose".into(),
+                "is this the trajectory of the run? (give it with --trajectory)",
+            )
+        })?;
+    let mut hi = lo;
+    while hi + 1 < traj.len() && same_off_axis(&traj[lo], &traj[hi + 1]) {
+        hi += 1;
+    }
+    Ok((lo, hi))
+}
+
+fn datum_x_mm(log: &LogContents, opts: &PositioningOptions) -> Result<f64, AnalysisError> {
+    if let Some(d) = opts.datum_x_mm {
+        return Ok(d);
+    }
+    match log.run_metadata.get("datum_x_mm") {
+        Some(s) => s.trim().parse::<f64>().map_err(|_| {
+            no_data(
+                log,
+                format!("metadata datum_x_mm = `{s}` is not a number"),
+                "give the datum with the option instead",
+            )
+        }),
+        None => Ok(0.0),
+    }
+}
+
+/// A simulated run may compress time (sim `time_scale`: slow effects run that much faster);
+/// the readings' times are then given in the simulated machine's seconds.
+fn time_scale(log: &LogContents) -> Result<f64, AnalysisError> {
+    match log.run_metadata.get("time_scale") {
+        Some(s) => s
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .ok_or_else(|| {
+                no_data(
+                    log,
+                    format!("metadata time_scale = `{s}` is not a positive number"),
+                    "the log's metadata is damaged",
+                )
+            }),
+        None => Ok(1.0),
+    }
+}
+
+/// Visits of the run: (trajectory index, direction of approach).
+fn visits(
+    traj: &[TrajectoryRow],
+    lo: usize,
+    hi: usize,
+    datum_x_mm: f64,
+) -> Vec<(usize, Direction)> {
+    let mut visits = Vec::new();
+    let mut prev_dir = Direction::Up;
+    for i in lo..=hi {
+        let from = if i == 0 { datum_x_mm } else { traj[i - 1].x_mm };
+        let dx = traj[i].x_mm - from;
+        let dir = if dx > LIN_TOL_MM / 2.0 {
+            Direction::Up
+        } else if dx < -LIN_TOL_MM / 2.0 {
+            Direction::Down
+        } else {
+            prev_dir
+        };
+        prev_dir = dir;
+        // In an explicit range, poses off the line of the first one are not part of the run.
+        if same_off_axis(&traj[lo], &traj[i]) {
+            visits.push((i, dir));
+        }
+    }
+    visits
+}
+
+/// The targets (position keys, µm) with an ok value — approached from both sides when the
+/// run is bidirectional.
+fn measured_targets(
+    traj: &[TrajectoryRow],
+    visits: &[(usize, Direction)],
+    values: &BTreeMap<u32, &PoseMsg>,
+) -> Vec<i64> {
+    let mut dirs: BTreeMap<i64, (bool, bool, bool)> = BTreeMap::new();
+    for &(i, d) in visits {
+        let e = dirs.entry(key_um(traj[i].x_mm)).or_default();
+        match d {
+            Direction::Up => e.0 = true,
+            Direction::Down => e.1 = true,
+        }
+        if values.get(&traj[i].pose).is_some_and(|p| is_ok(p)) {
+            e.2 = true;
+        }
+    }
+    let bidirectional = dirs.values().any(|(u, d, _)| *u && *d);
+    dirs.iter()
+        .filter(|(_, (u, d, ok))| *ok && (!bidirectional || (*u && *d)))
+        .map(|(k, _)| *k)
+        .collect()
+}
+
+/// Air and mean material temperature of the environment record nearest the pose's window.
+fn environment_of(log: &LogContents, p: &PoseMsg) -> (Option<f64>, Option<f64>) {
+    let mid_ns = p.t_first_ns / 2 + p.t_last_ns / 2;
+    let env = log.environment_at(mid_ns);
+    let air_c = env.map(|e| e.air_c).filter(|v| v.is_finite());
+    let material_c = env.and_then(|e| {
+        let m: Vec<f64> = e
+            .material_c
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .collect();
+        (!m.is_empty()).then(|| m.iter().sum::<f64>() / m.len() as f64)
+    });
+    (air_c, material_c)
 }
 
 #[cfg(test)]

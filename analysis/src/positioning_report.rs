@@ -237,6 +237,15 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
             mu.budget.material_temp_c
         );
     }
+    render_drift(&mut s, an);
+    for n in an.drift_elimination.notes.iter().chain(&an.notes) {
+        let _ = writeln!(s, "Note: {n}");
+    }
+    s
+}
+
+/// The thermal-drift elimination part of the text report.
+fn render_drift(s: &mut String, an: &PositioningAnalysis) {
     let d = &an.drift_elimination;
     let _ = writeln!(
         s,
@@ -253,79 +262,7 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
         }
     );
     for dd in &d.directions {
-        let sign = dir_sign(dd.direction);
-        let _ = writeln!(
-            s,
-            "\n  direction {sign}, chart anchored on target 1 of cycle {}",
-            dd.reference_cycle
-                .map(|c| c.to_string())
-                .unwrap_or_else(|| "—".into())
-        );
-        let _ = writeln!(
-            s,
-            "  {:>7} {:>11} {:>9} {:>13} {:>11} {:>7}   {:>3} {:>11} {:>9}",
-            "pair",
-            "x̄_i−x̄_i+1",
-            "s_diff",
-            "s classic",
-            "ratio",
-            "stands",
-            "i",
-            "drift-free",
-            "±border"
-        );
-        let _ = writeln!(
-            s,
-            "  {:>7} {:>11} {:>9} {:>13} {:>11} {:>7}   {:>3} {:>11} {:>9}",
-            "", "µm", "µm", "µm (i+1)", "classic/df", "out", "", "µm", "µm"
-        );
-        let classic = |i: usize| {
-            an.targets.get(i).and_then(|t| {
-                if dd.direction == metrology::axis_model::Direction::Up {
-                    t.s_up_um
-                } else {
-                    t.s_down_um
-                }
-            })
-        };
-        for (k, pt) in dd.chart.iter().enumerate() {
-            if k == 0 {
-                let _ = writeln!(
-                    s,
-                    "  {:>7} {:>11} {:>9} {:>13} {:>11} {:>7}   {:>3} {} {}",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    pt.index,
-                    f(pt.deviation_um, 11),
-                    f(pt.border_um, 9)
-                );
-                continue;
-            }
-            let p = &dd.pairs[k - 1];
-            let _ = writeln!(
-                s,
-                "  {:>7} {} {} {} {} {:>7}   {:>3} {} {}",
-                format!("{}–{}", p.index, p.index + 1),
-                f(p.mean_diff_um, 11),
-                f(p.s_diff_um, 9),
-                f(classic(k), 13),
-                f(p.ratio_classic_to_drift_free, 11),
-                if p.stands_out { "YES" } else { "" },
-                pt.index,
-                f(pt.deviation_um, 11),
-                f(pt.border_um, 9)
-            );
-        }
-        if let Some(r) = dd.mean_ratio {
-            let _ = writeln!(
-                s,
-                "  mean classic s / mean drift-free s_diff = {r:.2} (≈ 0.71 = 1/√2 without drift: a difference of two readings scatters √2 times more)"
-            );
-        }
+        render_drift_direction(s, an, dd);
     }
     if d.anomalous_targets.is_empty() {
         let _ = writeln!(s, "\n  No target's adjacent-difference scatter stands out.");
@@ -337,8 +274,73 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
             d.anomalous_targets
         );
     }
-    for n in d.notes.iter().chain(&an.notes) {
-        let _ = writeln!(s, "Note: {n}");
+}
+
+/// One direction's adjacent-target differences and drift-free chart.
+fn render_drift_direction(s: &mut String, an: &PositioningAnalysis, dd: &drift::DirectionDrift) {
+    let sign = dir_sign(dd.direction);
+    let _ = writeln!(
+        s,
+        "\n  direction {sign}, chart anchored on target 1 of cycle {}",
+        dd.reference_cycle
+            .map(|c| c.to_string())
+            .unwrap_or_else(|| "—".into())
+    );
+    let _ = writeln!(
+        s,
+        "  {:>7} {:>11} {:>9} {:>13} {:>11} {:>7}   {:>3} {:>11} {:>9}",
+        "pair", "x̄_i−x̄_i+1", "s_diff", "s classic", "ratio", "stands", "i", "drift-free", "±border"
+    );
+    let _ = writeln!(
+        s,
+        "  {:>7} {:>11} {:>9} {:>13} {:>11} {:>7}   {:>3} {:>11} {:>9}",
+        "", "µm", "µm", "µm (i+1)", "classic/df", "out", "", "µm", "µm"
+    );
+    let classic = |i: usize| {
+        an.targets.get(i).and_then(|t| {
+            if dd.direction == metrology::axis_model::Direction::Up {
+                t.s_up_um
+            } else {
+                t.s_down_um
+            }
+        })
+    };
+    for (k, pt) in dd.chart.iter().enumerate() {
+        if k == 0 {
+            let _ = writeln!(
+                s,
+                "  {:>7} {:>11} {:>9} {:>13} {:>11} {:>7}   {:>3} {} {}",
+                "",
+                "",
+                "",
+                "",
+                "",
+                "",
+                pt.index,
+                f(pt.deviation_um, 11),
+                f(pt.border_um, 9)
+            );
+            continue;
+        }
+        let p = &dd.pairs[k - 1];
+        let _ = writeln!(
+            s,
+            "  {:>7} {} {} {} {} {:>7}   {:>3} {} {}",
+            format!("{}–{}", p.index, p.index + 1),
+            f(p.mean_diff_um, 11),
+            f(p.s_diff_um, 9),
+            f(classic(k), 13),
+            f(p.ratio_classic_to_drift_free, 11),
+            if p.stands_out { "YES" } else { "" },
+            pt.index,
+            f(pt.deviation_um, 11),
+            f(pt.border_um, 9)
+        );
     }
-    s
+    if let Some(r) = dd.mean_ratio {
+        let _ = writeln!(
+            s,
+            "  mean classic s / mean drift-free s_diff = {r:.2} (≈ 0.71 = 1/√2 without drift: a difference of two readings scatters √2 times more)"
+        );
+    }
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 use metrology::capball::CapballSetup;
 use metrology::diagnose::{self, Options};
 use metrology::kinematics::Pose;
+use metrology::positioning_data::PositioningData;
 
 use super::capball::identify_subset;
 use super::{AnalysisError, LogContents, PositioningOptions};
@@ -23,9 +24,15 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
     if let Some(e) = &log.summary.error {
         let _ = writeln!(s, "  (log read up to damage: {e})");
     }
+    positioning_section(&log, &mut s);
+    capball_section(&log, &mut s);
+    psd_section(&log, &mut s);
+    Ok(s)
+}
 
-    // ISO 230-2 and the diagnosis.
-    match super::positioning::positioning_from_contents(&log, &PositioningOptions::default()) {
+/// ISO 230-2 of the run's positioning poses, and the diagnosis of that run.
+fn positioning_section(log: &LogContents, s: &mut String) {
+    match super::positioning::positioning_from_contents(log, &PositioningOptions::default()) {
         Err(e) => {
             let _ = writeln!(s, "\nISO 230-2: not available: {e}");
         }
@@ -63,47 +70,53 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
             for n in &an.notes {
                 let _ = writeln!(s, "  note: {n}");
             }
-            match diagnose::diagnose(&data, &Options::default()) {
-                Err(e) => {
-                    let _ = writeln!(s, "\nDiagnosis: not available: {e}");
-                }
-                Ok(d) => {
-                    let r = &d.report;
-                    let _ = writeln!(
-                        s,
-                        "\nDiagnosis (baseline RMS {:.3} µm, held-out {:.3} µm):",
-                        r.baseline.rms_um, r.baseline.heldout_rms_um
-                    );
-                    if r.findings.is_empty() {
-                        let _ = writeln!(s, "  no finding: the baseline explains the data");
-                    }
-                    for (k, f) in r.findings.iter().enumerate() {
-                        let params: Vec<String> = f
-                            .params
-                            .iter()
-                            .map(|(n, v)| match f.params_u.get(n) {
-                                Some(u) => format!("{n} = {v:.3} ± {u:.3}"),
-                                None => format!("{n} = {v:.3}"),
-                            })
-                            .collect();
-                        let _ = writeln!(
-                            s,
-                            "  {}. {}: {}\n     held-out {:.3} → {:.3} µm; cause: {}",
-                            k + 1,
-                            f.effect,
-                            params.join(", "),
-                            f.heldout_rms_before_um,
-                            f.heldout_rms_after_um,
-                            f.cause
-                        );
-                    }
-                }
+            diagnosis_section(&data, s);
+        }
+    }
+}
+
+fn diagnosis_section(data: &PositioningData, s: &mut String) {
+    match diagnose::diagnose(data, &Options::default()) {
+        Err(e) => {
+            let _ = writeln!(s, "\nDiagnosis: not available: {e}");
+        }
+        Ok(d) => {
+            let r = &d.report;
+            let _ = writeln!(
+                s,
+                "\nDiagnosis (baseline RMS {:.3} µm, held-out {:.3} µm):",
+                r.baseline.rms_um, r.baseline.heldout_rms_um
+            );
+            if r.findings.is_empty() {
+                let _ = writeln!(s, "  no finding: the baseline explains the data");
+            }
+            for (k, f) in r.findings.iter().enumerate() {
+                let params: Vec<String> = f
+                    .params
+                    .iter()
+                    .map(|(n, v)| match f.params_u.get(n) {
+                        Some(u) => format!("{n} = {v:.3} ± {u:.3}"),
+                        None => format!("{n} = {v:.3}"),
+                    })
+                    .collect();
+                let _ = writeln!(
+                    s,
+                    "  {}. {}: {}\n     held-out {:.3} → {:.3} µm; cause: {}",
+                    k + 1,
+                    f.effect,
+                    params.join(", "),
+                    f.heldout_rms_before_um,
+                    f.heldout_rms_after_um,
+                    f.cause
+                );
             }
         }
     }
+}
 
-    // CapBall.
-    match super::capball::capball_from_contents_auto(&log) {
+/// The CapBall link-error identification of the run's CapBall poses.
+fn capball_section(log: &LogContents, s: &mut String) {
+    match super::capball::capball_from_contents_auto(log) {
         Err(e) => {
             let _ = writeln!(s, "\nCapBall: not available: {e}");
         }
@@ -162,9 +175,11 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
             }
         }
     }
+}
 
-    // PSD.
-    match super::psd::psd_from_contents(&log, None) {
+/// The straightness of the run's PSD segment.
+fn psd_section(log: &LogContents, s: &mut String) {
+    match super::psd::psd_from_contents(log, None) {
         Err(e) => {
             let _ = writeln!(s, "\nPSD: not available: {e}");
         }
@@ -186,5 +201,4 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
             );
         }
     }
-    Ok(s)
 }

@@ -138,63 +138,62 @@ impl SyntheticEvents<'_> {
         let (u1, u2) = (self.uniform(), self.uniform());
         (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
     }
-    fn ns(&self, t: f64) -> u64 {
-        self.run.start_ns + (t * 1e9).round() as u64
+    /// The connections of the four instruments, first of all events.
+    fn connect_all(&mut self) -> Option<DriverEvent> {
+        self.started = true;
+        self.next[4] = 1.0;
+        for (i, id) in [
+            (Instrument::Interferometer, "LI-80,SN1234,FW2.1"),
+            (Instrument::Capball, "CB-3,SN77,FW1.4"),
+            (Instrument::Psd, "PSD-2,SN5,FW3.0"),
+            (Instrument::Trigger, "SLCAN,V1013"),
+        ] {
+            self.pending.push(DriverEvent::Connected {
+                instrument: i,
+                port: format!("/dev/ttyV{}", i as u8),
+                identity: id.into(),
+            });
+        }
+        self.pending.pop()
     }
-}
 
-impl Iterator for SyntheticEvents<'_> {
-    type Item = DriverEvent;
+    fn next_trigger(&mut self) -> DriverEvent {
+        let (tt, ev, pose) = self.trig[self.ti];
+        self.ti += 1;
+        DriverEvent::Trigger(Trigger {
+            event: ev,
+            pose,
+            nc_ms: (tt * 1000.0) as u32,
+            host_ns: self.ns(tt),
+        })
+    }
 
-    fn next(&mut self) -> Option<DriverEvent> {
-        if let Some(e) = self.pending.pop() {
-            return Some(e);
+    /// The once-a-second counters of every instrument.
+    fn push_counters(&mut self, seq: u64) -> Option<DriverEvent> {
+        for (i, n) in [
+            (Instrument::Interferometer, self.count[0]),
+            (Instrument::Capball, self.count[2]),
+            (Instrument::Psd, self.count[3]),
+            (Instrument::Trigger, self.ti as u64),
+        ] {
+            let mut c = Counters {
+                samples: n,
+                clock_drift_ppm: Some(1.5),
+                ..Counters::default()
+            };
+            c.rejections
+                .insert(protocol::RejectKind::BadChecksum, seq / 10);
+            self.pending.push(DriverEvent::Counters {
+                instrument: i,
+                counters: c,
+            });
         }
+        self.pending.pop()
+    }
+
+    /// The values of stream `which` (0 position, 1 environment, 2 CapBall, 3 PSD) at `t` s.
+    fn values_at(&mut self, which: usize, t: f64) -> (Instrument, SampleValues) {
         let r = self.run;
-        if !self.started {
-            // Connections first.
-            self.started = true;
-            self.next[4] = 1.0;
-            for (i, id) in [
-                (Instrument::Interferometer, "LI-80,SN1234,FW2.1"),
-                (Instrument::Capball, "CB-3,SN77,FW1.4"),
-                (Instrument::Psd, "PSD-2,SN5,FW3.0"),
-                (Instrument::Trigger, "SLCAN,V1013"),
-            ] {
-                self.pending.push(DriverEvent::Connected {
-                    instrument: i,
-                    port: format!("/dev/ttyV{}", i as u8),
-                    identity: id.into(),
-                });
-            }
-            return self.pending.pop();
-        }
-        let rates_hz = [r.li80_hz, 1.0, r.cb3_hz, r.psd_hz, 1.0];
-        let t_trig = self.trig.get(self.ti).map(|x| x.0).unwrap_or(f64::INFINITY);
-        let (mut which, mut t) = (usize::MAX, t_trig);
-        for (i, &tn) in self.next.iter().enumerate() {
-            if tn < t {
-                (which, t) = (i, tn);
-            }
-        }
-        if t >= r.duration_s() {
-            return None;
-        }
-        if which == usize::MAX {
-            let (tt, ev, pose) = self.trig[self.ti];
-            self.ti += 1;
-            return Some(DriverEvent::Trigger(Trigger {
-                event: ev,
-                pose,
-                nc_ms: (tt * 1000.0) as u32,
-                host_ns: self.ns(tt),
-            }));
-        }
-        self.count[which] += 1;
-        // From the count, not accumulated: exact sample times (counters start at 1 s).
-        let first = if which == 4 { 1.0 } else { 0.0 };
-        self.next[which] = first + self.count[which] as f64 / rates_hz[which];
-        let seq = self.count[which];
         let (k, since, frac) = r.phase(t);
         let from = if k == 0 {
             r.targets_mm[0] - 10.0
@@ -208,12 +207,8 @@ impl Iterator for SyntheticEvents<'_> {
         } else {
             0.0
         };
-        // Host arrival a little after the device time (transport latency, jitter).
-        let host_ns = self.ns(t) + 300_000 + (self.uniform() * 200_000.0) as u64;
-        let fitted_ns = self.ns(t);
-        let device_t_us = (t * 1e6) as u64;
         let noise = r.noise_um;
-        let (instrument, values) = match which {
+        match which {
             0 => {
                 let p = pos_um + ring + noise * self.gauss();
                 let raw_nm = (p * 1000.0).round() as i64;
@@ -255,23 +250,7 @@ impl Iterator for SyntheticEvents<'_> {
                     },
                 )
             }
-            3 if r.psd_dark_every > 0 && seq.is_multiple_of(r.psd_dark_every) => {
-                return Some(DriverEvent::Sample(Sample {
-                    instrument: Instrument::Psd,
-                    seq,
-                    device_t_us,
-                    host_ns,
-                    fitted_ns,
-                    valid: false,
-                    values: SampleValues::Psd {
-                        x_um: f64::NAN,
-                        y_um: f64::NAN,
-                        sum_pa: 0.0,
-                        head_c: 21.0,
-                    },
-                }));
-            }
-            3 => {
+            _ => {
                 let e0 = SyntheticRun::psd_error_um(k);
                 (
                     Instrument::Psd,
@@ -283,36 +262,68 @@ impl Iterator for SyntheticEvents<'_> {
                     },
                 )
             }
-            _ => {
-                for (i, n) in [
-                    (Instrument::Interferometer, self.count[0]),
-                    (Instrument::Capball, self.count[2]),
-                    (Instrument::Psd, self.count[3]),
-                    (Instrument::Trigger, self.ti as u64),
-                ] {
-                    let mut c = Counters {
-                        samples: n,
-                        clock_drift_ppm: Some(1.5),
-                        ..Counters::default()
-                    };
-                    c.rejections
-                        .insert(protocol::RejectKind::BadChecksum, seq / 10);
-                    self.pending.push(DriverEvent::Counters {
-                        instrument: i,
-                        counters: c,
-                    });
-                }
-                return self.pending.pop();
+        }
+    }
+
+    fn ns(&self, t: f64) -> u64 {
+        self.run.start_ns + (t * 1e9).round() as u64
+    }
+}
+
+impl Iterator for SyntheticEvents<'_> {
+    type Item = DriverEvent;
+
+    fn next(&mut self) -> Option<DriverEvent> {
+        if let Some(e) = self.pending.pop() {
+            return Some(e);
+        }
+        if !self.started {
+            return self.connect_all();
+        }
+        let r = self.run;
+        let rates_hz = [r.li80_hz, 1.0, r.cb3_hz, r.psd_hz, 1.0];
+        let t_trig = self.trig.get(self.ti).map(|x| x.0).unwrap_or(f64::INFINITY);
+        let (mut which, mut t) = (usize::MAX, t_trig);
+        for (i, &tn) in self.next.iter().enumerate() {
+            if tn < t {
+                (which, t) = (i, tn);
             }
-        };
-        Some(DriverEvent::Sample(Sample {
-            instrument,
+        }
+        if t >= r.duration_s() {
+            return None;
+        }
+        if which == usize::MAX {
+            return Some(self.next_trigger());
+        }
+        self.count[which] += 1;
+        // From the count, not accumulated: exact sample times (counters start at 1 s).
+        let first = if which == 4 { 1.0 } else { 0.0 };
+        self.next[which] = first + self.count[which] as f64 / rates_hz[which];
+        let seq = self.count[which];
+        // Host arrival a little after the device time (transport latency, jitter).
+        let host_ns = self.ns(t) + 300_000 + (self.uniform() * 200_000.0) as u64;
+        let mut sample = Sample {
+            instrument: Instrument::Psd,
             seq,
-            device_t_us,
+            device_t_us: (t * 1e6) as u64,
             host_ns,
-            fitted_ns,
+            fitted_ns: self.ns(t),
             valid: true,
-            values,
-        }))
+            values: SampleValues::Psd {
+                x_um: f64::NAN,
+                y_um: f64::NAN,
+                sum_pa: 0.0,
+                head_c: 21.0,
+            },
+        };
+        match which {
+            4 => return self.push_counters(seq),
+            // A dark PSD sample: no light, no position.
+            3 if r.psd_dark_every > 0 && seq.is_multiple_of(r.psd_dark_every) => {
+                sample.valid = false;
+            }
+            _ => (sample.instrument, sample.values) = self.values_at(which, t),
+        }
+        Some(DriverEvent::Sample(sample))
     }
 }

@@ -327,20 +327,52 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
 ) -> anyhow::Result<()> {
     root.fill(&WHITE).map_err(e)?;
     let areas = root.split_evenly((2, 2));
-    let tscale = if data.has_times { 3600.0 } else { 1.0 };
-    let tdesc = if data.has_times {
-        "time / h"
-    } else {
-        "reading number"
-    };
-    let t: Vec<f64> = data.readings.iter().map(|r| r.time_s / tscale).collect();
-    let (t0, t1) = range(t.iter().copied());
-    let xr = range(data.readings.iter().map(|r| r.target_mm));
+    let ta = TimeAxis::of(data);
+    draw_baseline_vs_time(&areas[0], data, d, &ta)?;
+    draw_baseline_vs_position(&areas[1], data, d, &ta)?;
+    draw_rms_per_target(&areas[2], data, d)?;
+    draw_final_residuals(&areas[3], data, d, &ta)
+}
 
+/// The time axis of the diagnosis charts: hours when the run has times, else reading numbers.
+struct TimeAxis {
+    scale: f64,
+    desc: &'static str,
+    t: Vec<f64>,
+    t0: f64,
+    t1: f64,
+}
+
+impl TimeAxis {
+    fn of(data: &PositioningData) -> TimeAxis {
+        let scale = if data.has_times { 3600.0 } else { 1.0 };
+        let desc = if data.has_times {
+            "time / h"
+        } else {
+            "reading number"
+        };
+        let t: Vec<f64> = data.readings.iter().map(|r| r.time_s / scale).collect();
+        let (t0, t1) = range(t.iter().copied());
+        TimeAxis {
+            scale,
+            desc,
+            t,
+            t0,
+            t1,
+        }
+    }
+}
+
+fn draw_baseline_vs_time<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PositioningData,
+    d: &Diagnosis,
+    ta: &TimeAxis,
+) -> anyhow::Result<()> {
     // 1: baseline residuals vs time, with the fitted common-mode effects.
     let rb = &d.baseline_residuals_um;
     let yr = range(rb.iter().copied());
-    let mut c = ChartBuilder::on(&areas[0])
+    let mut c = ChartBuilder::on(area)
         .caption(
             "baseline residuals vs time (line: found effects)",
             (FONT, 18),
@@ -348,10 +380,10 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
-        .build_cartesian_2d(t0..t1, yr.0..yr.1)
+        .build_cartesian_2d(ta.t0..ta.t1, yr.0..yr.1)
         .map_err(e)?;
     c.configure_mesh()
-        .x_desc(tdesc)
+        .x_desc(ta.desc)
         .y_desc("residual / µm")
         .label_style((FONT, 13))
         .draw()
@@ -362,23 +394,23 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
         } else {
             DOWN
         };
-        Circle::new((r.time_s / tscale, *v), 2, col.mix(0.6).filled())
+        Circle::new((r.time_s / ta.scale, *v), 2, col.mix(0.6).filled())
     }))
     .map_err(e)?;
     // The common-mode part of the found effects at the axis middle, centred like the residuals.
     let m = &d.model;
     let mid = m.targets_mm.len() / 2;
     let steps = 400;
-    let (ta, tb) = t
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(*v), b.max(*v))
-        });
+    let (ta0, tb) =
+        ta.t.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
     let mut curve: Vec<(f64, f64)> = (0..=steps)
         .map(|k| {
-            let ts = (ta + (tb - ta) * k as f64 / steps as f64) * tscale;
+            let ts = (ta0 + (tb - ta0) * k as f64 / steps as f64) * ta.scale;
             (
-                ts / tscale,
+                ts / ta.scale,
                 m.deterministic_um(mid, Direction::Up, ts)
                     - m.systematic_up_um.get(mid).copied().unwrap_or(0.0),
             )
@@ -393,8 +425,20 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
             .map_err(e)?;
     }
 
+    Ok(())
+}
+
+fn draw_baseline_vs_position<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PositioningData,
+    d: &Diagnosis,
+    ta: &TimeAxis,
+) -> anyhow::Result<()> {
+    let rb = &d.baseline_residuals_um;
+    let yr = range(rb.iter().copied());
+    let xr = range(data.readings.iter().map(|r| r.target_mm));
     // 2: residuals against position and time together (colour = time).
-    let mut c = ChartBuilder::on(&areas[1])
+    let mut c = ChartBuilder::on(area)
         .caption(
             "baseline residuals vs position (colour: time, blue → red)",
             (FONT, 18),
@@ -414,11 +458,19 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
         Circle::new(
             (r.target_mm, *v),
             2,
-            heat((r.time_s / tscale - t0) / (t1 - t0)).filled(),
+            heat((r.time_s / ta.scale - ta.t0) / (ta.t1 - ta.t0)).filled(),
         )
     }))
     .map_err(e)?;
 
+    Ok(())
+}
+
+fn draw_rms_per_target<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PositioningData,
+    d: &Diagnosis,
+) -> anyhow::Result<()> {
     // 3: scatter of the final residuals per target and direction.
     let n_t = data.n_targets();
     let mut s = vec![[0.0f64; 2]; n_t];
@@ -450,7 +502,7 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
         .fold(0.0, f64::max)
         * 1.15
         + 1e-3;
-    let mut c = ChartBuilder::on(&areas[2])
+    let mut c = ChartBuilder::on(area)
         .caption(
             "RMS residual per target (after the found mean effects)",
             (FONT, 18),
@@ -474,10 +526,19 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
         .map_err(e)?;
     }
 
+    Ok(())
+}
+
+fn draw_final_residuals<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PositioningData,
+    d: &Diagnosis,
+    ta: &TimeAxis,
+) -> anyhow::Result<()> {
     // 4: final residuals vs time, outliers ringed.
     let rf = &d.residuals_um;
     let yr = range(rf.iter().copied());
-    let mut c = ChartBuilder::on(&areas[3])
+    let mut c = ChartBuilder::on(area)
         .caption(
             "residuals of the extended model (rings: outliers)",
             (FONT, 18),
@@ -485,10 +546,10 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
-        .build_cartesian_2d(t0..t1, yr.0..yr.1)
+        .build_cartesian_2d(ta.t0..ta.t1, yr.0..yr.1)
         .map_err(e)?;
     c.configure_mesh()
-        .x_desc(tdesc)
+        .x_desc(ta.desc)
         .y_desc("residual / µm")
         .label_style((FONT, 13))
         .draw()
@@ -499,7 +560,7 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
         } else {
             DOWN
         };
-        Circle::new((r.time_s / tscale, *v), 2, col.mix(0.6).filled())
+        Circle::new((r.time_s / ta.scale, *v), 2, col.mix(0.6).filled())
     }))
     .map_err(e)?;
     c.draw_series(
@@ -508,7 +569,7 @@ fn draw_diagnosis_on<DB: DrawingBackend>(
             .zip(rf)
             .zip(&d.outlier)
             .filter(|(_, o)| **o)
-            .map(|((r, v), _)| Circle::new((r.time_s / tscale, *v), 7, BLACK.stroke_width(2))),
+            .map(|((r, v), _)| Circle::new((r.time_s / ta.scale, *v), 7, BLACK.stroke_width(2))),
     )
     .map_err(e)?;
     Ok(())

@@ -325,31 +325,7 @@ impl Ctx<'_> {
 
         let interferometer = match raw.interferometer {
             None => None,
-            Some(s) => {
-                let r = s.into_inner();
-                let rate_hz = self.rate(r.rate_hz, DEFAULT_LI80_RATE_HZ, LI80_RATE_HZ, "LI-80")?;
-                let alpha = match r.alpha_um_per_m_k {
-                    None => DEFAULT_ALPHA_UM_PER_M_K,
-                    Some(a) => {
-                        let x = *a.get_ref();
-                        // Machine-tool materials lie within about -1 (invar, Zerodur) to 30
-                        // (aluminium, polymer concrete is lower); 100 leaves room and still
-                        // catches a value typed in the wrong unit (e.g. 1/K: 1.17e-5).
-                        if !x.is_finite() || x.abs() > 100.0 {
-                            return Err(self.err(
-                                a.span(),
-                                format!("alpha_um_per_m_k = {x} is not a plausible expansion coefficient; give it in µm/(m·K), e.g. 11.7 for steel"),
-                            ));
-                        }
-                        x
-                    }
-                };
-                Some(drivers::li80::Config {
-                    port: self.port(r.port)?,
-                    rate_hz,
-                    alpha_um_per_m_k: alpha,
-                })
-            }
+            Some(s) => Some(self.validate_interferometer(s.into_inner())?),
         };
 
         let capball = match raw.capball {
@@ -359,108 +335,12 @@ impl Ctx<'_> {
 
         let psd = match raw.psd {
             None => None,
-            Some(s) => {
-                let r = s.into_inner();
-                let baud = match r.baud {
-                    None => DEFAULT_PSD_BAUD,
-                    Some(b) => {
-                        let x = *b.get_ref();
-                        if !PSD_BAUDS.iter().any(|&p| p as i64 == x) {
-                            return Err(self.err(
-                                b.span(),
-                                format!("baud = {x} is not a baud rate the PSD-2 supports ({PSD_BAUDS:?})"),
-                            ));
-                        }
-                        x as u32
-                    }
-                };
-                let rate_span = r.rate_hz.as_ref().map(|v| v.span()).unwrap_or(0..0);
-                let rate_hz = self.rate(r.rate_hz, DEFAULT_PSD_RATE_HZ, PSD_RATE_HZ, "PSD-2")?;
-                let max_lines = baud / PSD_LINE_BITS;
-                if rate_hz > max_lines {
-                    return Err(self.err(
-                        rate_span,
-                        format!("rate_hz = {rate_hz} is more than a {baud} baud link carries (about {max_lines} lines/s); lower rate_hz or raise baud"),
-                    ));
-                }
-                let min_sum_pa = match r.min_sum_pa {
-                    None => DEFAULT_PSD_MIN_SUM_PA,
-                    Some(m) => {
-                        let x = *m.get_ref();
-                        if !x.is_finite() || x < 0.0 {
-                            return Err(self.err(
-                                m.span(),
-                                format!("min_sum_pa = {x} is impossible; a photocurrent threshold is a finite number of pA ≥ 0"),
-                            ));
-                        }
-                        x
-                    }
-                };
-                Some(drivers::psd::Config {
-                    port: self.port(r.port)?,
-                    baud,
-                    rate_hz,
-                    min_sum_pa,
-                    // Not part of the config file (yet): no error map, no head correction.
-                    error_map: None,
-                    head: None,
-                })
-            }
+            Some(s) => Some(self.validate_psd(s.into_inner())?),
         };
 
         let trigger = match raw.trigger {
             None => None,
-            Some(s) => {
-                let span = s.span();
-                let r = s.into_inner();
-                let can_id = match r.can_id {
-                    None => protocol::can::DEFAULT_CAN_ID,
-                    Some(c) => {
-                        let x = *c.get_ref();
-                        if !(0..=CAN_ID_MAX as i64).contains(&x) {
-                            return Err(self.err(
-                                c.span(),
-                                format!("can_id = {x:#x} is not a CAN 2.0A (11-bit) identifier; it must be 0x000 to 0x7FF"),
-                            ));
-                        }
-                        x as u32
-                    }
-                };
-                match (r.slcan, r.socketcan) {
-                    (Some(p), None) => Some(TriggerConfig::Slcan(drivers::trigger::SlcanConfig {
-                        port: self.port(p)?,
-                        can_id,
-                    })),
-                    (None, Some(i)) => {
-                        let name = i.get_ref();
-                        // Linux interface names are at most 15 bytes (IFNAMSIZ - 1).
-                        if name.is_empty() || name.len() > 15 || name.contains(['/', ' ']) {
-                            return Err(self.err(
-                                i.span(),
-                                format!("socketcan = {name:?} is not a network interface name (e.g. \"can0\")"),
-                            ));
-                        }
-                        Some(TriggerConfig::SocketCan(
-                            drivers::trigger::SocketCanConfig {
-                                interface: i.into_inner(),
-                                can_id,
-                            },
-                        ))
-                    }
-                    (Some(_), Some(s)) => {
-                        return Err(self.err(
-                            s.span(),
-                            "[trigger] has both slcan and socketcan; keep the one the CNC is wired to",
-                        ));
-                    }
-                    (None, None) => {
-                        return Err(self.err(
-                            span,
-                            "[trigger] needs slcan = \"/dev/...\" or socketcan = \"can0\"",
-                        ));
-                    }
-                }
-            }
+            Some(s) => Some(self.validate_trigger(s)?),
         };
 
         Ok(Config {
@@ -473,6 +353,131 @@ impl Ctx<'_> {
             psd,
             trigger,
         })
+    }
+
+    fn validate_interferometer(
+        &self,
+        r: RawInterferometer,
+    ) -> Result<drivers::li80::Config, ConfigError> {
+        let rate_hz = self.rate(r.rate_hz, DEFAULT_LI80_RATE_HZ, LI80_RATE_HZ, "LI-80")?;
+        let alpha = match r.alpha_um_per_m_k {
+            None => DEFAULT_ALPHA_UM_PER_M_K,
+            Some(a) => {
+                let x = *a.get_ref();
+                // Machine-tool materials lie within about -1 (invar, Zerodur) to 30
+                // (aluminium, polymer concrete is lower); 100 leaves room and still
+                // catches a value typed in the wrong unit (e.g. 1/K: 1.17e-5).
+                if !x.is_finite() || x.abs() > 100.0 {
+                    return Err(self.err(
+                        a.span(),
+                        format!("alpha_um_per_m_k = {x} is not a plausible expansion coefficient; give it in µm/(m·K), e.g. 11.7 for steel"),
+                    ));
+                }
+                x
+            }
+        };
+        Ok(drivers::li80::Config {
+            port: self.port(r.port)?,
+            rate_hz,
+            alpha_um_per_m_k: alpha,
+        })
+    }
+
+    fn validate_psd(&self, r: RawPsd) -> Result<drivers::psd::Config, ConfigError> {
+        let baud = match r.baud {
+            None => DEFAULT_PSD_BAUD,
+            Some(b) => {
+                let x = *b.get_ref();
+                if !PSD_BAUDS.iter().any(|&p| p as i64 == x) {
+                    return Err(self.err(
+                        b.span(),
+                        format!("baud = {x} is not a baud rate the PSD-2 supports ({PSD_BAUDS:?})"),
+                    ));
+                }
+                x as u32
+            }
+        };
+        let rate_span = r.rate_hz.as_ref().map(|v| v.span()).unwrap_or(0..0);
+        let rate_hz = self.rate(r.rate_hz, DEFAULT_PSD_RATE_HZ, PSD_RATE_HZ, "PSD-2")?;
+        let max_lines = baud / PSD_LINE_BITS;
+        if rate_hz > max_lines {
+            return Err(self.err(
+                rate_span,
+                format!("rate_hz = {rate_hz} is more than a {baud} baud link carries (about {max_lines} lines/s); lower rate_hz or raise baud"),
+            ));
+        }
+        let min_sum_pa = match r.min_sum_pa {
+            None => DEFAULT_PSD_MIN_SUM_PA,
+            Some(m) => {
+                let x = *m.get_ref();
+                if !x.is_finite() || x < 0.0 {
+                    return Err(self.err(
+                        m.span(),
+                        format!("min_sum_pa = {x} is impossible; a photocurrent threshold is a finite number of pA ≥ 0"),
+                    ));
+                }
+                x
+            }
+        };
+        Ok(drivers::psd::Config {
+            port: self.port(r.port)?,
+            baud,
+            rate_hz,
+            min_sum_pa,
+            // Not part of the config file (yet): no error map, no head correction.
+            error_map: None,
+            head: None,
+        })
+    }
+
+    fn validate_trigger(&self, s: Spanned<RawTrigger>) -> Result<TriggerConfig, ConfigError> {
+        let span = s.span();
+        let r = s.into_inner();
+        let can_id = match r.can_id {
+            None => protocol::can::DEFAULT_CAN_ID,
+            Some(c) => {
+                let x = *c.get_ref();
+                if !(0..=CAN_ID_MAX as i64).contains(&x) {
+                    return Err(self.err(
+                        c.span(),
+                        format!("can_id = {x:#x} is not a CAN 2.0A (11-bit) identifier; it must be 0x000 to 0x7FF"),
+                    ));
+                }
+                x as u32
+            }
+        };
+        match (r.slcan, r.socketcan) {
+            (Some(p), None) => Ok(TriggerConfig::Slcan(drivers::trigger::SlcanConfig {
+                port: self.port(p)?,
+                can_id,
+            })),
+            (None, Some(i)) => {
+                let name = i.get_ref();
+                // Linux interface names are at most 15 bytes (IFNAMSIZ - 1).
+                if name.is_empty() || name.len() > 15 || name.contains(['/', ' ']) {
+                    return Err(self.err(
+                        i.span(),
+                        format!(
+                            "socketcan = {name:?} is not a network interface name (e.g. \"can0\")"
+                        ),
+                    ));
+                }
+                Ok(TriggerConfig::SocketCan(
+                    drivers::trigger::SocketCanConfig {
+                        interface: i.into_inner(),
+                        can_id,
+                    },
+                ))
+            }
+            (Some(_), Some(s)) => Err(self.err(
+                s.span(),
+                "[trigger] has both slcan and socketcan; keep the one the CNC is wired to",
+            )),
+            (None, None) => Err(self.err(
+                span,
+                "[trigger] needs slcan = \"/dev/...\" or socketcan = \"can0\"",
+            )),
+        }
     }
 
     fn validate_run(&self, r: RawRun) -> Result<RunConfig, ConfigError> {

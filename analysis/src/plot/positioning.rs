@@ -363,20 +363,23 @@ impl TimeAxis {
     }
 }
 
-fn draw_baseline_vs_time<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
+/// A chart of residuals against time, coloured by direction; returned for more series.
+fn residuals_vs_time<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
     data: &PositioningData,
-    d: &Diagnosis,
+    residuals_um: &[f64],
     ta: &TimeAxis,
-) -> anyhow::Result<()> {
-    // 1: baseline residuals vs time, with the fitted common-mode effects.
-    let rb = &d.baseline_residuals_um;
-    let yr = range(rb.iter().copied());
+    caption: &str,
+) -> anyhow::Result<
+    ChartContext<
+        'a,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+> {
+    let yr = range(residuals_um.iter().copied());
     let mut c = ChartBuilder::on(area)
-        .caption(
-            "baseline residuals vs time (line: found effects)",
-            (FONT, 18),
-        )
+        .caption(caption, (FONT, 18))
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
@@ -388,7 +391,7 @@ fn draw_baseline_vs_time<DB: DrawingBackend>(
         .label_style((FONT, 13))
         .draw()
         .map_err(e)?;
-    c.draw_series(data.readings.iter().zip(rb).map(|(r, v)| {
+    c.draw_series(data.readings.iter().zip(residuals_um).map(|(r, v)| {
         let col = if r.direction == Direction::Up {
             UP
         } else {
@@ -397,6 +400,23 @@ fn draw_baseline_vs_time<DB: DrawingBackend>(
         Circle::new((r.time_s / ta.scale, *v), 2, col.mix(0.6).filled())
     }))
     .map_err(e)?;
+    Ok(c)
+}
+
+fn draw_baseline_vs_time<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    data: &PositioningData,
+    d: &Diagnosis,
+    ta: &TimeAxis,
+) -> anyhow::Result<()> {
+    // 1: baseline residuals vs time, with the fitted common-mode effects.
+    let mut c = residuals_vs_time(
+        area,
+        data,
+        &d.baseline_residuals_um,
+        ta,
+        "baseline residuals vs time (line: found effects)",
+    )?;
     // The common-mode part of the found effects at the axis middle, centred like the residuals.
     let m = &d.model;
     let mid = m.targets_mm.len() / 2;
@@ -537,32 +557,13 @@ fn draw_final_residuals<DB: DrawingBackend>(
 ) -> anyhow::Result<()> {
     // 4: final residuals vs time, outliers ringed.
     let rf = &d.residuals_um;
-    let yr = range(rf.iter().copied());
-    let mut c = ChartBuilder::on(area)
-        .caption(
-            "residuals of the extended model (rings: outliers)",
-            (FONT, 18),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(55)
-        .build_cartesian_2d(ta.t0..ta.t1, yr.0..yr.1)
-        .map_err(e)?;
-    c.configure_mesh()
-        .x_desc(ta.desc)
-        .y_desc("residual / µm")
-        .label_style((FONT, 13))
-        .draw()
-        .map_err(e)?;
-    c.draw_series(data.readings.iter().zip(rf).map(|(r, v)| {
-        let col = if r.direction == Direction::Up {
-            UP
-        } else {
-            DOWN
-        };
-        Circle::new((r.time_s / ta.scale, *v), 2, col.mix(0.6).filled())
-    }))
-    .map_err(e)?;
+    let mut c = residuals_vs_time(
+        area,
+        data,
+        rf,
+        ta,
+        "residuals of the extended model (rings: outliers)",
+    )?;
     c.draw_series(
         data.readings
             .iter()

@@ -9,6 +9,7 @@
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -181,17 +182,6 @@ pub struct CapballConfig {
 pub enum TriggerConfig {
     Slcan(drivers::trigger::SlcanConfig),
     SocketCan(drivers::trigger::SocketCanConfig),
-}
-
-/// One programmed pose of the trajectory (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct TrajectoryRow {
-    pub pose: u32,
-    pub x_mm: f64,
-    pub y_mm: f64,
-    pub z_mm: f64,
-    pub a_deg: Option<f64>,
-    pub c_deg: Option<f64>,
 }
 
 /// The trajectory (pose table) of a run.
@@ -656,64 +646,6 @@ pub fn parse_transform(text: &str) -> Result<[[f64; 4]; 4], String> {
         ));
     }
     Ok([rows[0], rows[1], rows[2], rows[3]])
-}
-
-/// The trajectory CSV: header `pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`, poses from 1 and increasing.
-pub fn parse_trajectory(text: &str) -> Result<Vec<TrajectoryRow>, String> {
-    let mut rdr = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .comment(Some(b'#'))
-        .from_reader(text.as_bytes());
-    let headers = rdr
-        .headers()
-        .map_err(|e| format!("bad header: {e}"))?
-        .clone();
-    let h: Vec<&str> = headers.iter().collect();
-    let rotary = match h.as_slice() {
-        ["pose", "x_mm", "y_mm", "z_mm"] => false,
-        ["pose", "x_mm", "y_mm", "z_mm", "a_deg", "c_deg"] => true,
-        _ => {
-            return Err(format!(
-                "header is {h:?}; expected pose,x_mm,y_mm,z_mm or pose,x_mm,y_mm,z_mm,a_deg,c_deg"
-            ));
-        }
-    };
-    let mut rows: Vec<TrajectoryRow> = Vec::new();
-    for rec in rdr.records() {
-        let rec = rec.map_err(|e| format!("{e}"))?;
-        let line = rec.position().map_or(0, |p| p.line());
-        let num = |i: usize| -> Result<f64, String> {
-            let s = rec.get(i).unwrap_or("");
-            s.parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| format!("line {line}: {} = {s:?} is not a finite number", h[i]))
-        };
-        let pose: u32 = rec.get(0).unwrap_or("").parse().map_err(|_| {
-            format!(
-                "line {line}: pose {:?} is not a whole number",
-                rec.get(0).unwrap_or("")
-            )
-        })?;
-        let expected = rows.last().map_or(1, |r| r.pose + 1);
-        if pose != expected {
-            return Err(format!(
-                "line {line}: pose {pose} should be {expected} (poses count up from 1)"
-            ));
-        }
-        rows.push(TrajectoryRow {
-            pose,
-            x_mm: num(1)?,
-            y_mm: num(2)?,
-            z_mm: num(3)?,
-            a_deg: if rotary { Some(num(4)?) } else { None },
-            c_deg: if rotary { Some(num(5)?) } else { None },
-        });
-    }
-    if rows.is_empty() {
-        return Err("has no poses".into());
-    }
-    Ok(rows)
 }
 
 #[cfg(test)]

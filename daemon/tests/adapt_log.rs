@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use metrolog_analysis::{self as analysis, PositioningOptions};
 use drivers::Instrument;
+use metrolog_analysis::{self as analysis, PositioningOptions};
 use metrolog_log::topics::{EnvironmentMsg, PoseMsg};
 use metrolog_log::{LogOptions, LogWriter, RunMetadata};
 use metrology::axis_model::Direction;

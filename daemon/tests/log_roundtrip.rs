@@ -433,8 +433,5 @@ fn only_the_instruments_of_the_run_get_pose_values() {
     );
     let out = replay(&path, &ReplayOptions::default()).unwrap();
     assert!(out.reproduces_log());
-    assert_eq!(
-        out.detector.instruments,
-        vec![Instrument::Interferometer]
-    );
+    assert_eq!(out.detector.instruments, vec![Instrument::Interferometer]);
 }

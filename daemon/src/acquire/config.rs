@@ -314,7 +314,12 @@ impl Ctx<'_> {
             None => None,
             Some(s) => {
                 let r = s.into_inner();
-                let rate_hz = self.rate(r.rate_hz, DEFAULT_LI80_RATE_HZ, protocol::li80::RATE_HZ, "LI-80")?;
+                let rate_hz = self.rate(
+                    r.rate_hz,
+                    DEFAULT_LI80_RATE_HZ,
+                    protocol::li80::RATE_HZ,
+                    "LI-80",
+                )?;
                 let alpha = match r.alpha_um_per_m_k {
                     None => protocol::convert::ALPHA_STEEL_UM_PER_M_K,
                     Some(a) => {
@@ -355,14 +360,22 @@ impl Ctx<'_> {
                         if !protocol::psd::BAUDS.iter().any(|&p| p as i64 == x) {
                             return Err(self.err(
                                 b.span(),
-                                format!("baud = {x} is not a baud rate the PSD-2 supports ({:?})", protocol::psd::BAUDS),
+                                format!(
+                                    "baud = {x} is not a baud rate the PSD-2 supports ({:?})",
+                                    protocol::psd::BAUDS
+                                ),
                             ));
                         }
                         x as u32
                     }
                 };
                 let rate_span = r.rate_hz.as_ref().map(|v| v.span()).unwrap_or(0..0);
-                let rate_hz = self.rate(r.rate_hz, DEFAULT_PSD_RATE_HZ, protocol::psd::RATE_HZ, "PSD-2")?;
+                let rate_hz = self.rate(
+                    r.rate_hz,
+                    DEFAULT_PSD_RATE_HZ,
+                    protocol::psd::RATE_HZ,
+                    "PSD-2",
+                )?;
                 let max_lines = baud / protocol::psd::LINE_BITS;
                 if rate_hz > max_lines {
                     return Err(self.err(
@@ -427,12 +440,10 @@ impl Ctx<'_> {
                                 format!("socketcan = {name:?} is not a network interface name (e.g. \"can0\")"),
                             ));
                         }
-                        Some(TriggerConfig::SocketCan(
-                            drivers::SocketCanConfig {
-                                interface: i.into_inner(),
-                                can_id,
-                            },
-                        ))
+                        Some(TriggerConfig::SocketCan(drivers::SocketCanConfig {
+                            interface: i.into_inner(),
+                            can_id,
+                        }))
                     }
                     (Some(_), Some(s)) => {
                         return Err(self.err(
@@ -520,7 +531,12 @@ impl Ctx<'_> {
     }
 
     fn validate_capball(&self, r: RawCapball) -> Result<CapballConfig, ConfigError> {
-        let rate_hz = self.rate(r.rate_hz, DEFAULT_CB3_RATE_HZ, protocol::cb3::RATE_HZ, "CB-3")?;
+        let rate_hz = self.rate(
+            r.rate_hz,
+            DEFAULT_CB3_RATE_HZ,
+            protocol::cb3::RATE_HZ,
+            "CB-3",
+        )?;
         let poly = match r.poly {
             None => [protocol::convert::CapBallPoly::NOMINAL.c; 3],
             Some(p) => {

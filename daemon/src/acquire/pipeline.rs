@@ -418,9 +418,7 @@ impl Pipeline {
                 st.port = port;
             }
             DriverEvent::Error {
-                instrument,
-                error,
-                ..
+                instrument, error, ..
             } => {
                 self.slot(instrument).last_error = Some(error.to_string());
             }

@@ -358,7 +358,7 @@ impl Pipeline {
             }
             self.status.last_pose = self.status.last_pose.max(v.pose);
             *self
-                .slot(v.instrument.instrument())
+                .slot(v.instrument)
                 .poses
                 .entry(v.status.name())
                 .or_default() += 1;

@@ -13,7 +13,7 @@ use metrology::kinematics::{Machine, Pose};
 use nalgebra::Vector3;
 
 use super::{AnalysisError, LogContents, is_ok};
-use metrolog_log::topics::PoseInstrument;
+use drivers::Instrument;
 
 /// The CapBall dataset of a log.
 #[derive(Debug, Clone)]
@@ -103,7 +103,7 @@ pub fn capball_from_contents(
     machine: &Machine,
 ) -> Result<CapballFromLog, AnalysisError> {
     let traj = log.trajectory(None)?;
-    let values = log.pose_values(PoseInstrument::Capball);
+    let values = log.pose_values(Instrument::Capball);
     let no_data = |what: &str, hint: &str| AnalysisError::NoData {
         path: log.path.clone(),
         what: what.into(),

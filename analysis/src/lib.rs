@@ -21,7 +21,8 @@ pub mod report;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use metrolog_log::topics::{Decoded, EnvironmentMsg, PoseInstrument, PoseMsg, decode};
+use drivers::Instrument;
+use metrolog_log::topics::{Decoded, EnvironmentMsg, PoseMsg, decode};
 use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use metrolog_log::{
     CONFIG_ATTACHMENT, LogError, RUN_METADATA, ReadSummary, TRAJECTORY_ATTACHMENT, read_log,
@@ -167,7 +168,7 @@ impl LogContents {
     }
 
     /// The first `/pose` value of `instrument` for every pose number.
-    pub fn pose_values(&self, instrument: PoseInstrument) -> BTreeMap<u32, &PoseMsg> {
+    pub fn pose_values(&self, instrument: Instrument) -> BTreeMap<u32, &PoseMsg> {
         let mut m = BTreeMap::new();
         for p in &self.poses {
             if p.msg.instrument == instrument {

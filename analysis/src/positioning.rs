@@ -38,7 +38,8 @@ use metrology::axis_model::Direction;
 use metrology::positioning_data::{PositioningData, Reading};
 
 use super::{AnalysisError, LogContents, is_ok};
-use metrolog_log::topics::{PoseInstrument, PoseMsg};
+use drivers::Instrument;
+use metrolog_log::topics::PoseMsg;
 use metrolog_log::trajectory::TrajectoryRow;
 
 /// Options of [`positioning_from_log`].
@@ -97,7 +98,7 @@ pub fn positioning_from_contents(
     opts: &PositioningOptions,
 ) -> Result<PositioningData, AnalysisError> {
     let traj = log.trajectory(opts.trajectory.as_deref())?;
-    let values = log.pose_values(PoseInstrument::Interferometer);
+    let values = log.pose_values(Instrument::Interferometer);
     if values.is_empty() {
         return Err(no_data(
             log,
@@ -356,7 +357,7 @@ mod tests {
             poses.push(LoggedPose {
                 log_ns: 0,
                 msg: PoseMsg {
-                    instrument: PoseInstrument::Interferometer,
+                    instrument: Instrument::Interferometer,
                     pose: no,
                     status: if v.is_some() {
                         PoseStatus::Ok

@@ -15,7 +15,7 @@
 use std::path::Path;
 
 use super::{AnalysisError, LogContents, is_ok};
-use metrolog_log::topics::PoseInstrument;
+use drivers::Instrument;
 use metrolog_log::trajectory::TrajectoryRow;
 
 /// One PSD point of the segment.
@@ -120,7 +120,7 @@ pub fn psd_from_contents(
     poses: Option<(u32, u32)>,
 ) -> Result<PsdSegment, AnalysisError> {
     let traj = log.trajectory(None)?;
-    let values = log.pose_values(PoseInstrument::Psd);
+    let values = log.pose_values(Instrument::Psd);
     let no_data = |what: String| {
         AnalysisError::NoData {
         path: log.path.clone(),

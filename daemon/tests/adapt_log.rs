@@ -6,8 +6,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use drivers::Instrument;
 use metrolog_analysis::{self as analysis, PositioningOptions};
-use metrolog_log::topics::{EnvironmentMsg, PoseInstrument, PoseMsg};
+use metrolog_log::topics::{EnvironmentMsg, PoseMsg};
 use metrolog_log::{LogOptions, LogWriter, RunMetadata};
 use metrology::axis_model::Direction;
 use metrology::capball::{CapballErrors, CapballSetup, TrajectorySpec};
@@ -119,7 +120,7 @@ struct Spec {
     time_scale: Option<f64>,
 }
 
-fn value(inst: PoseInstrument, pose_no: u32, t_ns: u64, ch: &[(&str, f64)]) -> PoseMsg {
+fn value(inst: Instrument, pose_no: u32, t_ns: u64, ch: &[(&str, f64)]) -> PoseMsg {
     PoseMsg {
         instrument: inst,
         pose: pose_no,
@@ -132,7 +133,7 @@ fn value(inst: PoseInstrument, pose_no: u32, t_ns: u64, ch: &[(&str, f64)]) -> P
     }
 }
 
-fn no_value(inst: PoseInstrument, pose_no: u32, t_ns: u64, st: PoseStatus) -> PoseMsg {
+fn no_value(inst: Instrument, pose_no: u32, t_ns: u64, st: PoseStatus) -> PoseMsg {
     PoseMsg {
         instrument: inst,
         pose: pose_no,
@@ -219,32 +220,32 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
         // Interferometer: position from the datum at home (x = 0).
         let li = match r.iso {
             Some((i, d, c)) if spec.missing == Some((c, d, i)) => no_value(
-                PoseInstrument::Interferometer,
+                Instrument::Interferometer,
                 no,
                 t_ns,
                 PoseStatus::BeamInvalid,
             ),
             Some((i, d, c)) => value(
-                PoseInstrument::Interferometer,
+                Instrument::Interferometer,
                 no,
                 t_ns,
                 &[("position_um", r.p.x_mm * 1000.0 + dev_um(i, d, c))],
             ),
             // The far reversal gets a value (a dwell of 0 may still settle), the near one not.
             None if r.p.x_mm > 400.0 => value(
-                PoseInstrument::Interferometer,
+                Instrument::Interferometer,
                 no,
                 t_ns,
                 &[("position_um", r.p.x_mm * 1000.0 + 9.0)],
             ),
             None if k < 36 => no_value(
-                PoseInstrument::Interferometer,
+                Instrument::Interferometer,
                 no,
                 t_ns,
                 PoseStatus::NeverSteady,
             ),
             None => value(
-                PoseInstrument::Interferometer,
+                Instrument::Interferometer,
                 no,
                 t_ns,
                 &[("position_um", r.p.x_mm * 1000.0)],
@@ -259,10 +260,10 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
             [300.0, -200.0, 100.0]
         };
         let cb = if spec.capball_bad_pose == Some(no) {
-            no_value(PoseInstrument::Capball, no, t_ns, PoseStatus::NeverSteady)
+            no_value(Instrument::Capball, no, t_ns, PoseStatus::NeverSteady)
         } else {
             value(
-                PoseInstrument::Capball,
+                Instrument::Capball,
                 no,
                 t_ns,
                 &[("ex_um", e[0]), ("ey_um", e[1]), ("ez_um", e[2])],
@@ -277,7 +278,7 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
         };
         w.write_pose(
             log_ns,
-            &value(PoseInstrument::Psd, no, t_ns, &[("x_um", x), ("y_um", y)]),
+            &value(Instrument::Psd, no, t_ns, &[("x_um", x), ("y_um", y)]),
         )
         .unwrap();
     }

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use drivers::{DriverEvent, Instrument};
 use metrolog::cmd::replay::{ReplayOptions, replay};
 use metrolog_log::synthetic::SyntheticRun;
-use metrolog_log::topics::{Decoded, PoseInstrument, decode};
+use metrolog_log::topics::{Decoded, decode};
 use metrolog_log::{LogItem, RUN_METADATA, RunMetadata, read_log};
 use metrology::steady::PoseStatus;
 
@@ -119,15 +119,16 @@ fn every_topic_round_trips() {
         let k = p.pose as usize - 1;
         let tol = 4.0 * run.noise_um / 150f64.sqrt();
         let want: Vec<(&str, f64)> = match p.instrument {
-            PoseInstrument::Interferometer => vec![("position_um", run.targets_mm[k] * 1000.0)],
-            PoseInstrument::Capball => {
+            Instrument::Interferometer => vec![("position_um", run.targets_mm[k] * 1000.0)],
+            Instrument::Capball => {
                 let e = SyntheticRun::capball_error_um(k);
                 vec![("ex_um", e[0]), ("ey_um", e[1]), ("ez_um", e[2])]
             }
-            PoseInstrument::Psd => {
+            Instrument::Psd => {
                 let e = SyntheticRun::psd_error_um(k);
                 vec![("x_um", e[0]), ("y_um", e[1])]
             }
+            Instrument::Trigger => panic!("a pose value of the trigger"),
         };
         assert_eq!(p.mean.len(), want.len());
         for (name, v) in want {
@@ -277,7 +278,7 @@ fn trigger_free_run_finds_the_plateaus() {
     }
     let interf: Vec<_> = found
         .iter()
-        .filter(|p| p.instrument == PoseInstrument::Interferometer)
+        .filter(|p| p.instrument == Instrument::Interferometer)
         .collect();
     assert_eq!(interf.len(), 5, "{interf:?}");
     for (k, p) in interf.iter().enumerate() {
@@ -387,7 +388,7 @@ fn dark_psd_samples_round_trip_as_nan_and_replay_exactly() {
     let psd: Vec<_> = w
         .poses
         .iter()
-        .filter(|p| p.instrument == PoseInstrument::Psd)
+        .filter(|p| p.instrument == Instrument::Psd)
         .collect();
     assert_eq!(psd.len(), 2);
     assert!(
@@ -406,7 +407,7 @@ fn only_the_instruments_of_the_run_get_pose_values() {
         ..SyntheticRun::default()
     };
     let mut meta = log_common::meta(&run);
-    meta.detector.instruments = vec![PoseInstrument::Interferometer];
+    meta.detector.instruments = vec![Instrument::Interferometer];
     let path = dir.path().join("li80.mcap");
     let mut rec = metrolog::acquire::recorder::Recorder::create(
         &path,
@@ -428,12 +429,9 @@ fn only_the_instruments_of_the_run_get_pose_values() {
     assert!(
         poses
             .iter()
-            .all(|p| p.instrument == PoseInstrument::Interferometer && p.status == PoseStatus::Ok)
+            .all(|p| p.instrument == Instrument::Interferometer && p.status == PoseStatus::Ok)
     );
     let out = replay(&path, &ReplayOptions::default()).unwrap();
     assert!(out.reproduces_log());
-    assert_eq!(
-        out.detector.instruments,
-        vec![PoseInstrument::Interferometer]
-    );
+    assert_eq!(out.detector.instruments, vec![Instrument::Interferometer]);
 }

@@ -9,7 +9,7 @@ use metrolog::acquire::pipeline::{
     DetectOnly, EventSink, Pipeline, PipelineConfig, Status, StopReason,
 };
 use metrolog_log::DetectorSettings;
-use metrolog_log::topics::{PoseInstrument, PoseMsg};
+use metrolog_log::topics::PoseMsg;
 use metrology::steady::PoseStatus;
 use protocol::can::TriggerEvent;
 
@@ -168,7 +168,7 @@ fn steady_values_sit_on_the_programmed_plateaus() {
     assert!(seen.finished);
     assert_eq!(seen.samples + seen.triggers, n_events);
     assert_eq!(seen.triggers, 5 * 3 + 2);
-    for inst in [PoseInstrument::Interferometer, PoseInstrument::Psd] {
+    for inst in [Instrument::Interferometer, Instrument::Psd] {
         let values: Vec<&PoseMsg> = out.poses.iter().filter(|v| v.instrument == inst).collect();
         assert_eq!(values.len(), 5, "{inst:?}: {values:?}");
         for (k, v) in values.iter().enumerate() {
@@ -178,7 +178,7 @@ fn steady_values_sit_on_the_programmed_plateaus() {
             // Uniform ±0.05 µm: σ = 0.05/√3, mean of 150 within 5σ/√150 = 0.012 µm.
             let tol = 0.012;
             let expected: Vec<(&str, f64)> = match inst {
-                PoseInstrument::Interferometer => vec![("position_um", 1000.0 * (k + 1) as f64)],
+                Instrument::Interferometer => vec![("position_um", 1000.0 * (k + 1) as f64)],
                 _ => vec![("x_um", (k + 1) as f64), ("y_um", -((k + 1) as f64))],
             };
             for (ch, e) in expected {
@@ -199,7 +199,7 @@ fn steady_values_sit_on_the_programmed_plateaus() {
     let cb: Vec<&PoseMsg> = out
         .poses
         .iter()
-        .filter(|v| v.instrument == PoseInstrument::Capball)
+        .filter(|v| v.instrument == Instrument::Capball)
         .collect();
     assert_eq!(cb.len(), 5);
     assert!(
@@ -268,7 +268,7 @@ fn a_dwell_without_samples_is_reported_not_invented() {
     let li: Vec<_> = out
         .poses
         .iter()
-        .filter(|v| v.instrument == PoseInstrument::Interferometer)
+        .filter(|v| v.instrument == Instrument::Interferometer)
         .collect();
     assert_eq!(li.len(), 1);
     assert_eq!(li[0].status, PoseStatus::DeviceAway);

@@ -9,15 +9,17 @@
 
 use std::time::Duration;
 
-use protocol::Decoded;
 use protocol::cb3::{Decoder, Frame};
 use protocol::convert::{CapBallPoly, CapBallTransform};
 
-use crate::link::{Acq, Device, Handler, Link, SessionError};
-use crate::{Instrument, Sample, SampleValues};
+use crate::sample_path::{FrameConverter, Reading, SamplePath};
+use crate::serial_driver::{SerialDriver, SerialSession, idle_timeout, is_ok};
+use crate::stamper::SampleStamper;
+use crate::{DriverError, Instrument, SampleValues};
 
+/// What the daemon configures for the CB-3.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
-pub struct Config {
+pub struct Cb3Config {
     pub port: String,
     pub rate_hz: u32,
     /// Per channel `[c1, c2, c3]`: `d = c1·V + c2·V² + c3·V³`, µm.
@@ -26,38 +28,29 @@ pub struct Config {
     pub transform: [[f64; 4]; 4],
 }
 
-struct Cb3 {
-    cfg: Config,
-    acq: Acq,
+/// CB-3 frames to readings: volts → distance changes → machine-frame error.
+struct Cb3Frames {
     poly: [CapBallPoly; 3],
     transform: CapBallTransform,
 }
 
-impl Handler for Cb3 {
-    type Dec = Decoder;
+impl FrameConverter for Cb3Frames {
+    type Decoder = Decoder;
 
-    fn on_item(&mut self, item: Decoded<Frame>, host_ns: u64) -> Option<String> {
-        match item {
-            Decoded::Reject(r) => self.acq.reject(r.kind, r.bytes),
-            Decoded::Frame(Frame::Text(t)) => {
-                self.acq.counters.answers += 1;
-                return Some(t);
-            }
-            Decoded::Frame(Frame::Sample(f)) => {
-                if !self.acq.accepting {
-                    return None;
-                }
-                let (seq, device_t_us, fitted_ns) =
-                    self.acq.stamp(f.seq as u64, f.t_us as u64, host_ns);
+    fn new_decoder(&self) -> Decoder {
+        Decoder::new()
+    }
+
+    fn convert(&mut self, frame: Frame, _host_ns: u64, out: &mut impl FnMut(Reading)) {
+        match frame {
+            Frame::Text(t) => out(Reading::Answer(t)),
+            Frame::Sample(f) => {
                 let volts = f.volts();
                 let d_um: [f64; 3] = std::array::from_fn(|i| self.poly[i].distance_um(volts[i]));
                 let e_um = self.transform.apply(d_um);
-                self.acq.emit_sample(Sample {
-                    instrument: Instrument::Capball,
-                    seq,
-                    device_t_us,
-                    host_ns,
-                    fitted_ns,
+                out(Reading::Data {
+                    raw_seq: f.seq as u64,
+                    raw_t_us: f.t_us as u64,
                     valid: f.flags & 0b111 == 0,
                     values: SampleValues::Capball {
                         volts,
@@ -68,64 +61,60 @@ impl Handler for Cb3 {
                 });
             }
         }
-        None
     }
 }
 
-impl Device for Cb3 {
-    fn acq(&mut self) -> &mut Acq {
-        &mut self.acq
-    }
+/// The CB-3's session: commands and their expected answers.
+struct Cb3Driver {
+    rate_hz: u32,
+}
+
+impl SerialDriver for Cb3Driver {
+    type Converter = Cb3Frames;
+
     fn baud(&self) -> u32 {
         115_200
     }
-    fn new_decoder(&self) -> Decoder {
-        Decoder::new()
-    }
     fn idle_timeout(&self) -> Duration {
-        crate::li80::idle_timeout(self.cfg.rate_hz)
+        idle_timeout(self.rate_hz)
     }
-    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
-        link.expect(self, "STOP\n", crate::link::is_ok)
-            .await
-            .map(drop)
+    async fn stop(&self, s: &mut SerialSession<'_, Cb3Frames>) -> Result<(), DriverError> {
+        s.expect("STOP\n", is_ok).await.map(drop)
     }
 
-    async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
-        self.acq.set_rate(self.cfg.rate_hz);
-        link.expect(self, "STOP\n", crate::link::is_ok).await?;
-        link.reset_decoder();
-        let id = link
-            .expect(self, "ID?\n", |a| a.starts_with("CB-3,"))
-            .await?;
-        link.expect(
-            self,
-            &format!("RATE {}\n", self.cfg.rate_hz),
-            crate::link::is_ok,
-        )
-        .await?;
-        self.acq.accepting = true;
-        link.expect(self, "START\n", crate::link::is_ok).await?;
+    async fn setup(&self, s: &mut SerialSession<'_, Cb3Frames>) -> Result<String, DriverError> {
+        s.path.stamper.set_rate(self.rate_hz);
+        s.expect("STOP\n", is_ok).await?;
+        s.reset_decoder();
+        let id = s.expect("ID?\n", |a| a.starts_with("CB-3,")).await?;
+        s.expect(&format!("RATE {}\n", self.rate_hz), is_ok).await?;
+        s.start_accepting();
+        s.expect("START\n", is_ok).await?;
         Ok(id.trim().to_string())
     }
 }
 
-pub fn spawn(
-    cfg: Config,
+/// Start the CB-3 driver task. It runs until `cancel` fires, reconnecting with backoff.
+pub fn spawn_cb3(
+    cfg: Cb3Config,
     clock: crate::HostClock,
     tx: crate::EventSender,
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
-    let acq = Acq::new(Instrument::Capball, &cfg.port, 16, 32, clock, tx);
-    let poly = cfg.poly.map(|c| CapBallPoly { c });
-    let transform = CapBallTransform { t: cfg.transform };
-    tokio::spawn(crate::link::run(
-        Cb3 {
-            cfg,
-            acq,
-            poly,
-            transform,
-        },
-        cancel,
-    ))
+    let frames = Cb3Frames {
+        poly: cfg.poly.map(|c| CapBallPoly { c }),
+        transform: CapBallTransform { t: cfg.transform },
+    };
+    let path = SamplePath::new(
+        frames,
+        SampleStamper::new(16, 32),
+        Instrument::Capball,
+        &cfg.port,
+        clock,
+        tx,
+    );
+    let driver = Cb3Driver {
+        rate_hz: cfg.rate_hz,
+    };
+    tokio::spawn(crate::serial_driver::run(driver, path, cancel))
 }

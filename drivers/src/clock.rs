@@ -76,6 +76,7 @@ impl ClockFit {
     }
 
     /// Number of closed windows in the fit.
+    #[cfg(test)]
     pub fn windows(&self) -> usize {
         self.minima.len()
     }

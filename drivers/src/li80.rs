@@ -8,56 +8,54 @@
 
 use std::time::Duration;
 
-use protocol::Decoded;
 use protocol::convert::Li80Compensation;
 use protocol::li80::{Decoder, Line};
 
-use crate::link::{Acq, Device, Handler, Link, SessionError};
-use crate::{Instrument, Sample, SampleValues};
+use crate::clock::Unwrap;
+use crate::sample_path::{FrameConverter, Reading, SamplePath};
+use crate::serial_driver::{SerialDriver, SerialSession, idle_timeout, is_ok};
+use crate::stamper::SampleStamper;
+use crate::{DriverError, Instrument, Sample, SampleValues};
 
 /// What the daemon configures for the LI-80.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
-pub struct Config {
+pub struct Li80Config {
     /// Serial port path, e.g. `/dev/metrolog-li80`.
     pub port: String,
     pub rate_hz: u32,
-    /// Expansion coefficient of the measured axis, µm/(m·K), for the 20 °C compensation.
+    /// Expansion coefficient of the measured axis, µm/(m·K), for the 20 °C compensation
+    /// (default: `protocol::convert::ALPHA_STEEL_UM_PER_M_K`).
     pub alpha_um_per_m_k: f64,
 }
 
-struct Li80 {
-    cfg: Config,
-    acq: Acq,
+/// LI-80 lines to readings: `$POS` compensated with the last good `$ENV`.
+struct Li80Frames {
+    port: String,
+    alpha_um_per_m_k: f64,
     comp: Option<Li80Compensation>,
-    env_seq: crate::clock::Unwrap,
+    env_seq: Unwrap,
+    /// An `$ENV` line came since the last `setup`.
     env_seen: bool,
 }
 
-impl Handler for Li80 {
-    type Dec = Decoder;
+impl FrameConverter for Li80Frames {
+    type Decoder = Decoder;
 
-    fn on_item(&mut self, item: Decoded<Line>, host_ns: u64) -> Option<String> {
-        match item {
-            Decoded::Reject(r) => self.acq.reject(r.kind, r.bytes),
-            Decoded::Frame(Line::Answer(a)) => {
-                self.acq.counters.answers += 1;
-                return Some(a);
-            }
-            Decoded::Frame(Line::Pos(p)) => {
-                if !self.acq.accepting {
-                    return None;
-                }
-                let (seq, device_t_us, fitted_ns) = self.acq.stamp(p.seq as u64, p.t_us, host_ns);
+    fn new_decoder(&self) -> Decoder {
+        Decoder::new()
+    }
+
+    fn convert(&mut self, line: Line, host_ns: u64, out: &mut impl FnMut(Reading)) {
+        match line {
+            Line::Answer(a) => out(Reading::Answer(a)),
+            Line::Pos(p) => {
                 let (position_um, comp_ok) = match self.comp {
                     Some(c) => (c.length_at_20c_nm(p.raw_nm) * 1e-3, true),
                     None => (f64::NAN, false),
                 };
-                self.acq.emit_sample(Sample {
-                    instrument: Instrument::Interferometer,
-                    seq,
-                    device_t_us,
-                    host_ns,
-                    fitted_ns,
+                out(Reading::Data {
+                    raw_seq: p.seq as u64,
+                    raw_t_us: p.t_us,
                     valid: p.valid() && comp_ok,
                     values: SampleValues::Position {
                         raw_nm: p.raw_nm,
@@ -67,17 +65,19 @@ impl Handler for Li80 {
                     },
                 });
             }
-            Decoded::Frame(Line::Env(e)) => {
+            Line::Env(e) => {
                 self.env_seen = true;
-                let comp = match Li80Compensation::from_env(&e, self.cfg.alpha_um_per_m_k) {
+                let comp = match Li80Compensation::from_env(&e, self.alpha_um_per_m_k) {
                     Ok(c) => {
                         self.comp = Some(c);
                         Some(c)
                     }
-                    Err(err) => {
+                    Err(cause) => {
                         // Keep compensating with the last good record; the operator must know.
-                        let msg = format!("port {}: `$ENV` record unusable: {err}", self.acq.port);
-                        self.acq.error(msg);
+                        out(Reading::Problem(DriverError::UnusableEnvironment {
+                            port: self.port.clone(),
+                            cause,
+                        }));
                         None
                     }
                 };
@@ -86,7 +86,7 @@ impl Handler for Li80 {
                     .push(e.seq as u64)
                     .unwrap_or_else(|| self.env_seq.rebase(e.seq as u64));
                 let n_air = comp.map_or(f64::NAN, |c| c.n_air);
-                self.acq.emit_sample(Sample {
+                out(Reading::Timed(Sample {
                     instrument: Instrument::Interferometer,
                     seq,
                     device_t_us: e.t_us,
@@ -100,86 +100,78 @@ impl Handler for Li80 {
                         material_c: e.material_c,
                         n_air,
                     },
-                });
+                }));
             }
-            Decoded::Frame(Line::Err(e)) => {
-                self.acq.counters.device_errors += 1;
-                let msg = format!(
-                    "port {}: device reports error {}: {}",
-                    self.acq.port, e.code, e.text
-                );
-                self.acq.error(msg);
-            }
+            Line::Err(e) => out(Reading::DeviceError(DriverError::DeviceReported {
+                port: self.port.clone(),
+                code: e.code,
+                text: e.text,
+            })),
         }
-        None
     }
 }
 
-impl Device for Li80 {
-    fn acq(&mut self) -> &mut Acq {
-        &mut self.acq
-    }
+/// The LI-80's session: commands and their expected answers.
+struct Li80Driver {
+    rate_hz: u32,
+}
+
+impl SerialDriver for Li80Driver {
+    type Converter = Li80Frames;
+
     fn baud(&self) -> u32 {
         // USB virtual serial port: the setting is ignored by the device.
         115_200
     }
-    fn new_decoder(&self) -> Decoder {
-        Decoder::new()
-    }
     fn idle_timeout(&self) -> Duration {
-        idle_timeout(self.cfg.rate_hz)
+        idle_timeout(self.rate_hz)
     }
-    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
-        link.expect(self, "STREAM OFF\n", crate::link::is_ok)
-            .await
-            .map(drop)
+    async fn stop(&self, s: &mut SerialSession<'_, Li80Frames>) -> Result<(), DriverError> {
+        s.expect("STREAM OFF\n", is_ok).await.map(drop)
     }
 
-    async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
-        self.acq.set_rate(self.cfg.rate_hz);
-        link.expect(self, "STREAM OFF\n", crate::link::is_ok)
+    async fn setup(&self, s: &mut SerialSession<'_, Li80Frames>) -> Result<String, DriverError> {
+        s.path.stamper.set_rate(self.rate_hz);
+        s.expect("STREAM OFF\n", is_ok).await?;
+        s.reset_decoder();
+        let idn = s.expect("*IDN?\n", |a| a.starts_with("LI-80,")).await?;
+        s.expect(&format!("RATE {}\n", self.rate_hz), is_ok).await?;
+        s.expect("DATUM\n", is_ok).await?;
+        s.path.converter.env_seen = false;
+        s.path.converter.env_seq.reset();
+        s.send("ENV?\n").await?;
+        s.wait_for("`$ENV` line in answer to `ENV?`", |c| c.env_seen)
             .await?;
-        link.reset_decoder();
-        let idn = link
-            .expect(self, "*IDN?\n", |a| a.starts_with("LI-80,"))
-            .await?;
-        link.expect(
-            self,
-            &format!("RATE {}\n", self.cfg.rate_hz),
-            crate::link::is_ok,
-        )
-        .await?;
-        link.expect(self, "DATUM\n", crate::link::is_ok).await?;
-        self.env_seen = false;
-        self.env_seq.reset();
-        link.send("ENV?\n").await?;
-        link.wait_for(self, "`$ENV` line in answer to `ENV?`", |h| h.env_seen)
-            .await?;
-        self.acq.accepting = true;
-        link.expect(self, "STREAM ON\n", crate::link::is_ok).await?;
+        s.start_accepting();
+        s.expect("STREAM ON\n", is_ok).await?;
         Ok(idn.trim().to_string())
     }
 }
 
-/// Silence that means the device is gone: 2 s plus five sample periods.
-pub(crate) fn idle_timeout(rate_hz: u32) -> Duration {
-    Duration::from_secs(2) + Duration::from_secs_f64(5.0 / rate_hz.max(1) as f64)
-}
-
-/// Start the driver task. It runs until `cancel` fires, reconnecting with backoff.
-pub fn spawn(
-    cfg: Config,
+/// Start the LI-80 driver task. It runs until `cancel` fires, reconnecting with backoff.
+pub fn spawn_li80(
+    cfg: Li80Config,
     clock: crate::HostClock,
     tx: crate::EventSender,
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
-    let acq = Acq::new(Instrument::Interferometer, &cfg.port, 32, 64, clock, tx);
-    let dev = Li80 {
-        cfg,
-        acq,
+    let frames = Li80Frames {
+        port: cfg.port.clone(),
+        alpha_um_per_m_k: cfg.alpha_um_per_m_k,
         comp: None,
-        env_seq: crate::clock::Unwrap::new(32),
+        env_seq: Unwrap::new(32),
         env_seen: false,
     };
-    tokio::spawn(crate::link::run(dev, cancel))
+    let path = SamplePath::new(
+        frames,
+        SampleStamper::new(32, 64),
+        Instrument::Interferometer,
+        &cfg.port,
+        clock,
+        tx,
+    );
+    let driver = Li80Driver {
+        rate_hz: cfg.rate_hz,
+    };
+    tokio::spawn(crate::serial_driver::run(driver, path, cancel))
 }

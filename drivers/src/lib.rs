@@ -3,16 +3,29 @@
 //! sample, counts every fault, and survives unplug/replug. Drivers never block on the consumer:
 //! they send into a bounded channel and count what could not be delivered.
 //!
-//! Public surface used by the daemon:
-//! - [`Sample`], [`SampleValues`], [`Trigger`], [`DriverEvent`] — what the drivers yield;
+//! Public surface (the modules are private; this is everything the daemon needs):
+//! - [`Sample`], [`SampleValues`], [`Trigger`], [`DriverEvent`] — what the drivers yield,
+//!   through an [`EventSender`];
+//! - [`DriverError`] — why a port or device failed (in `DriverEvent::{Error, Disconnected}`);
 //! - [`Counters`] — per-instrument counters;
-//! - [`Instrument`];
-//! - `li80::spawn`, `cb3::spawn`, `psd::spawn`, `trigger::spawn_slcan`, `trigger::spawn_socketcan`
-//!   — start a driver task (see each module);
-//! - [`trigger::trigger_from_frame`] — the one decoding path of SLCAN and SocketCAN frames;
-//! - [`clock::ClockFit`] — device-clock against host-clock fit; [`clock::Unwrap`] — wrapping
-//!   counters to u64;
+//! - [`Instrument`], with the pose-valued instruments and their detector channels;
+//! - [`spawn_li80`], [`spawn_cb3`], [`spawn_psd`], [`spawn_slcan`], [`spawn_socketcan`] with
+//!   their configurations — start a driver task;
+//! - [`trigger_from_frame`] and [`from_socketcan`] — the one decoding path of SLCAN and
+//!   SocketCAN frames; [`trigger_kind`] / [`trigger_event`] — CAN trigger events to the pose
+//!   detector's `metrology::steady::TriggerKind` and back;
 //! - [`HostClock`] — the host monotonic clock as ns since the Unix epoch.
+//!
+//! A sample's way through a serial driver is one direction (docs/design.md):
+//!
+//! ```text
+//! port bytes ─ SerialLink (protocol decoder) ─ FrameConverter (the instrument's: frame → Reading)
+//!   ─ SampleStamper (unwrap sequence and device clock, ClockFit) ─ EventReporter (count, emit
+//!   DriverEvent into the bounded queue)
+//! ```
+//!
+//! The instrument's `SerialDriver` (e.g. `Li80Driver`) only issues its command sequence through
+//! a `SerialSession`, which reads and routes data arriving meanwhile down the same way.
 //!
 //! Every serial driver runs the same loop: open the port (8N1, no flow control), stop a stream
 //! the device may still be sending, identify, configure, start streaming; then read in large
@@ -23,189 +36,29 @@
 //! `Error` naming the port, the command and the answer, and is retried. Cancelling stops the
 //! stream and still delivers every sample sent before the device's answer.
 
-use serde::Serialize;
+mod cb3;
+mod clock;
+mod error;
+mod event;
+mod host_clock;
+mod instrument;
+mod li80;
+mod psd;
+mod reporter;
+mod sample_path;
+mod serial_driver;
+mod serial_link;
+mod stamper;
+mod trigger;
 
-/// The instruments metrolog knows.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "snake_case")]
-pub enum Instrument {
-    Interferometer,
-    Capball,
-    Psd,
-    Trigger,
-}
-
-impl Instrument {
-    pub fn name(self) -> &'static str {
-        match self {
-            Instrument::Interferometer => "interferometer",
-            Instrument::Capball => "capball",
-            Instrument::Psd => "psd",
-            Instrument::Trigger => "trigger",
-        }
-    }
-}
-
-/// The host clock: monotonic, expressed as ns since the Unix epoch (wall time read once at
-/// start, then advanced by the monotonic clock, so it never jumps).
-#[derive(Debug, Clone, Copy)]
-pub struct HostClock {
-    start_mono: std::time::Instant,
-    start_unix_ns: u64,
-}
-
-impl HostClock {
-    pub fn new() -> Self {
-        let start_unix_ns = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos() as u64)
-            .unwrap_or(0);
-        HostClock {
-            start_mono: std::time::Instant::now(),
-            start_unix_ns,
-        }
-    }
-    /// Now, ns since the Unix epoch along the monotonic clock.
-    pub fn now_ns(&self) -> u64 {
-        self.start_unix_ns + self.start_mono.elapsed().as_nanos() as u64
-    }
-}
-
-impl Default for HostClock {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-/// One converted, timestamped sample of an instrument.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Sample {
-    pub instrument: Instrument,
-    /// Device sequence number, unwrapped (monotonic across wraps within one connection).
-    pub seq: u64,
-    /// Device clock, µs, unwrapped.
-    pub device_t_us: u64,
-    /// Host arrival time, ns since the Unix epoch (see [`HostClock`]).
-    pub host_ns: u64,
-    /// Device time mapped onto the host axis by the clock fit, ns since the Unix epoch
-    /// (equals `host_ns` until the fit has enough points).
-    pub fitted_ns: u64,
-    pub valid: bool,
-    pub values: SampleValues,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum SampleValues {
-    /// LI-80 `$POS`, with the compensated length.
-    Position {
-        raw_nm: i64,
-        position_um: f64,
-        sig: u8,
-        flags: u32,
-    },
-    /// LI-80 `$ENV`, with the refractive index computed from it.
-    Environment {
-        air_c: f64,
-        air_pa: f64,
-        rh_pct: f64,
-        material_c: Vec<f64>,
-        n_air: f64,
-    },
-    /// CB-3 sample: volts, distance changes (polynomial) and machine-frame error (transform).
-    Capball {
-        volts: [f64; 3],
-        d_um: [f64; 3],
-        e_um: [f64; 3],
-        flags: u8,
-    },
-    /// PSD-2 sample: position, summed photocurrent, head temperature.
-    Psd {
-        x_um: f64,
-        y_um: f64,
-        sum_pa: f64,
-        head_c: f64,
-    },
-}
-
-/// A CNC trigger, from SocketCAN or SLCAN alike.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Trigger {
-    pub event: protocol::can::TriggerEvent,
-    pub pose: u16,
-    pub nc_ms: u32,
-    pub host_ns: u64,
-}
-
-/// Per-instrument counters. Every field only grows during a run.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct Counters {
-    /// Samples handed on (LI-80: `$POS` and `$ENV`; triggers: trigger frames).
-    pub samples: u64,
-    /// Samples missing according to the sequence numbers.
-    pub gap_samples: u64,
-    /// Number of gaps (events), each of one or more samples.
-    pub gaps: u64,
-    /// Lines or frames discarded by the decoder (and trigger frames with a bad payload), by
-    /// kind, once streaming. What a device sends before we start its stream is discarded
-    /// uncounted.
-    pub rejections: std::collections::BTreeMap<protocol::RejectKind, u64>,
-    /// Sequence number or device clock stepped back within one connection (the device
-    /// restarted under us): counting and the clock fit start afresh; not a gap.
-    pub resyncs: u64,
-    /// Connections identified again after a disconnect.
-    pub reconnects: u64,
-    pub disconnects: u64,
-    /// Samples that could not be delivered because the consumer's queue was full.
-    pub dropped: u64,
-    /// Samples marked invalid (beam low or datum lost, over-range, photocurrent below minimum).
-    pub invalid: u64,
-    /// Asynchronous device errors (`$ERR`; CAN error frames on SocketCAN).
-    pub device_errors: u64,
-    /// Answer lines or frames routed to commands.
-    pub answers: u64,
-    /// Fitted drift of the device clock against the host clock, ppm (None until fitted).
-    pub clock_drift_ppm: Option<f64>,
-}
-
-/// Everything a driver reports.
-#[derive(Debug, Clone)]
-pub enum DriverEvent {
-    Sample(Sample),
-    Trigger(Trigger),
-    /// The device was identified (after every (re)connect).
-    Connected {
-        instrument: Instrument,
-        port: String,
-        identity: String,
-    },
-    /// The port vanished or failed; the driver retries with backoff.
-    Disconnected {
-        instrument: Instrument,
-        port: String,
-        reason: String,
-    },
-    /// An error the operator must read (device answered ERR or nothing).
-    Error {
-        instrument: Instrument,
-        port: String,
-        message: String,
-    },
-    /// A snapshot of the counters (sent about once a second and on change of connection).
-    Counters {
-        instrument: Instrument,
-        counters: Counters,
-    },
-}
-
-pub mod cb3;
-pub mod clock;
-pub mod li80;
-mod link;
-pub mod psd;
-pub mod trigger;
-
-/// How a driver hands its events on: a bounded queue; a full queue is counted, never waited on.
-pub type EventSender = tokio::sync::mpsc::Sender<DriverEvent>;
+pub use cb3::{Cb3Config, spawn_cb3};
+pub use error::DriverError;
+pub use event::{Counters, DriverEvent, EventSender, Sample, SampleValues, Trigger};
+pub use host_clock::HostClock;
+pub use instrument::Instrument;
+pub use li80::{Li80Config, spawn_li80};
+pub use psd::{HeadCorrection, PsdAxis, PsdConfig, spawn_psd};
+pub use trigger::{
+    SlcanConfig, SocketCanConfig, from_socketcan, spawn_slcan, spawn_socketcan, trigger_event,
+    trigger_from_frame, trigger_kind,
+};

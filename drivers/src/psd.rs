@@ -9,15 +9,17 @@
 
 use std::time::Duration;
 
-use protocol::Decoded;
 use protocol::convert::{ErrorMap, PsdReading, head_thermal_um, psd_position};
 use protocol::psd::{DataLine, Decoder, Line};
 
-use crate::link::{Acq, Device, Handler, Link, SessionError};
-use crate::{Instrument, Sample, SampleValues};
+use crate::sample_path::{FrameConverter, Reading, SamplePath};
+use crate::serial_driver::{SerialDriver, SerialSession, idle_timeout};
+use crate::stamper::SampleStamper;
+use crate::{DriverError, Instrument, SampleValues};
 
+/// What the daemon configures for the PSD-2.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
-pub struct Config {
+pub struct PsdConfig {
     pub port: String,
     pub baud: u32,
     pub rate_hz: u32,
@@ -50,7 +52,7 @@ pub struct HeadCorrection {
     pub t_ref_c: f64,
 }
 
-impl Config {
+impl PsdConfig {
     /// Position (µm), total photocurrent of the four electrodes (pA), validity.
     pub fn convert(&self, d: &DataLine) -> (f64, f64, f64, bool) {
         let sum_pa = (d.x1_pa as f64 + d.x2_pa as f64) + (d.y1_pa as f64 + d.y2_pa as f64);
@@ -81,33 +83,26 @@ impl Config {
     }
 }
 
-struct Psd {
-    cfg: Config,
-    acq: Acq,
+/// PSD-2 data lines to readings: position, error map, head correction, validity.
+struct PsdFrames {
+    cfg: PsdConfig,
 }
 
-impl Handler for Psd {
-    type Dec = Decoder;
+impl FrameConverter for PsdFrames {
+    type Decoder = Decoder;
 
-    fn on_item(&mut self, item: Decoded<Line>, host_ns: u64) -> Option<String> {
-        match item {
-            Decoded::Reject(r) => self.acq.reject(r.kind, r.bytes),
-            Decoded::Frame(Line::Answer(a)) => {
-                self.acq.counters.answers += 1;
-                return Some(a);
-            }
-            Decoded::Frame(Line::Data(d)) => {
-                if !self.acq.accepting {
-                    return None;
-                }
-                let (seq, device_t_us, fitted_ns) = self.acq.stamp(d.seq as u64, d.t_us, host_ns);
+    fn new_decoder(&self) -> Decoder {
+        Decoder::new()
+    }
+
+    fn convert(&mut self, line: Line, _host_ns: u64, out: &mut impl FnMut(Reading)) {
+        match line {
+            Line::Answer(a) => out(Reading::Answer(a)),
+            Line::Data(d) => {
                 let (x_um, y_um, sum_pa, valid) = self.cfg.convert(&d);
-                self.acq.emit_sample(Sample {
-                    instrument: Instrument::Psd,
-                    seq,
-                    device_t_us,
-                    host_ns,
-                    fitted_ns,
+                out(Reading::Data {
+                    raw_seq: d.seq as u64,
+                    raw_t_us: d.t_us,
                     valid,
                     values: SampleValues::Psd {
                         x_um,
@@ -118,7 +113,6 @@ impl Handler for Psd {
                 });
             }
         }
-        None
     }
 }
 
@@ -127,77 +121,87 @@ fn syst_err_code(a: &str) -> Option<i32> {
     a.split(',').next()?.trim().parse().ok()
 }
 
-impl Device for Psd {
-    fn acq(&mut self) -> &mut Acq {
-        &mut self.acq
-    }
+/// The PSD-2's session: SCPI commands, `*OPC?` and the error queue.
+struct PsdDriver {
+    baud: u32,
+    rate_hz: u32,
+}
+
+impl SerialDriver for PsdDriver {
+    type Converter = PsdFrames;
+
     fn baud(&self) -> u32 {
-        self.cfg.baud
-    }
-    fn new_decoder(&self) -> Decoder {
-        Decoder::new()
+        self.baud
     }
     fn idle_timeout(&self) -> Duration {
-        crate::li80::idle_timeout(self.cfg.rate_hz)
+        idle_timeout(self.rate_hz)
     }
-    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
-        link.send("INIT:CONT OFF\n").await?;
-        link.expect(self, "*OPC?\n", |a| a.trim() == "1")
-            .await
-            .map(drop)
+    async fn stop(&self, s: &mut SerialSession<'_, PsdFrames>) -> Result<(), DriverError> {
+        s.send("INIT:CONT OFF\n").await?;
+        s.expect("*OPC?\n", |a| a.trim() == "1").await.map(drop)
     }
 
-    async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
-        if let Some(m) = &self.cfg.error_map
-            && let Err(e) = m.validate()
+    async fn setup(&self, s: &mut SerialSession<'_, PsdFrames>) -> Result<String, DriverError> {
+        if let Some(m) = &s.path.converter.cfg.error_map
+            && let Err(cause) = m.validate()
         {
-            return Err(SessionError::Device(format!(
-                "port {}: PSD error map: {e}",
-                self.acq.port
-            )));
+            return Err(DriverError::BadErrorMap {
+                port: s.port().to_string(),
+                cause,
+            });
         }
-        self.acq.set_rate(self.cfg.rate_hz);
-        link.send("INIT:CONT OFF\n").await?;
-        link.expect(self, "*OPC?\n", |a| a.trim() == "1").await?;
-        link.reset_decoder();
+        s.path.stamper.set_rate(self.rate_hz);
+        s.send("INIT:CONT OFF\n").await?;
+        s.expect("*OPC?\n", |a| a.trim() == "1").await?;
+        s.reset_decoder();
         // Empty the error queue of whatever came before us.
         for _ in 0..16 {
-            let a = link
-                .expect(self, "SYST:ERR?\n", |a| syst_err_code(a).is_some())
+            let a = s
+                .expect("SYST:ERR?\n", |a| syst_err_code(a).is_some())
                 .await?;
             if syst_err_code(&a) == Some(0) {
                 break;
             }
         }
-        let idn = link
-            .expect(self, "*IDN?\n", |a| a.starts_with("PSD-2,"))
-            .await?;
-        let rate = format!("CONF:RATE {}\n", self.cfg.rate_hz);
-        link.send(&rate).await?;
-        let err = link.command(self, "SYST:ERR?\n").await?;
+        let idn = s.expect("*IDN?\n", |a| a.starts_with("PSD-2,")).await?;
+        let rate = format!("CONF:RATE {}\n", self.rate_hz);
+        s.send(&rate).await?;
+        let err = s.command("SYST:ERR?\n").await?;
         if syst_err_code(&err) != Some(0) {
-            return Err(SessionError::Device(format!(
-                "port {}: command `{}` failed: SYST:ERR? answered `{}`",
-                link.path,
-                rate.trim(),
-                err.escape_debug()
-            )));
+            return Err(DriverError::CommandFailed {
+                port: s.port().to_string(),
+                command: rate.trim().to_string(),
+                answer: err,
+            });
         }
-        self.acq.accepting = true;
-        link.send("INIT:CONT ON\n").await?;
-        link.expect(self, "*OPC?\n", |a| a.trim() == "1").await?;
+        s.start_accepting();
+        s.send("INIT:CONT ON\n").await?;
+        s.expect("*OPC?\n", |a| a.trim() == "1").await?;
         Ok(idn.trim().to_string())
     }
 }
 
-pub fn spawn(
-    cfg: Config,
+/// Start the PSD-2 driver task. It runs until `cancel` fires, reconnecting with backoff.
+pub fn spawn_psd(
+    cfg: PsdConfig,
     clock: crate::HostClock,
     tx: crate::EventSender,
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
-    let acq = Acq::new(Instrument::Psd, &cfg.port, 32, 64, clock, tx);
-    tokio::spawn(crate::link::run(Psd { cfg, acq }, cancel))
+    let driver = PsdDriver {
+        baud: cfg.baud,
+        rate_hz: cfg.rate_hz,
+    };
+    let port = cfg.port.clone();
+    let path = SamplePath::new(
+        PsdFrames { cfg },
+        SampleStamper::new(32, 64),
+        Instrument::Psd,
+        &port,
+        clock,
+        tx,
+    );
+    tokio::spawn(crate::serial_driver::run(driver, path, cancel))
 }
 
 #[cfg(test)]
@@ -205,8 +209,8 @@ mod tests {
     use super::*;
     use protocol::convert::OutsideMap;
 
-    fn cfg() -> Config {
-        Config {
+    fn cfg() -> PsdConfig {
+        PsdConfig {
             port: String::new(),
             baud: 921_600,
             rate_hz: 100,

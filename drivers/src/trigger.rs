@@ -7,19 +7,23 @@
 
 use std::time::Duration;
 
-use protocol::can::{TriggerError, TriggerFrame};
+use metrology::steady::TriggerKind;
+use protocol::can::{TriggerError, TriggerEvent, TriggerFrame};
 use protocol::slcan::{CanFrame, Decoder, Message};
-use protocol::{Decoded, RejectKind};
 
-use crate::link::{Acq, Device, Handler, Link, SessionError};
-use crate::{Instrument, Trigger};
+use crate::sample_path::{FrameConverter, Reading, SamplePath};
+use crate::serial_driver::{SerialDriver, SerialSession};
+use crate::stamper::SampleStamper;
+use crate::{DriverError, EventSender, HostClock, Instrument, Trigger};
 
+/// What the daemon configures for an SLCAN (serial) CAN adapter.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
 pub struct SlcanConfig {
     pub port: String,
     pub can_id: u32,
 }
 
+/// What the daemon configures for a SocketCAN interface.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
 pub struct SocketCanConfig {
     pub interface: String,
@@ -45,107 +49,142 @@ pub fn trigger_from_frame(
     }))
 }
 
-/// The rejection kind a bad trigger payload is counted under.
-pub fn reject_kind(e: &TriggerError) -> RejectKind {
-    match e {
-        TriggerError::BadDlc(_) => RejectKind::BadLength,
-        TriggerError::UnknownEvent(_) => RejectKind::UnknownRecord,
-        TriggerError::Reserved(_) => RejectKind::Malformed,
+/// The pose detector's kind of a CAN trigger event (`metrology::steady`, one to one).
+pub fn trigger_kind(event: TriggerEvent) -> TriggerKind {
+    match event {
+        TriggerEvent::MotionStart => TriggerKind::MotionStart,
+        TriggerEvent::ExactStop => TriggerKind::ExactStop,
+        TriggerEvent::DwellEnd => TriggerKind::DwellEnd,
+        TriggerEvent::ProgramStart => TriggerKind::ProgramStart,
+        TriggerEvent::ProgramEnd => TriggerKind::ProgramEnd,
+        TriggerEvent::FeedHold => TriggerKind::FeedHold,
     }
 }
 
-/// The one path every received CAN frame takes, whichever the transport.
-fn handle_frame(acq: &mut Acq, frame: &CanFrame, can_id: u32, host_ns: u64) {
-    if !acq.accepting {
-        return;
+/// The CAN trigger event of a pose detector's trigger kind (inverse of [`trigger_kind`]).
+pub fn trigger_event(kind: TriggerKind) -> TriggerEvent {
+    match kind {
+        TriggerKind::MotionStart => TriggerEvent::MotionStart,
+        TriggerKind::ExactStop => TriggerEvent::ExactStop,
+        TriggerKind::DwellEnd => TriggerEvent::DwellEnd,
+        TriggerKind::ProgramStart => TriggerEvent::ProgramStart,
+        TriggerKind::ProgramEnd => TriggerEvent::ProgramEnd,
+        TriggerKind::FeedHold => TriggerEvent::FeedHold,
     }
+}
+
+impl Trigger {
+    /// This trigger's kind as the pose detector takes it.
+    pub fn kind(&self) -> TriggerKind {
+        trigger_kind(self.event)
+    }
+}
+
+/// What a CAN frame means: nothing when it is not ours, else a trigger or a bad payload.
+fn frame_reading(frame: &CanFrame, can_id: u32, host_ns: u64) -> Option<Reading> {
     match trigger_from_frame(frame, can_id, host_ns) {
-        Ok(Some(t)) => acq.emit_trigger(t),
-        Ok(None) => {}
-        Err(e) => {
-            tracing::warn!(port = %acq.port, id = frame.id, "bad trigger frame: {e}");
-            acq.reject(reject_kind(&e), frame.data.len());
-        }
+        Ok(Some(t)) => Some(Reading::Trigger(t)),
+        Ok(None) => None,
+        Err(error) => Some(Reading::BadTrigger {
+            can_id: frame.id,
+            error,
+            bytes: frame.data.len(),
+        }),
     }
 }
 
-struct Slcan {
-    cfg: SlcanConfig,
-    acq: Acq,
+/// SLCAN messages to readings: data frames through [`trigger_from_frame`], acknowledgements
+/// as answers.
+struct SlcanFrames {
+    port: String,
+    can_id: u32,
 }
 
 const ACK: &str = "\r";
 const NACK: &str = "\x07";
 
-impl Handler for Slcan {
-    type Dec = Decoder;
+impl FrameConverter for SlcanFrames {
+    type Decoder = Decoder;
 
-    fn on_item(&mut self, item: Decoded<Message>, host_ns: u64) -> Option<String> {
-        match item {
-            Decoded::Reject(r) => self.acq.reject(r.kind, r.bytes),
-            Decoded::Frame(Message::Frame(f)) => {
-                handle_frame(&mut self.acq, &f, self.cfg.can_id, host_ns)
+    fn new_decoder(&self) -> Decoder {
+        Decoder::new()
+    }
+
+    fn convert(&mut self, m: Message, host_ns: u64, out: &mut impl FnMut(Reading)) {
+        match m {
+            Message::Frame(f) => {
+                if let Some(r) = frame_reading(&f, self.can_id, host_ns) {
+                    out(r)
+                }
             }
-            Decoded::Frame(Message::Ack) => {
-                self.acq.counters.answers += 1;
-                return Some(ACK.into());
-            }
-            Decoded::Frame(Message::Nack) => {
-                self.acq.counters.answers += 1;
-                return Some(NACK.into());
-            }
-            Decoded::Frame(Message::Other(o)) => {
-                tracing::debug!(port = %self.acq.port, "SLCAN says {o:?}")
-            }
+            Message::Ack => out(Reading::Answer(ACK.into())),
+            Message::Nack => out(Reading::Answer(NACK.into())),
+            Message::Other(o) => tracing::debug!(port = %self.port, "SLCAN says {o:?}"),
         }
-        None
     }
 }
 
-impl Device for Slcan {
-    fn acq(&mut self) -> &mut Acq {
-        &mut self.acq
-    }
+/// The SLCAN adapter's session: close, set 500 kbit/s, open.
+struct SlcanDriver {
+    can_id: u32,
+}
+
+impl SerialDriver for SlcanDriver {
+    type Converter = SlcanFrames;
+
     fn baud(&self) -> u32 {
         115_200
-    }
-    fn new_decoder(&self) -> Decoder {
-        Decoder::new()
     }
     fn idle_timeout(&self) -> Duration {
         // Triggers come when the machine moves; silence is normal. A vanished port still
         // shows as a read error.
         Duration::from_secs(24 * 3600)
     }
-    async fn stop(&mut self, link: &mut Link<Decoder>) -> Result<(), SessionError> {
-        link.expect(self, "C\r", |a| a == ACK || a == NACK)
-            .await
-            .map(drop)
+    async fn stop(&self, s: &mut SerialSession<'_, SlcanFrames>) -> Result<(), DriverError> {
+        s.expect("C\r", |a| a == ACK || a == NACK).await.map(drop)
     }
 
-    async fn setup(&mut self, link: &mut Link<Decoder>) -> Result<String, SessionError> {
+    async fn setup(&self, s: &mut SerialSession<'_, SlcanFrames>) -> Result<String, DriverError> {
         // Close first: the channel may be open from an earlier run (a nack just means it was
         // closed already).
-        link.expect(self, "C\r", |a| a == ACK || a == NACK).await?;
-        link.reset_decoder();
-        link.expect(self, "S6\r", |a| a == ACK).await?;
-        self.acq.accepting = true;
-        link.expect(self, "O\r", |a| a == ACK).await?;
+        s.expect("C\r", |a| a == ACK || a == NACK).await?;
+        s.reset_decoder();
+        s.expect("S6\r", |a| a == ACK).await?;
+        s.start_accepting();
+        s.expect("O\r", |a| a == ACK).await?;
         Ok(format!(
             "SLCAN adapter at 500 kbit/s, trigger id {:#05x}",
-            self.cfg.can_id
+            self.can_id
         ))
     }
 }
 
+fn trigger_path(
+    port: &str,
+    can_id: u32,
+    clock: HostClock,
+    tx: EventSender,
+) -> SamplePath<SlcanFrames> {
+    let frames = SlcanFrames {
+        port: port.to_string(),
+        can_id,
+    };
+    // Triggers carry no device sequence or clock to fit: the stamper stays unused.
+    let stamper = SampleStamper::new(32, 32);
+    SamplePath::new(frames, stamper, Instrument::Trigger, port, clock, tx)
+}
+
+/// Start the SLCAN trigger driver task. It runs until `cancel` fires, reconnecting with
+/// backoff.
 pub fn spawn_slcan(
     cfg: SlcanConfig,
-    clock: crate::HostClock,
-    tx: crate::EventSender,
+    clock: HostClock,
+    tx: EventSender,
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
-    let acq = Acq::new(Instrument::Trigger, &cfg.port, 32, 32, clock, tx);
-    tokio::spawn(crate::link::run(Slcan { cfg, acq }, cancel))
+    let path = trigger_path(&cfg.port, cfg.can_id, clock, tx);
+    let driver = SlcanDriver { can_id: cfg.can_id };
+    tokio::spawn(crate::serial_driver::run(driver, path, cancel))
 }
 
 /// A SocketCAN frame as the SLCAN path sees it (`None` for remote and error frames).
@@ -162,40 +201,38 @@ pub fn from_socketcan(f: &socketcan::CanFrame) -> Option<CanFrame> {
     }
 }
 
+/// Start the SocketCAN trigger driver task. It runs until `cancel` fires, reopening the
+/// interface with backoff.
 pub fn spawn_socketcan(
     cfg: SocketCanConfig,
-    clock: crate::HostClock,
-    tx: crate::EventSender,
+    clock: HostClock,
+    tx: EventSender,
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
     tokio::spawn(async move {
-        let mut acq = Acq::new(Instrument::Trigger, &cfg.interface, 32, 32, clock, tx);
+        let mut path = trigger_path(&cfg.interface, cfg.can_id, clock, tx);
         let mut backoff = Duration::from_millis(100);
         while !cancel.is_cancelled() {
             match socketcan::tokio::CanSocket::open(&cfg.interface) {
-                Err(e) => acq.error(format!("cannot open CAN interface {}: {e}", cfg.interface)),
+                Err(e) => path.reporter.error(DriverError::CanInterface {
+                    interface: cfg.interface.clone(),
+                    cause: std::sync::Arc::new(e),
+                }),
                 Ok(sock) => {
                     backoff = Duration::from_millis(100);
-                    acq.connected(format!("SocketCAN {}", cfg.interface));
-                    acq.accepting = true;
+                    let identity = format!("SocketCAN {}", cfg.interface);
+                    path.reporter.connected(identity, &path.stamper);
+                    path.reporter.accepting = true;
                     loop {
                         let r = tokio::select! {
                             _ = cancel.cancelled() => return,
                             r = sock.read_frame() => r,
                         };
                         match r {
-                            Ok(f) => {
-                                let host_ns = acq.clock.now_ns();
-                                match from_socketcan(&f) {
-                                    Some(cf) => handle_frame(&mut acq, &cf, cfg.can_id, host_ns),
-                                    None if matches!(f, socketcan::CanFrame::Error(_)) => {
-                                        acq.counters.device_errors += 1
-                                    }
-                                    None => {}
-                                }
-                            }
+                            Ok(f) => socketcan_frame(&mut path, &f, cfg.can_id),
                             Err(e) => {
-                                acq.disconnected(format!("read failed: {e}"));
+                                let reason = DriverError::ReadFailed { cause: e.into() };
+                                path.reporter.disconnected(reason, &path.stamper);
                                 break;
                             }
                         }
@@ -208,14 +245,31 @@ pub fn spawn_socketcan(
             }
             backoff = (backoff * 2).min(Duration::from_secs(2));
         }
-        acq.tick(true);
+        path.tick(true);
     })
+}
+
+/// One received SocketCAN frame down the trigger path; error frames are device errors.
+fn socketcan_frame(path: &mut SamplePath<SlcanFrames>, f: &socketcan::CanFrame, can_id: u32) {
+    let host_ns = path.reporter.clock.now_ns();
+    match from_socketcan(f) {
+        Some(cf) => {
+            if let Some(r) = frame_reading(&cf, can_id, host_ns) {
+                path.take_reading(r, host_ns)
+            }
+        }
+        None if matches!(f, socketcan::CanFrame::Error(_)) => {
+            path.reporter.counters.device_errors += 1
+        }
+        None => {}
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::can::TriggerEvent;
+    use crate::sample_path::reject_kind;
+    use protocol::RejectKind;
 
     fn frame(id: u32, extended: bool, data: Vec<u8>) -> CanFrame {
         CanFrame {
@@ -279,24 +333,34 @@ mod tests {
             (t.event, t.pose, t.nc_ms),
             (TriggerEvent::ProgramStart, 0, 16)
         );
-        // Through the shared handler: counted as a trigger.
+        // Through the shared path: counted as a trigger; a bad payload as a rejection.
         let (tx, mut rx) = tokio::sync::mpsc::channel(4);
-        let mut acq = Acq::new(
-            Instrument::Trigger,
-            "can0",
-            32,
-            32,
-            crate::HostClock::new(),
-            tx,
-        );
-        acq.accepting = true;
-        handle_frame(&mut acq, &cf, 0x181, 1);
-        handle_frame(&mut acq, &frame(0x181, false, vec![1]), 0x181, 2);
-        assert_eq!(acq.counters.samples, 1);
+        let mut path = trigger_path("can0", 0x181, HostClock::new(), tx);
+        path.reporter.accepting = true;
+        socketcan_frame(&mut path, &sc, 0x181);
+        let bad = socketcan::CanFrame::new(id, &[1]).unwrap();
+        socketcan_frame(&mut path, &bad, 0x181);
+        assert_eq!(path.reporter.counters.samples, 1);
         assert_eq!(
-            acq.counters.rejections.get(&RejectKind::BadLength),
+            path.reporter
+                .counters
+                .rejections
+                .get(&RejectKind::BadLength),
             Some(&1)
         );
         assert!(matches!(rx.try_recv(), Ok(crate::DriverEvent::Trigger(t)) if t.pose == 0));
+    }
+
+    #[test]
+    fn trigger_kinds_are_the_events_by_name() {
+        for e in TriggerEvent::ALL {
+            let k = trigger_kind(e);
+            assert_eq!(trigger_event(k), e);
+            // Same serde name on both sides: the log stores one, the detector takes the other.
+            assert_eq!(
+                serde_json::to_value(e).unwrap(),
+                serde_json::to_value(k).unwrap()
+            );
+        }
     }
 }

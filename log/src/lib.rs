@@ -72,7 +72,7 @@ pub const DETECTOR_KEY: &str = "detector";
 pub struct DetectorSettings {
     /// The instruments of the run: only these get pose values (an instrument that is not
     /// part of the run would otherwise get a `device_away` at every pose).
-    pub instruments: Vec<topics::PoseInstrument>,
+    pub instruments: Vec<drivers::Instrument>,
     pub interferometer: SteadyConfig,
     pub capball: SteadyConfig,
     pub psd: SteadyConfig,
@@ -81,7 +81,7 @@ pub struct DetectorSettings {
 impl Default for DetectorSettings {
     fn default() -> Self {
         DetectorSettings {
-            instruments: topics::PoseInstrument::ALL.to_vec(),
+            instruments: drivers::Instrument::POSE_VALUED.to_vec(),
             interferometer: SteadyConfig::default(),
             capball: SteadyConfig::default(),
             psd: SteadyConfig::default(),

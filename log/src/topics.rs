@@ -8,7 +8,7 @@
 use std::collections::BTreeMap;
 
 use drivers::{Counters, Instrument, Sample, SampleValues, Trigger};
-use metrology::steady::{PoseStatus, PoseValue, TriggerKind};
+use metrology::steady::{PoseStatus, PoseValue};
 use protocol::can::TriggerEvent;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
@@ -168,112 +168,21 @@ pub struct PsdMsg {
 }
 topic!(PsdMsg, "/psd/sample", "metrolog.Psd");
 
-/// CNC trigger event names (instruments.md §4).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum TriggerEventName {
-    MotionStart,
-    ExactStop,
-    DwellEnd,
-    ProgramStart,
-    ProgramEnd,
-    FeedHold,
-}
-
-impl From<TriggerEvent> for TriggerEventName {
-    fn from(e: TriggerEvent) -> Self {
-        match e {
-            TriggerEvent::MotionStart => TriggerEventName::MotionStart,
-            TriggerEvent::ExactStop => TriggerEventName::ExactStop,
-            TriggerEvent::DwellEnd => TriggerEventName::DwellEnd,
-            TriggerEvent::ProgramStart => TriggerEventName::ProgramStart,
-            TriggerEvent::ProgramEnd => TriggerEventName::ProgramEnd,
-            TriggerEvent::FeedHold => TriggerEventName::FeedHold,
-        }
-    }
-}
-
-impl From<TriggerEventName> for TriggerEvent {
-    fn from(e: TriggerEventName) -> Self {
-        match e {
-            TriggerEventName::MotionStart => TriggerEvent::MotionStart,
-            TriggerEventName::ExactStop => TriggerEvent::ExactStop,
-            TriggerEventName::DwellEnd => TriggerEvent::DwellEnd,
-            TriggerEventName::ProgramStart => TriggerEvent::ProgramStart,
-            TriggerEventName::ProgramEnd => TriggerEvent::ProgramEnd,
-            TriggerEventName::FeedHold => TriggerEvent::FeedHold,
-        }
-    }
-}
-
-impl From<TriggerEventName> for TriggerKind {
-    fn from(e: TriggerEventName) -> Self {
-        match e {
-            TriggerEventName::MotionStart => TriggerKind::MotionStart,
-            TriggerEventName::ExactStop => TriggerKind::ExactStop,
-            TriggerEventName::DwellEnd => TriggerKind::DwellEnd,
-            TriggerEventName::ProgramStart => TriggerKind::ProgramStart,
-            TriggerEventName::ProgramEnd => TriggerKind::ProgramEnd,
-            TriggerEventName::FeedHold => TriggerKind::FeedHold,
-        }
-    }
-}
-
 /// `/cnc/trigger`: one CNC trigger frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct TriggerMsg {
-    pub event: TriggerEventName,
+    pub event: TriggerEvent,
     pub pose: u16,
     /// NC clock, ms (wraps).
     pub nc_ms: u32,
 }
 topic!(TriggerMsg, "/cnc/trigger", "metrolog.Trigger");
 
-/// The instruments that give pose values.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema,
-)]
-#[serde(rename_all = "snake_case")]
-pub enum PoseInstrument {
-    Interferometer,
-    Capball,
-    Psd,
-}
-
-impl PoseInstrument {
-    pub const ALL: [PoseInstrument; 3] = [
-        PoseInstrument::Interferometer,
-        PoseInstrument::Capball,
-        PoseInstrument::Psd,
-    ];
-    pub fn name(self) -> &'static str {
-        match self {
-            PoseInstrument::Interferometer => "interferometer",
-            PoseInstrument::Capball => "capball",
-            PoseInstrument::Psd => "psd",
-        }
-    }
-    /// Names of the detector's channels, in order.
-    pub fn channels(self) -> &'static [&'static str] {
-        match self {
-            PoseInstrument::Interferometer => &["position_um"],
-            PoseInstrument::Capball => &["ex_um", "ey_um", "ez_um"],
-            PoseInstrument::Psd => &["x_um", "y_um"],
-        }
-    }
-    pub fn instrument(self) -> Instrument {
-        match self {
-            PoseInstrument::Interferometer => Instrument::Interferometer,
-            PoseInstrument::Capball => Instrument::Capball,
-            PoseInstrument::Psd => Instrument::Psd,
-        }
-    }
-}
-
 /// `/pose`: the steady value of one instrument at one pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct PoseMsg {
-    pub instrument: PoseInstrument,
+    /// One of the instruments that give pose values (`Instrument::POSE_VALUED`).
+    pub instrument: Instrument,
     pub pose: u32,
     pub status: PoseStatus,
     /// Samples averaged (0 when no value).
@@ -290,8 +199,8 @@ pub struct PoseMsg {
 topic!(PoseMsg, "/pose", "metrolog.Pose");
 
 impl PoseMsg {
-    pub fn from_value(instrument: PoseInstrument, v: &PoseValue) -> PoseMsg {
-        let names = instrument.channels();
+    pub fn from_value(instrument: Instrument, v: &PoseValue) -> PoseMsg {
+        let names = instrument.detector_channels();
         let map = |xs: &[f64]| {
             names
                 .iter()
@@ -525,14 +434,14 @@ impl Decoded {
 impl TriggerMsg {
     pub fn from_trigger(t: &Trigger) -> TriggerMsg {
         TriggerMsg {
-            event: t.event.into(),
+            event: t.event,
             pose: t.pose,
             nc_ms: t.nc_ms,
         }
     }
     pub fn to_trigger(&self, host_ns: u64) -> Trigger {
         Trigger {
-            event: self.event.into(),
+            event: self.event,
             pose: self.pose,
             nc_ms: self.nc_ms,
             host_ns,

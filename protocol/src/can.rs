@@ -1,6 +1,8 @@
 //! CNC exact-stop trigger frames (instruments.md §4): CAN 2.0A, DLC 8, little-endian.
 
+/// CNC trigger event names (instruments.md §4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "schemars", derive(schemars::JsonSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum TriggerEvent {
     MotionStart = 1,
@@ -41,6 +43,8 @@ pub struct TriggerFrame {
 
 /// Default identifier of trigger frames.
 pub const DEFAULT_CAN_ID: u32 = 0x181;
+/// Largest identifier of a standard (CAN 2.0A, 11-bit) frame.
+pub const STANDARD_ID_MAX: u32 = 0x7FF;
 
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum TriggerError {

@@ -21,12 +21,16 @@ pub const TYPE_SAMPLE: u8 = 0x01;
 pub const TYPE_TEXT: u8 = 0x7F;
 /// Payload size of a sample frame: type 1 + seq 2 + t_us 4 + 3 × ch 4 + flags 1 + crc 2.
 pub const SAMPLE_PAYLOAD_LEN: usize = 22;
-/// Range of `RATE <hz>` the device accepts.
+/// Range of `RATE <hz>` the device accepts (instruments.md §2).
 pub const RATE_MIN_HZ: u32 = 100;
 pub const RATE_MAX_HZ: u32 = 20_000;
+/// [`RATE_MIN_HZ`]`..=`[`RATE_MAX_HZ`], for range checks.
+pub const RATE_HZ: std::ops::RangeInclusive<u32> = RATE_MIN_HZ..=RATE_MAX_HZ;
 /// Full scale of the 24-bit codes: volts = code · 10.0 / 8388608.
 pub const CODE_FULL_SCALE: f64 = 8_388_608.0;
 pub const VOLTS_FULL_SCALE: f64 = 10.0;
+/// Largest code a channel can carry (24-bit two's complement).
+pub const CODE_MAX: i32 = 8_388_607;
 
 /// Payload type `0x01`: `seq u16, t_us u32 (wraps), ch0..ch2 i32 (24-bit codes), flags u8, crc u16`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

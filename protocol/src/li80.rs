@@ -44,9 +44,12 @@ pub struct PosFrame {
 /// Below this signal strength (%) a reading is invalid.
 pub const SIG_MIN: u8 = 25;
 
-/// Range of `RATE <hz>` the device accepts.
+/// Range of `RATE <hz>` the device accepts (instruments.md §1); outside it answers
+/// `ERR 2 rate out of range`.
 pub const RATE_MIN_HZ: u32 = 1;
 pub const RATE_MAX_HZ: u32 = 10_000;
+/// [`RATE_MIN_HZ`]`..=`[`RATE_MAX_HZ`], for range checks.
+pub const RATE_HZ: std::ops::RangeInclusive<u32> = RATE_MIN_HZ..=RATE_MAX_HZ;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct PosFlags(pub u32);

@@ -10,6 +10,21 @@
 //!
 //! The host-side conversions are in [`edlen`] (refractive index of air) and [`convert`].
 //!
+//! # Data-sheet limits
+//!
+//! The numbers of `docs/instruments.md` are defined here and nowhere else in the workspace
+//! (the daemon's config checks, the simulator and the analyses use these):
+//! - rates: [`li80::RATE_HZ`] (1–10000 Hz), [`cb3::RATE_HZ`] (100–20000 Hz),
+//!   [`psd::RATE_HZ`] (1–1000 Hz), and [`POWER_UP_RATE_HZ`] (10 Hz, every device);
+//! - links: [`psd::BAUDS`], [`psd::DEFAULT_BAUD`], [`psd::LINE_BITS`],
+//!   [`can::STANDARD_ID_MAX`], [`can::DEFAULT_CAN_ID`];
+//! - sensor ranges: [`li80::SIG_MIN`], [`cb3::CODE_MAX`], [`cb3::CODE_FULL_SCALE`],
+//!   [`cb3::VOLTS_FULL_SCALE`], [`convert::AIR_C_RANGE`], [`convert::AIR_PA_RANGE`],
+//!   [`convert::RH_PCT_RANGE`], [`convert::MATERIAL_C_RANGE`], [`convert::PSD_LX_MM`],
+//!   [`convert::PSD_LY_MM`], [`convert::CapBallPoly::NOMINAL`];
+//! - material expansion coefficients α: [`convert::ALPHA_STEEL_UM_PER_M_K`] (the default of the
+//!   measured axis, 11.7 µm/(m·K)), [`convert::HEAD_ALPHA_UM_PER_M_K`] (invar of the PSD head).
+//!
 //! ```
 //! use protocol::{Decoded, RejectKind, StreamDecoder, li80};
 //!
@@ -35,6 +50,10 @@ pub mod slcan;
 mod text;
 
 pub use reject::{RejectKind, Rejection};
+
+/// Rate every instrument streams at after power-up, until told otherwise (instruments.md,
+/// introduction).
+pub const POWER_UP_RATE_HZ: u32 = 10;
 
 /// What a streaming decoder hands out for the bytes it was fed.
 #[derive(Debug, Clone, PartialEq)]

@@ -43,9 +43,20 @@ pub enum Line {
 /// maximum is 129 bytes; the cap leaves room for that and for long answers.
 pub const MAX_LINE: usize = 160;
 
-/// Range of `CONF:RATE <hz>` the device accepts; outside it sets error −222.
+/// Range of `CONF:RATE <hz>` the device accepts; outside it sets error −222 (instruments.md §3).
 pub const RATE_MIN_HZ: u32 = 1;
 pub const RATE_MAX_HZ: u32 = 1000;
+/// [`RATE_MIN_HZ`]`..=`[`RATE_MAX_HZ`], for range checks.
+pub const RATE_HZ: std::ops::RangeInclusive<u32> = RATE_MIN_HZ..=RATE_MAX_HZ;
+/// Baud rate of the board's serial link at power-up (instruments.md §3).
+pub const DEFAULT_BAUD: u32 = 921_600;
+/// Baud rates the board's serial link can be set to.
+pub const BAUDS: [u32; 8] = [
+    9600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 921_600,
+];
+/// Bits one data line takes on the wire: about 55 bytes of 10 bits (8N1), so that a link of
+/// `baud` carries at most `baud / LINE_BITS` lines per second (instruments.md §3).
+pub const LINE_BITS: u32 = 55 * 10;
 
 #[derive(Debug, Default)]
 pub struct Decoder {

@@ -123,14 +123,14 @@ fn main() {
         let clock = HostClock::new();
         let port = |l: &str| dir.path().join(l).display().to_string();
         let tasks = vec![
-            drivers::li80::spawn(
-                drivers::li80::Config { port: port("li80"), rate_hz: LI80_HZ as u32, alpha_um_per_m_k: 11.7 },
+            drivers::spawn_li80(
+                drivers::Li80Config { port: port("li80"), rate_hz: LI80_HZ as u32, alpha_um_per_m_k: 11.7 },
                 clock,
                 tx.clone(),
                 cancel.clone(),
             ),
-            drivers::cb3::spawn(
-                drivers::cb3::Config {
+            drivers::spawn_cb3(
+                drivers::Cb3Config {
                     port: port("cb3"),
                     rate_hz: CB3_HZ as u32,
                     poly: [[10.0, 0.0, 0.0]; 3],
@@ -140,8 +140,8 @@ fn main() {
                 tx.clone(),
                 cancel.clone(),
             ),
-            drivers::psd::spawn(
-                drivers::psd::Config {
+            drivers::spawn_psd(
+                drivers::PsdConfig {
                     port: port("psd2"),
                     baud: 921_600,
                     rate_hz: PSD_HZ as u32,
@@ -196,7 +196,7 @@ fn main() {
                 DriverEvent::Counters { instrument, counters: c } => {
                     counters.insert(instrument, c);
                 }
-                DriverEvent::Error { message, .. } => eprintln!("driver error: {message}"),
+                DriverEvent::Error { error, .. } => eprintln!("driver error: {error}"),
                 DriverEvent::Disconnected { reason, .. } => eprintln!("disconnected: {reason}"),
                 DriverEvent::Trigger(_) => {}
             }

@@ -190,8 +190,8 @@ impl Collected {
             DriverEvent::Sample(s) => self.samples.push(s),
             DriverEvent::Trigger(t) => self.triggers.push(t),
             DriverEvent::Connected { identity, .. } => self.connected.push(identity),
-            DriverEvent::Disconnected { reason, .. } => self.disconnected.push(reason),
-            DriverEvent::Error { message, .. } => self.errors.push(message),
+            DriverEvent::Disconnected { reason, .. } => self.disconnected.push(reason.to_string()),
+            DriverEvent::Error { error, .. } => self.errors.push(error.to_string()),
             DriverEvent::Counters { counters, .. } => self.counters = Some(counters),
         }
     }

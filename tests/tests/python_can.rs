@@ -96,11 +96,11 @@ async fn python_can_slcan_frames_are_read_by_our_trigger_driver() {
 
     let (tx, mut rx) = tokio::sync::mpsc::channel(1000);
     let cancel = CancellationToken::new();
-    let cfg = drivers::trigger::SlcanConfig {
+    let cfg = drivers::SlcanConfig {
         port: link.display().to_string(),
         can_id: 0x181,
     };
-    let task = drivers::trigger::spawn_slcan(cfg, HostClock::new(), tx, cancel.clone());
+    let task = drivers::spawn_slcan(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
     assert!(
         collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c

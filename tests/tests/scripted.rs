@@ -90,7 +90,7 @@ async fn cb3_values_wraps_and_fault_counts() {
 
     let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
     let cancel = CancellationToken::new();
-    let cfg = drivers::cb3::Config {
+    let cfg = drivers::Cb3Config {
         port: link.display().to_string(),
         rate_hz: 20_000,
         poly: [[10.0, 0.0, 0.0], [10.0, 0.5, 0.0], [10.0, 0.0, 0.0]],
@@ -101,7 +101,7 @@ async fn cb3_values_wraps_and_fault_counts() {
             [0.0, 0.0, 0.0, 1.0],
         ],
     };
-    let task = drivers::cb3::spawn(cfg, HostClock::new(), tx, cancel.clone());
+    let task = drivers::spawn_cb3(cfg, HostClock::new(), tx, cancel.clone());
     let lost: BTreeSet<u64> = dropped
         .union(&bad_crc)
         .chain(truncated.iter())
@@ -219,7 +219,7 @@ async fn psd_values_gating_and_bad_lines() {
         FakeDevice::start(&link, b'\n', psd_device(), chunks, Duration::from_millis(5)).unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
     let cancel = CancellationToken::new();
-    let cfg = drivers::psd::Config {
+    let cfg = drivers::PsdConfig {
         port: link.display().to_string(),
         baud: 921_600,
         rate_hz: 1000,
@@ -227,7 +227,7 @@ async fn psd_values_gating_and_bad_lines() {
         error_map: None,
         head: None,
     };
-    let task = drivers::psd::spawn(cfg, HostClock::new(), tx, cancel.clone());
+    let task = drivers::spawn_psd(cfg, HostClock::new(), tx, cancel.clone());
     let lost: BTreeSet<u64> = bad_field_count.union(&unparsable).copied().collect();
     let expected = N - lost.len() as u64;
     let mut c = Collected::default();
@@ -295,7 +295,7 @@ async fn psd_rate_refused_is_reported_with_port_command_and_answer() {
         FakeDevice::start(&link, b'\n', psd_device(), vec![], Duration::from_millis(5)).unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(1000);
     let cancel = CancellationToken::new();
-    let cfg = drivers::psd::Config {
+    let cfg = drivers::PsdConfig {
         port: link.display().to_string(),
         baud: 115_200,
         rate_hz: 5000,
@@ -303,7 +303,7 @@ async fn psd_rate_refused_is_reported_with_port_command_and_answer() {
         error_map: None,
         head: None,
     };
-    let task = drivers::psd::spawn(cfg, HostClock::new(), tx, cancel.clone());
+    let task = drivers::spawn_psd(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
     assert!(
         collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c
@@ -337,7 +337,7 @@ async fn silent_device_gets_a_clear_error() {
     .unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(1000);
     let cancel = CancellationToken::new();
-    let cfg = drivers::cb3::Config {
+    let cfg = drivers::Cb3Config {
         port: link.display().to_string(),
         rate_hz: 1000,
         poly: [[10.0, 0.0, 0.0]; 3],
@@ -348,7 +348,7 @@ async fn silent_device_gets_a_clear_error() {
             [0.0, 0.0, 0.0, 1.0],
         ],
     };
-    let task = drivers::cb3::spawn(cfg, HostClock::new(), tx, cancel.clone());
+    let task = drivers::spawn_cb3(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
     assert!(
         collect_until(&mut rx, &mut c, Duration::from_secs(10), |c| !c
@@ -399,7 +399,7 @@ async fn replugged_device_is_reconfigured_and_its_restart_is_not_a_gap() {
     .unwrap();
     let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
     let cancel = CancellationToken::new();
-    let cfg = drivers::cb3::Config {
+    let cfg = drivers::Cb3Config {
         port: link.display().to_string(),
         rate_hz: 1000,
         poly: [[10.0, 0.0, 0.0]; 3],
@@ -410,7 +410,7 @@ async fn replugged_device_is_reconfigured_and_its_restart_is_not_a_gap() {
             [0.0, 0.0, 0.0, 1.0],
         ],
     };
-    let task = drivers::cb3::spawn(cfg, HostClock::new(), tx, cancel.clone());
+    let task = drivers::spawn_cb3(cfg, HostClock::new(), tx, cancel.clone());
     let mut c = Collected::default();
     assert!(
         collect_until(&mut rx, &mut c, Duration::from_secs(20), |c| c
@@ -574,12 +574,12 @@ async fn li80_values_compensation_validity_and_fault_counts() {
     let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
     let cancel = CancellationToken::new();
     let alpha = 11.7;
-    let cfg = drivers::li80::Config {
+    let cfg = drivers::Li80Config {
         port: link.display().to_string(),
         rate_hz: 10_000,
         alpha_um_per_m_k: alpha,
     };
-    let task = drivers::li80::spawn(cfg, HostClock::new(), tx, cancel.clone());
+    let task = drivers::spawn_li80(cfg, HostClock::new(), tx, cancel.clone());
     let lost: BTreeSet<u64> = dropped
         .iter()
         .chain(&bad_checksum)

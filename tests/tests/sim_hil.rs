@@ -50,8 +50,8 @@ impl Rig {
         let mut tasks = Vec::new();
         for &i in which {
             let t = match i {
-                Instrument::Interferometer => drivers::li80::spawn(
-                    drivers::li80::Config {
+                Instrument::Interferometer => drivers::spawn_li80(
+                    drivers::Li80Config {
                         port: port(Device::Interferometer),
                         rate_hz: rates.li80,
                         alpha_um_per_m_k: sim.scenario().interferometer.alpha_um_per_m_k,
@@ -60,8 +60,8 @@ impl Rig {
                     tx.clone(),
                     cancel.clone(),
                 ),
-                Instrument::Capball => drivers::cb3::spawn(
-                    drivers::cb3::Config {
+                Instrument::Capball => drivers::spawn_cb3(
+                    drivers::Cb3Config {
                         port: port(Device::Capball),
                         rate_hz: rates.cb3,
                         poly: sim.scenario().capball.poly,
@@ -71,8 +71,8 @@ impl Rig {
                     tx.clone(),
                     cancel.clone(),
                 ),
-                Instrument::Psd => drivers::psd::spawn(
-                    drivers::psd::Config {
+                Instrument::Psd => drivers::spawn_psd(
+                    drivers::PsdConfig {
                         port: port(Device::Psd),
                         baud: 921_600,
                         rate_hz: rates.psd,
@@ -84,8 +84,8 @@ impl Rig {
                     tx.clone(),
                     cancel.clone(),
                 ),
-                Instrument::Trigger => drivers::trigger::spawn_slcan(
-                    drivers::trigger::SlcanConfig {
+                Instrument::Trigger => drivers::spawn_slcan(
+                    drivers::SlcanConfig {
                         port: port(Device::Trigger),
                         can_id: sim.scenario().trigger.can_id,
                     },
@@ -629,8 +629,8 @@ async fn device_found_streaming_mid_frame_is_taken_over_cleanly() {
     let (tx, mut rx) = tokio::sync::mpsc::channel(200_000);
     let cancel = CancellationToken::new();
     let clock = HostClock::new();
-    let t1 = drivers::li80::spawn(
-        drivers::li80::Config {
+    let t1 = drivers::spawn_li80(
+        drivers::Li80Config {
             port: first.sim.port(Device::Interferometer).display().to_string(),
             rate_hz: 1000,
             alpha_um_per_m_k: 11.7,
@@ -639,8 +639,8 @@ async fn device_found_streaming_mid_frame_is_taken_over_cleanly() {
         tx.clone(),
         cancel.clone(),
     );
-    let t2 = drivers::cb3::spawn(
-        drivers::cb3::Config {
+    let t2 = drivers::spawn_cb3(
+        drivers::Cb3Config {
             port: first.sim.port(Device::Capball).display().to_string(),
             rate_hz: 1000,
             poly: sc.capball.poly,

@@ -13,30 +13,16 @@ use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use serde::Deserialize;
 use toml::Spanned;
 
-/// Defaults, shared with the example config `deploy/metrolog.toml`.
+/// Defaults, shared with the example config `deploy/metrolog.toml`. The data-sheet limits the
+/// values are checked against (rate ranges, PSD-2 bauds and line size, CAN identifiers) and the
+/// data-sheet defaults (α of steel, the CB-3's nominal sensitivity, the PSD-2's baud) are
+/// `protocol`'s (docs/instruments.md), defined there only.
 pub const DEFAULT_DETECTOR_SAMPLES: usize = 150;
 pub const DEFAULT_LI80_RATE_HZ: u32 = 1000;
-/// Steel (instruments.md §1).
-pub const DEFAULT_ALPHA_UM_PER_M_K: f64 = 11.7;
 pub const DEFAULT_CB3_RATE_HZ: u32 = 1000;
-/// Nominal sensor sensitivity, 10 µm/V (instruments.md §2).
-pub const DEFAULT_CB3_POLY: [[f64; 3]; 3] = [[10.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 0.0]];
-pub const DEFAULT_PSD_BAUD: u32 = 921_600;
 pub const DEFAULT_PSD_RATE_HZ: u32 = 100;
 pub const DEFAULT_PSD_MIN_SUM_PA: f64 = 100_000.0;
 
-/// Data-sheet limits (instruments.md).
-pub const LI80_RATE_HZ: (u32, u32) = (1, 10_000);
-pub const CB3_RATE_HZ: (u32, u32) = (100, 20_000);
-pub const PSD_RATE_HZ: (u32, u32) = (1, 1000);
-/// A PSD-2 data line is about 55 bytes of 10 bits on the wire (8N1).
-pub const PSD_LINE_BITS: u32 = 55 * 10;
-/// Baud rates a PSD-2 link can be set to.
-pub const PSD_BAUDS: [u32; 8] = [
-    9600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 921_600,
-];
-/// CAN 2.0A identifiers are 11 bits.
-pub const CAN_ID_MAX: u32 = 0x7FF;
 /// The steady test needs a variance of successive differences (metrology::steady): 3 at least.
 pub const DETECTOR_SAMPLES: (usize, usize) = (3, 1_000_000);
 
@@ -146,9 +132,9 @@ pub struct Config {
     pub text: String,
     pub run: RunConfig,
     pub detector: DetectorConfig,
-    pub interferometer: Option<drivers::li80::Config>,
+    pub interferometer: Option<drivers::Li80Config>,
     pub capball: Option<CapballConfig>,
-    pub psd: Option<drivers::psd::Config>,
+    pub psd: Option<drivers::PsdConfig>,
     pub trigger: Option<TriggerConfig>,
 }
 
@@ -173,15 +159,15 @@ pub struct DetectorConfig {
 
 #[derive(Debug, Clone)]
 pub struct CapballConfig {
-    pub driver: drivers::cb3::Config,
+    pub driver: drivers::Cb3Config,
     /// The transform file (path and text as read), stored in the log; `None` = identity.
     pub transform_file: Option<(PathBuf, String)>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum TriggerConfig {
-    Slcan(drivers::trigger::SlcanConfig),
-    SocketCan(drivers::trigger::SocketCanConfig),
+    Slcan(drivers::SlcanConfig),
+    SocketCan(drivers::SocketCanConfig),
 }
 
 /// The trajectory (pose table) of a run.
@@ -267,11 +253,12 @@ impl Ctx<'_> {
         &self,
         v: Option<Spanned<i64>>,
         default: u32,
-        (lo, hi): (u32, u32),
+        range: std::ops::RangeInclusive<u32>,
         what: &str,
     ) -> Result<u32, ConfigError> {
         let Some(v) = v else { return Ok(default) };
         let x = *v.get_ref();
+        let (lo, hi) = (*range.start(), *range.end());
         if x < lo as i64 || x > hi as i64 {
             return Err(self.err(
                 v.span(),
@@ -348,10 +335,15 @@ impl Ctx<'_> {
     fn validate_interferometer(
         &self,
         r: RawInterferometer,
-    ) -> Result<drivers::li80::Config, ConfigError> {
-        let rate_hz = self.rate(r.rate_hz, DEFAULT_LI80_RATE_HZ, LI80_RATE_HZ, "LI-80")?;
+    ) -> Result<drivers::Li80Config, ConfigError> {
+        let rate_hz = self.rate(
+            r.rate_hz,
+            DEFAULT_LI80_RATE_HZ,
+            protocol::li80::RATE_HZ,
+            "LI-80",
+        )?;
         let alpha = match r.alpha_um_per_m_k {
-            None => DEFAULT_ALPHA_UM_PER_M_K,
+            None => protocol::convert::ALPHA_STEEL_UM_PER_M_K,
             Some(a) => {
                 let x = *a.get_ref();
                 // Machine-tool materials lie within about -1 (invar, Zerodur) to 30
@@ -366,30 +358,38 @@ impl Ctx<'_> {
                 x
             }
         };
-        Ok(drivers::li80::Config {
+        Ok(drivers::Li80Config {
             port: self.port(r.port)?,
             rate_hz,
             alpha_um_per_m_k: alpha,
         })
     }
 
-    fn validate_psd(&self, r: RawPsd) -> Result<drivers::psd::Config, ConfigError> {
+    fn validate_psd(&self, r: RawPsd) -> Result<drivers::PsdConfig, ConfigError> {
         let baud = match r.baud {
-            None => DEFAULT_PSD_BAUD,
+            None => protocol::psd::DEFAULT_BAUD,
             Some(b) => {
                 let x = *b.get_ref();
-                if !PSD_BAUDS.iter().any(|&p| p as i64 == x) {
+                if !protocol::psd::BAUDS.iter().any(|&p| p as i64 == x) {
                     return Err(self.err(
                         b.span(),
-                        format!("baud = {x} is not a baud rate the PSD-2 supports ({PSD_BAUDS:?})"),
+                        format!(
+                            "baud = {x} is not a baud rate the PSD-2 supports ({:?})",
+                            protocol::psd::BAUDS
+                        ),
                     ));
                 }
                 x as u32
             }
         };
         let rate_span = r.rate_hz.as_ref().map(|v| v.span()).unwrap_or(0..0);
-        let rate_hz = self.rate(r.rate_hz, DEFAULT_PSD_RATE_HZ, PSD_RATE_HZ, "PSD-2")?;
-        let max_lines = baud / PSD_LINE_BITS;
+        let rate_hz = self.rate(
+            r.rate_hz,
+            DEFAULT_PSD_RATE_HZ,
+            protocol::psd::RATE_HZ,
+            "PSD-2",
+        )?;
+        let max_lines = baud / protocol::psd::LINE_BITS;
         if rate_hz > max_lines {
             return Err(self.err(
                 rate_span,
@@ -409,7 +409,7 @@ impl Ctx<'_> {
                 x
             }
         };
-        Ok(drivers::psd::Config {
+        Ok(drivers::PsdConfig {
             port: self.port(r.port)?,
             baud,
             rate_hz,
@@ -427,7 +427,7 @@ impl Ctx<'_> {
             None => protocol::can::DEFAULT_CAN_ID,
             Some(c) => {
                 let x = *c.get_ref();
-                if !(0..=CAN_ID_MAX as i64).contains(&x) {
+                if !(0..=i64::from(protocol::can::STANDARD_ID_MAX)).contains(&x) {
                     return Err(self.err(
                         c.span(),
                         format!("can_id = {x:#x} is not a CAN 2.0A (11-bit) identifier; it must be 0x000 to 0x7FF"),
@@ -437,7 +437,7 @@ impl Ctx<'_> {
             }
         };
         match (r.slcan, r.socketcan) {
-            (Some(p), None) => Ok(TriggerConfig::Slcan(drivers::trigger::SlcanConfig {
+            (Some(p), None) => Ok(TriggerConfig::Slcan(drivers::SlcanConfig {
                 port: self.port(p)?,
                 can_id,
             })),
@@ -452,12 +452,10 @@ impl Ctx<'_> {
                         ),
                     ));
                 }
-                Ok(TriggerConfig::SocketCan(
-                    drivers::trigger::SocketCanConfig {
-                        interface: i.into_inner(),
-                        can_id,
-                    },
-                ))
+                Ok(TriggerConfig::SocketCan(drivers::SocketCanConfig {
+                    interface: i.into_inner(),
+                    can_id,
+                }))
             }
             (Some(_), Some(s)) => Err(self.err(
                 s.span(),
@@ -528,9 +526,14 @@ impl Ctx<'_> {
     }
 
     fn validate_capball(&self, r: RawCapball) -> Result<CapballConfig, ConfigError> {
-        let rate_hz = self.rate(r.rate_hz, DEFAULT_CB3_RATE_HZ, CB3_RATE_HZ, "CB-3")?;
+        let rate_hz = self.rate(
+            r.rate_hz,
+            DEFAULT_CB3_RATE_HZ,
+            protocol::cb3::RATE_HZ,
+            "CB-3",
+        )?;
         let poly = match r.poly {
-            None => DEFAULT_CB3_POLY,
+            None => [protocol::convert::CapBallPoly::NOMINAL.c; 3],
             Some(p) => {
                 let v = p.get_ref();
                 let shape_ok = v.len() == 3 && v.iter().all(|row| row.len() == 3);
@@ -576,7 +579,7 @@ impl Ctx<'_> {
             }
         };
         Ok(CapballConfig {
-            driver: drivers::cb3::Config {
+            driver: drivers::Cb3Config {
                 port: self.port(r.port)?,
                 rate_hz,
                 poly,

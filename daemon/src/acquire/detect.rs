@@ -9,27 +9,27 @@
 //! device clock mapped onto the host axis), triggers at their host arrival time — the one
 //! axis all instruments and triggers share.
 
-use drivers::{Sample, SampleValues, Trigger};
-use metrolog_log::topics::{PoseInstrument, PoseMsg, TriggerEventName};
+use drivers::{Instrument, Sample, SampleValues, Trigger};
+use metrolog_log::topics::PoseMsg;
 use metrolog_log::{DetectorSettings, LogError};
-use metrology::steady::{SteadyDetector, TriggerKind};
+use metrology::steady::SteadyDetector;
 
 /// The steady-value detectors of the interferometer, the CapBall and the PSD.
 #[derive(Debug, Clone)]
 pub struct PoseEngine {
-    detectors: Vec<(PoseInstrument, SteadyDetector)>,
+    detectors: Vec<(Instrument, SteadyDetector)>,
 }
 
 impl PoseEngine {
     pub fn new(settings: &DetectorSettings) -> Result<PoseEngine, LogError> {
-        let mk = |i: PoseInstrument, cfg: &metrology::steady::SteadyConfig| {
-            SteadyDetector::new(cfg.clone(), i.channels().len()).map(|d| (i, d))
+        let mk = |i: Instrument, cfg: &metrology::steady::SteadyConfig| {
+            SteadyDetector::new(cfg.clone(), i.detector_channels().len()).map(|d| (i, d))
         };
         let mut detectors = Vec::new();
         for (inst, cfg) in [
-            (PoseInstrument::Interferometer, &settings.interferometer),
-            (PoseInstrument::Capball, &settings.capball),
-            (PoseInstrument::Psd, &settings.psd),
+            (Instrument::Interferometer, &settings.interferometer),
+            (Instrument::Capball, &settings.capball),
+            (Instrument::Psd, &settings.psd),
         ] {
             if settings.instruments.contains(&inst) {
                 detectors.push(mk(inst, cfg)?);
@@ -40,12 +40,12 @@ impl PoseEngine {
 
     /// Feeds a sample to its instrument's detector (environment records are not).
     pub fn on_sample(&mut self, s: &Sample) -> Vec<PoseMsg> {
-        let (inst, values, n): (PoseInstrument, [f64; 3], usize) = match &s.values {
+        let (inst, values, n): (Instrument, [f64; 3], usize) = match &s.values {
             SampleValues::Position { position_um, .. } => {
-                (PoseInstrument::Interferometer, [*position_um, 0.0, 0.0], 1)
+                (Instrument::Interferometer, [*position_um, 0.0, 0.0], 1)
             }
-            SampleValues::Capball { e_um, .. } => (PoseInstrument::Capball, *e_um, 3),
-            SampleValues::Psd { x_um, y_um, .. } => (PoseInstrument::Psd, [*x_um, *y_um, 0.0], 2),
+            SampleValues::Capball { e_um, .. } => (Instrument::Capball, *e_um, 3),
+            SampleValues::Psd { x_um, y_um, .. } => (Instrument::Psd, [*x_um, *y_um, 0.0], 2),
             SampleValues::Environment { .. } => return Vec::new(),
         };
         let Some((_, det)) = self.detectors.iter_mut().find(|(i, _)| *i == inst) else {
@@ -59,7 +59,7 @@ impl PoseEngine {
 
     /// Feeds a trigger to every detector.
     pub fn on_trigger(&mut self, t: &Trigger) -> Vec<PoseMsg> {
-        let kind: TriggerKind = TriggerEventName::from(t.event).into();
+        let kind = t.kind();
         let mut out = Vec::new();
         for (inst, det) in &mut self.detectors {
             for v in det.push_trigger(kind, u32::from(t.pose), t.host_ns) {

@@ -358,7 +358,7 @@ impl Pipeline {
             }
             self.status.last_pose = self.status.last_pose.max(v.pose);
             *self
-                .slot(v.instrument.instrument())
+                .slot(v.instrument)
                 .poses
                 .entry(v.status.name())
                 .or_default() += 1;
@@ -418,11 +418,9 @@ impl Pipeline {
                 st.port = port;
             }
             DriverEvent::Error {
-                instrument,
-                message,
-                ..
+                instrument, error, ..
             } => {
-                self.slot(instrument).last_error = Some(message);
+                self.slot(instrument).last_error = Some(error.to_string());
             }
             DriverEvent::Counters {
                 instrument,
@@ -575,9 +573,10 @@ pub fn detector_settings(cfg: &crate::acquire::config::Config) -> DetectorSettin
     let mut s = DetectorSettings::default().with_samples(cfg.detector.samples);
     // Only the configured instruments get pose values: one left out of the run is not "away".
     s.instruments.retain(|i| match i {
-        metrolog_log::topics::PoseInstrument::Interferometer => cfg.interferometer.is_some(),
-        metrolog_log::topics::PoseInstrument::Capball => cfg.capball.is_some(),
-        metrolog_log::topics::PoseInstrument::Psd => cfg.psd.is_some(),
+        drivers::Instrument::Interferometer => cfg.interferometer.is_some(),
+        drivers::Instrument::Capball => cfg.capball.is_some(),
+        drivers::Instrument::Psd => cfg.psd.is_some(),
+        drivers::Instrument::Trigger => false,
     });
     if cfg.trigger.is_none() {
         for c in [&mut s.interferometer, &mut s.capball, &mut s.psd] {

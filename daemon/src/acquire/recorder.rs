@@ -120,7 +120,7 @@ impl Recorder {
                     instrument: instrument.name().into(),
                     kind: EventKind::Disconnected,
                     port: port.clone(),
-                    text: reason.clone(),
+                    text: reason.to_string(),
                 };
                 self.writer.write(now_ns, &msg)?;
                 Vec::new()
@@ -128,13 +128,13 @@ impl Recorder {
             DriverEvent::Error {
                 instrument,
                 port,
-                message,
+                error,
             } => {
                 let msg = EventMsg {
                     instrument: instrument.name().into(),
                     kind: EventKind::Error,
                     port: port.clone(),
-                    text: message.clone(),
+                    text: error.to_string(),
                 };
                 self.writer.write(now_ns, &msg)?;
                 Vec::new()

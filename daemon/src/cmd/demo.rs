@@ -19,7 +19,7 @@ use crate::acquire::config::Config;
 use crate::acquire::pipeline::Status;
 use crate::acquire::service::Notifier;
 use crate::cmd::run::{Acquire, RunReport, acquire};
-use metrolog_log::topics::{PoseInstrument, PoseMsg};
+use metrolog_log::topics::PoseMsg;
 use metrology::steady::PoseStatus;
 
 #[derive(Debug, clap::Args)]
@@ -170,10 +170,10 @@ fn compare(
     truth: &[PoseTruth],
     home_x_mm: f64,
     reversals: &[u32],
-    instrument: PoseInstrument,
+    instrument: Instrument,
 ) -> Comparison {
     let mut c = Comparison {
-        instrument: instrument.instrument(),
+        instrument,
         ok: 0,
         other: Vec::new(),
         max_err_um: 0.0,
@@ -215,20 +215,21 @@ fn error_um(v: &PoseMsg, t: &PoseTruth, home_x_mm: f64) -> Option<f64> {
     Some(match v.instrument {
         // The interferometer reads the 20 °C length from the datum at home: programmed
         // displacement plus the axis deviation.
-        PoseInstrument::Interferometer => {
+        Instrument::Interferometer => {
             let expected = (t.x_mm - home_x_mm) * 1e3 + t.deviation_um;
             (m("position_um")? - expected).abs()
         }
-        PoseInstrument::Capball => {
+        Instrument::Capball => {
             let e = [m("ex_um")?, m("ey_um")?, m("ez_um")?];
             (0..3)
                 .map(|k| (e[k] - t.capball_e_um[k]).powi(2))
                 .sum::<f64>()
                 .sqrt()
         }
-        PoseInstrument::Psd => {
+        Instrument::Psd => {
             ((m("x_um")? - t.psd_x_um).powi(2) + (m("y_um")? - t.psd_y_um).powi(2)).sqrt()
         }
+        Instrument::Trigger => return None,
     })
 }
 
@@ -251,7 +252,7 @@ fn print_report(report: &RunReport, truth: &[PoseTruth], home_x_mm: f64, reversa
         "  {:<15} {:>9} {:>14} {:>14}  not measured",
         "instrument", "ok poses", "max |err| µm", "rms err µm"
     );
-    for i in PoseInstrument::ALL {
+    for i in Instrument::POSE_VALUED {
         let c = compare(report, truth, home_x_mm, reversals, i);
         let other = if c.other.is_empty() {
             "-".to_string()

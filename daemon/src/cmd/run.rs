@@ -170,7 +170,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
 
     let mut handles = Vec::new();
     if let Some(c) = &cfg.interferometer {
-        handles.push(drivers::li80::spawn(
+        handles.push(drivers::spawn_li80(
             c.clone(),
             clock,
             tx.clone(),
@@ -178,7 +178,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
         ));
     }
     if let Some(c) = &cfg.capball {
-        handles.push(drivers::cb3::spawn(
+        handles.push(drivers::spawn_cb3(
             c.driver.clone(),
             clock,
             tx.clone(),
@@ -186,7 +186,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
         ));
     }
     if let Some(c) = &cfg.psd {
-        handles.push(drivers::psd::spawn(
+        handles.push(drivers::spawn_psd(
             c.clone(),
             clock,
             tx.clone(),
@@ -194,13 +194,13 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
         ));
     }
     match &cfg.trigger {
-        Some(TriggerConfig::Slcan(c)) => handles.push(drivers::trigger::spawn_slcan(
+        Some(TriggerConfig::Slcan(c)) => handles.push(drivers::spawn_slcan(
             c.clone(),
             clock,
             tx.clone(),
             drivers_cancel.child_token(),
         )),
-        Some(TriggerConfig::SocketCan(c)) => handles.push(drivers::trigger::spawn_socketcan(
+        Some(TriggerConfig::SocketCan(c)) => handles.push(drivers::spawn_socketcan(
             c.clone(),
             clock,
             tx.clone(),

@@ -14,8 +14,7 @@ use crate::scenario::{Interferometer, Timed};
 use crate::{Device, Shared};
 
 /// CO2 content assumed by the device's environment model and the host's compensation, ppm.
-const CO2_PPM: f64 = 450.0;
-const MAX_RATE_HZ: u32 = 10_000;
+const CO2_PPM: f64 = protocol::edlen::LI80_CO2_PPM;
 /// Counts lost in a beam interruption: the reading is off by up to this much afterwards.
 const LOST_COUNTS_MAX_UM: f64 = 50.0;
 
@@ -307,7 +306,7 @@ impl Model for Li80 {
                 firmware: self.cfg.identity.firmware.clone(),
             },
             Ok(Command::Rate(hz)) => {
-                if (1..=MAX_RATE_HZ).contains(&hz) {
+                if protocol::li80::RATE_HZ.contains(&hz) {
                     self.rate_hz = hz;
                     if let Some(c) = &self.stream {
                         // The new rate takes effect from the next sample on.

@@ -14,7 +14,6 @@ use crate::record::{Fate, SentSample, SentValues};
 use crate::scenario::Psd;
 use crate::{Device, Shared};
 
-const RATE_RANGE_HZ: std::ops::RangeInclusive<u32> = 1..=1000;
 /// Half the diode's side, µm (10 mm × 10 mm duolateral PSD).
 const HALF_SIDE_UM: f64 = 5_000.0;
 /// SCPI error queue length (IEEE 488.2: at least 2; overflow replaces the last entry).
@@ -198,7 +197,7 @@ impl Model for Psd2 {
                 self.answer(ctx, line, e.to_line());
             }
             Some(Command::ConfRate(hz)) => {
-                if RATE_RANGE_HZ.contains(&hz) {
+                if protocol::psd::RATE_HZ.contains(&hz) {
                     self.rate_hz = hz;
                     if let Some(c) = &self.stream {
                         self.stream = Some(Cadence::new(hz as f64, c.next_us()));

@@ -1,0 +1,277 @@
+//! What every serial driver shares: a session on one open port (commands and their answers,
+//! data handled meanwhile) and the connect / configure / stream / reconnect loop.
+//!
+//! A sample's way is one direction: [`SerialLink`] (port bytes → protocol decoder) →
+//! [`SamplePath`] (converter → stamper → reporter → `DriverEvent`). The instrument's
+//! [`SerialDriver`] only issues commands through the session; nothing calls back into it.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use tokio_util::sync::CancellationToken;
+
+use crate::DriverError;
+use crate::sample_path::{FrameConverter, SamplePath};
+use crate::serial_link::{SerialLink, open_port};
+
+/// How long a command waits for its answer.
+pub(crate) const ANSWER_TIMEOUT: Duration = Duration::from_secs(1);
+/// First and longest wait between attempts to open a vanished port.
+const BACKOFF_MIN: Duration = Duration::from_millis(100);
+const BACKOFF_MAX: Duration = Duration::from_secs(2);
+/// While streaming, a read that returned less than this lets the next read wait a little so
+/// that bytes accumulate: at 20 kHz the CB-3 otherwise wakes the driver for every frame.
+const BATCH_BYTES: usize = 2048;
+const BATCH_WAIT: Duration = Duration::from_millis(10);
+/// Every this many batched reads, one read waits for the next bytes without the batching
+/// pause: its arrival time is then the write time plus the wake-up latency only, which gives
+/// the clock fit ([`crate::clock`]) the least-delayed points it needs (a batched read dates
+/// everything in it by the read, up to `BATCH_WAIT` late).
+const PROBE_EVERY: u32 = 2;
+
+/// The LI-80 and CB-3 acknowledge a command with a plain `OK` (instruments.md §1, §2).
+pub(crate) fn is_ok(answer: &str) -> bool {
+    answer.trim() == "OK"
+}
+
+/// One connection: the open port and the sample path its items take.
+pub(crate) struct SerialSession<'p, C: FrameConverter> {
+    link: SerialLink<C::Decoder>,
+    pub(crate) path: &'p mut SamplePath<C>,
+    answers: VecDeque<String>,
+}
+
+impl<C: FrameConverter> SerialSession<'_, C> {
+    /// Read once, send every item down the sample path, keep the answers. Returns the byte
+    /// count. Cancel-safe: the only await is the read itself.
+    pub(crate) async fn read_once(&mut self) -> Result<usize, DriverError> {
+        let SerialSession {
+            link,
+            path,
+            answers,
+        } = self;
+        link.read(|item, host_ns| {
+            if let Some(a) = path.take(item, host_ns) {
+                answers.push_back(a);
+            }
+        })
+        .await
+    }
+
+    /// Write a command line (with its terminator) that has no answer.
+    pub(crate) async fn send(&mut self, line: &str) -> Result<(), DriverError> {
+        self.link.write_line(line).await
+    }
+
+    /// Send a command and wait for its answer line, data lines being handled meanwhile.
+    pub(crate) async fn command(&mut self, line: &str) -> Result<String, DriverError> {
+        self.answers.clear();
+        self.send(line).await?;
+        let deadline = tokio::time::Instant::now() + ANSWER_TIMEOUT;
+        loop {
+            if let Some(a) = self.answers.pop_front() {
+                return Ok(a);
+            }
+            match tokio::time::timeout_at(deadline, self.read_once()).await {
+                Ok(r) => {
+                    r?;
+                }
+                Err(_) => {
+                    return Err(DriverError::NoAnswer {
+                        port: self.link.path.clone(),
+                        command: line.trim().to_string(),
+                        timeout: ANSWER_TIMEOUT,
+                    });
+                }
+            }
+        }
+    }
+
+    /// Send a command whose answer must satisfy `ok`; otherwise a clear device error.
+    pub(crate) async fn expect(
+        &mut self,
+        line: &str,
+        ok: impl Fn(&str) -> bool,
+    ) -> Result<String, DriverError> {
+        let a = self.command(line).await?;
+        if ok(&a) {
+            Ok(a)
+        } else {
+            Err(DriverError::UnexpectedAnswer {
+                port: self.link.path.clone(),
+                command: line.trim().to_string(),
+                answer: a,
+            })
+        }
+    }
+
+    /// Keep reading until `done` holds for the converter (e.g. an `$ENV` line came), or time
+    /// out with an error saying that `awaited` did not come.
+    pub(crate) async fn wait_for(
+        &mut self,
+        awaited: &'static str,
+        done: impl Fn(&C) -> bool,
+    ) -> Result<(), DriverError> {
+        let deadline = tokio::time::Instant::now() + ANSWER_TIMEOUT;
+        while !done(&self.path.converter) {
+            match tokio::time::timeout_at(deadline, self.read_once()).await {
+                Ok(r) => {
+                    r?;
+                }
+                Err(_) => {
+                    return Err(DriverError::NothingWithin {
+                        port: self.link.path.clone(),
+                        awaited,
+                        timeout: ANSWER_TIMEOUT,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Forget partial input (after stopping a stream that was running when we opened).
+    pub(crate) fn reset_decoder(&mut self) {
+        self.link.reset_decoder();
+        self.answers.clear();
+    }
+
+    /// From now on data frames are samples (see `EventReporter::accepting`).
+    pub(crate) fn start_accepting(&mut self) {
+        self.path.reporter.accepting = true;
+    }
+
+    /// The port's path.
+    pub(crate) fn port(&self) -> &str {
+        &self.link.path
+    }
+}
+
+/// How to talk to one serial instrument: its port settings and its command sequences.
+pub(crate) trait SerialDriver: Send + Sync {
+    type Converter: FrameConverter;
+    fn baud(&self) -> u32;
+    /// Longest silence while streaming before the port is taken for lost.
+    fn idle_timeout(&self) -> Duration;
+    /// Stop streaming and wait for the device's answer, handling every data line before it,
+    /// so a run that ends on purpose loses nothing the device sent.
+    fn stop(
+        &self,
+        s: &mut SerialSession<'_, Self::Converter>,
+    ) -> impl Future<Output = Result<(), DriverError>> + Send;
+    /// Stop, identify, configure and start streaming; returns the identity string.
+    fn setup(
+        &self,
+        s: &mut SerialSession<'_, Self::Converter>,
+    ) -> impl Future<Output = Result<String, DriverError>> + Send;
+}
+
+/// Silence that means the device is gone: 2 s plus five sample periods.
+pub(crate) fn idle_timeout(rate_hz: u32) -> Duration {
+    Duration::from_secs(2) + Duration::from_secs_f64(5.0 / rate_hz.max(1) as f64)
+}
+
+async fn stream<C: FrameConverter>(
+    s: &mut SerialSession<'_, C>,
+    idle: Duration,
+) -> Result<(), DriverError> {
+    let mut cycle = 0u32;
+    loop {
+        match tokio::time::timeout(idle, s.read_once()).await {
+            Ok(Ok(n)) => {
+                cycle = cycle.wrapping_add(1);
+                if n < BATCH_BYTES && !cycle.is_multiple_of(PROBE_EVERY) {
+                    tokio::time::sleep(BATCH_WAIT).await;
+                }
+                s.path.tick(false);
+            }
+            Ok(Err(e)) => return Err(e),
+            Err(_) => return Err(DriverError::Silent { idle }),
+        }
+    }
+}
+
+/// How a session ended.
+enum Ended {
+    Cancelled,
+    Failed(DriverError),
+}
+
+/// The driver task: connect, configure, stream; on loss report, back off and start again.
+pub(crate) async fn run<D: SerialDriver>(
+    driver: D,
+    mut path: SamplePath<D::Converter>,
+    cancel: CancellationToken,
+) {
+    let mut backoff = BACKOFF_MIN;
+    let mut open_failures = 0u32;
+    let port_path = path.reporter.port.clone();
+    loop {
+        if cancel.is_cancelled() {
+            break;
+        }
+        let port = match open_port(&port_path, driver.baud()) {
+            Ok(p) => p,
+            Err(e) => {
+                if open_failures == 0 {
+                    tracing::warn!(port = %port_path, "cannot open the port ({e}); retrying with backoff");
+                }
+                open_failures += 1;
+                tokio::select! {
+                    _ = cancel.cancelled() => break,
+                    _ = tokio::time::sleep(backoff) => {}
+                }
+                backoff = (backoff * 2).min(BACKOFF_MAX);
+                continue;
+            }
+        };
+        open_failures = 0;
+        let link = SerialLink::new(
+            port,
+            path.converter.new_decoder(),
+            path.reporter.clock,
+            &port_path,
+        );
+        // A new connection: the device may have restarted its sequence and clock.
+        path.stamper.reset();
+        path.reporter.accepting = false;
+        let mut session = SerialSession {
+            link,
+            path: &mut path,
+            answers: VecDeque::new(),
+        };
+        let result = tokio::select! {
+            _ = cancel.cancelled() => Err(Ended::Cancelled),
+            r = async {
+                let identity = driver.setup(&mut session).await?;
+                let p = &mut session.path;
+                p.reporter.connected(identity, &p.stamper);
+                stream(&mut session, driver.idle_timeout()).await
+            } => r.map_err(Ended::Failed),
+        };
+        match result {
+            Ok(()) | Err(Ended::Cancelled) => {
+                if let Err(e) = driver.stop(&mut session).await {
+                    tracing::warn!(port = %port_path, "stopping the stream: {e}");
+                }
+                break;
+            }
+            Err(Ended::Failed(e)) if e.is_port_lost() => {
+                let p = &mut session.path;
+                let was_streaming = p.reporter.accepting;
+                p.reporter.disconnected(e, &p.stamper);
+                if was_streaming {
+                    backoff = BACKOFF_MIN;
+                }
+            }
+            Err(Ended::Failed(e)) => session.path.reporter.error(e),
+        }
+        drop(session);
+        tokio::select! {
+            _ = cancel.cancelled() => break,
+            _ = tokio::time::sleep(backoff) => {}
+        }
+        backoff = (backoff * 2).min(BACKOFF_MAX);
+    }
+    path.tick(true);
+}

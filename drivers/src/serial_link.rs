@@ -1,0 +1,89 @@
+//! One open serial port with the protocol decoder of its instrument: bytes in, decoded frames
+//! and rejections out, each dated by its read's arrival time on the host clock.
+
+use protocol::{Decoded, StreamDecoder};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio_serial::SerialPort;
+
+use crate::{DriverError, HostClock};
+
+/// Read buffer: large, so that one read takes everything the kernel holds.
+const READ_BUF: usize = 64 * 1024;
+
+/// A port opened 8N1 without flow control, its decoder and its read buffer.
+pub(crate) struct SerialLink<D> {
+    port: tokio_serial::SerialStream,
+    decoder: D,
+    buf: Box<[u8]>,
+    clock: HostClock,
+    pub(crate) path: String,
+}
+
+/// Open `path` at `baud`, 8N1, no flow control, and forget whatever the device sent before.
+pub(crate) fn open_port(path: &str, baud: u32) -> std::io::Result<tokio_serial::SerialStream> {
+    let builder = tokio_serial::new(path, baud)
+        .data_bits(tokio_serial::DataBits::Eight)
+        .parity(tokio_serial::Parity::None)
+        .stop_bits(tokio_serial::StopBits::One)
+        .flow_control(tokio_serial::FlowControl::None);
+    let port = tokio_serial::SerialStream::open(&builder).map_err(std::io::Error::from)?;
+    // Whatever the device sent before we looked is stale.
+    port.clear(tokio_serial::ClearBuffer::All)
+        .map_err(std::io::Error::from)?;
+    Ok(port)
+}
+
+impl<D: StreamDecoder + Send> SerialLink<D> {
+    pub(crate) fn new(
+        port: tokio_serial::SerialStream,
+        decoder: D,
+        clock: HostClock,
+        path: &str,
+    ) -> Self {
+        SerialLink {
+            port,
+            decoder,
+            buf: vec![0u8; READ_BUF].into_boxed_slice(),
+            clock,
+            path: path.to_string(),
+        }
+    }
+
+    /// Read once (whatever is there) and hand every decoded item, with the read's arrival time
+    /// (ns since the Unix epoch), to `sink`. Returns the byte count. Cancel-safe: the only await
+    /// is the read itself.
+    pub(crate) async fn read(
+        &mut self,
+        mut sink: impl FnMut(Decoded<D::Frame>, u64),
+    ) -> Result<usize, DriverError> {
+        let n = match self.port.read(&mut self.buf).await {
+            Ok(0) => return Err(DriverError::EndOfFile),
+            Ok(n) => n,
+            Err(e) => return Err(DriverError::ReadFailed { cause: e.into() }),
+        };
+        let host_ns = self.clock.now_ns();
+        self.decoder
+            .feed(&self.buf[..n], |item| sink(item, host_ns));
+        Ok(n)
+    }
+
+    /// Write a command line (with its terminator).
+    pub(crate) async fn write_line(&mut self, line: &str) -> Result<(), DriverError> {
+        self.port
+            .write_all(line.as_bytes())
+            .await
+            .map_err(|e| DriverError::WriteFailed {
+                command: line.trim().to_string(),
+                cause: e.into(),
+            })?;
+        self.port
+            .flush()
+            .await
+            .map_err(|e| DriverError::FlushFailed { cause: e.into() })
+    }
+
+    /// Forget a partial frame.
+    pub(crate) fn reset_decoder(&mut self) {
+        self.decoder.reset();
+    }
+}

@@ -11,6 +11,7 @@ pub mod diagnose;
 pub mod drift;
 pub mod iso230;
 pub mod positioning_data;
+pub mod standards;
 
 // Machine error models and identification (papers 001, 003, 004).
 pub mod capball;

@@ -3,6 +3,8 @@
 
 // Simulation model of a linear axis (shared by sim/ and diagnose).
 pub mod axis_model;
+// Pitch-error compensation tables per controller dialect.
+pub mod compensation;
 // Steady-value detection (one value per pose).
 pub mod steady;
 

@@ -19,6 +19,8 @@ pub mod standards;
 pub mod capball;
 pub mod kinematics;
 pub mod parts;
+// Planning a positioning test: targets, cycle, part programs.
+pub mod plan;
 pub mod psd_frame;
 pub mod volumetric;
 

@@ -155,18 +155,13 @@ fn read_linuxcnc(text: &str) -> Vec<Ev> {
     ev
 }
 
-/// The trajectory's x column by pose.
-fn trajectory(csv: &str) -> Vec<f64> {
-    let rows: Vec<&str> = csv.lines().filter(|l| !l.starts_with('#')).collect();
-    assert_eq!(rows[0], "pose,x_mm,y_mm,z_mm");
-    rows[1..]
+/// The x column of the trajectory rows, checking the other axes stay at 0.
+fn trajectory(p: &metrology::plan::Plan) -> Vec<f64> {
+    p.positions_xyz_mm()
         .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            let f: Vec<&str> = r.split(',').collect();
-            assert_eq!(f[0].parse::<usize>().unwrap(), i + 1);
-            assert_eq!((f[2], f[3]), ("0.000", "0.000"));
-            num(f[1])
+        .map(|xyz| {
+            assert_eq!((xyz[1], xyz[2]), (0.0, 0.0));
+            xyz[0]
         })
         .collect()
 }
@@ -261,7 +256,7 @@ fn targets_follow_iso_230_2_with_random_offsets() {
 fn trajectory_has_the_cycle_with_overrun() {
     let o = options();
     let p = plan(&o).unwrap();
-    let x = trajectory(&p.trajectory_csv());
+    let x = trajectory(&p);
     let (first, last) = (p.targets_mm[0], p.targets_mm[10]);
     assert!((x[0] - (first - 5.0)).abs() < 1e-9);
     for c in 0..5 {
@@ -278,7 +273,7 @@ fn trajectory_has_the_cycle_with_overrun() {
 fn every_dialect_program_reads_back_as_the_trajectory() {
     let o = options();
     let p = plan(&o).unwrap();
-    let traj = trajectory(&p.trajectory_csv());
+    let traj = trajectory(&p);
     for (d, read) in [
         (Dialect::Sinumerik, read_sinumerik as fn(&str) -> Vec<Ev>),
         (Dialect::Fanuc, read_fanuc),

@@ -7,8 +7,6 @@
 
 mod programs;
 
-use std::fmt::Write;
-
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -169,20 +167,18 @@ pub fn plan(o: &PlanOptions) -> Result<Plan, PlanError> {
 }
 
 impl Plan {
-    /// The daemon's trajectory (`docs/instruments.md` §4): `pose,x_mm,y_mm,z_mm`, the axis'
-    /// column carrying the position, `#` comments naming each row's role.
-    pub fn trajectory_csv(&self) -> String {
-        let o = &self.options;
-        let mut s = format!(
-            "# ISO 230-2 positioning test of {}: {} targets, {} cycles, seed {}, overrun {} mm, dwell {} s (metrolog plan)\npose,x_mm,y_mm,z_mm\n",
-            o.axis, o.targets, o.cycles, o.seed, o.overrun_mm, o.dwell_s
-        );
-        for p in &self.poses {
-            let mut xyz = [0.0; 3];
-            xyz[(o.axis as u8 - b'X') as usize] = p.position_mm;
-            let _ = writeln!(s, "{},{:.3},{:.3},{:.3}", p.pose, xyz[0], xyz[1], xyz[2]);
-        }
-        s
+    /// Machine positions (x, y, z mm) of each pose, in trajectory order: the rows of the
+    /// daemon's trajectory (`docs/instruments.md` §4; written by `metrolog_log::trajectory`).
+    pub fn positions_xyz_mm(&self) -> Vec<[f64; 3]> {
+        let k = (self.options.axis as u8 - b'X') as usize;
+        self.poses
+            .iter()
+            .map(|p| {
+                let mut xyz = [0.0; 3];
+                xyz[k] = p.position_mm;
+                xyz
+            })
+            .collect()
     }
 
     /// The part program in a dialect.

@@ -127,6 +127,6 @@ mod tests {
     fn no_negative_zero() {
         assert_eq!(num(-0.0001, 2), "0.00");
         assert_eq!(num(-0.01, 2), "-0.01");
-        assert_eq!(num(3.14159, 3), "3.142");
+        assert_eq!(num(2.71849, 3), "2.718");
     }
 }

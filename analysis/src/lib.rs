@@ -11,6 +11,8 @@
 //! [`PositioningData`]: metrology::positioning_data::PositioningData
 
 pub mod capball;
+pub mod export;
+pub mod html_report;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod positioning;

@@ -38,6 +38,14 @@ pub enum Command {
     Parts(cmd::parts::Args),
     /// Evaluate an uncertainty budget by GUM and/or Monte Carlo.
     Uncertainty(cmd::uncertainty::Args),
+    /// Plan a test: targets, trajectory and part program.
+    #[command(subcommand)]
+    Plan(cmd::plan::Command),
+    /// Write a controller's compensation table from a measurement.
+    #[command(subcommand)]
+    Compensate(cmd::compensate::Command),
+    /// The positioning report a customer signs (self-contained HTML).
+    Report(cmd::report::Args),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -53,5 +61,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Identify(c) => cmd::identify::run(c),
         Command::Parts(a) => cmd::parts::run(a),
         Command::Uncertainty(a) => cmd::uncertainty::run(a),
+        Command::Plan(c) => cmd::plan::run(c),
+        Command::Compensate(c) => cmd::compensate::run(c),
+        Command::Report(a) => cmd::report::run(a),
     }
 }

@@ -3,6 +3,8 @@
 
 // Simulation model of a linear axis (shared by sim/ and diagnose).
 pub mod axis_model;
+// Pitch-error compensation tables per controller dialect.
+pub mod compensation;
 // Steady-value detection (one value per pose).
 pub mod steady;
 
@@ -11,11 +13,14 @@ pub mod diagnose;
 pub mod drift;
 pub mod iso230;
 pub mod positioning_data;
+pub mod standards;
 
 // Machine error models and identification (papers 001, 003, 004).
 pub mod capball;
 pub mod kinematics;
 pub mod parts;
+// Planning a positioning test: targets, cycle, part programs.
+pub mod plan;
 pub mod psd_frame;
 pub mod volumetric;
 

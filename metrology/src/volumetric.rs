@@ -523,97 +523,175 @@ pub fn compensation_csv(points: &[GridPoint]) -> String {
 pub struct CecTables {
     /// The `%_N_NC_CEC_INI` file text.
     pub ini: String,
-    /// Largest difference over the grid between the full correction and the sum of the nine
-    /// one-dimensional tables, µm (the non-separable part: Abbe products such as `EAX(x)·z`).
+    /// Largest difference over the grid between the full correction and the sum of the
+    /// tables written, µm (the non-separable part: Abbe products such as `EAX(x)·z`, plus any
+    /// table left out for the control's table limit).
     pub max_separation_residual_um: f64,
+    /// Tables left out because the control holds fewer (e.g. "correction of Z from X").
+    pub omitted: Vec<String>,
 }
 
-/// SINUMERIK "interpolatory compensation" (CEC, sag/cross compensation) tables: nine tables,
-/// one per (input axis, output axis) pair, so that correction_k(x, y, z) ≈ Σ_j table_jk(q_j).
+/// Which control the CEC tables are for and what they are valid for.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CecOptions<'a> {
+    /// Machine axis names for X, Y, Z (e.g. `["AX1", "AX2", "AX3"]`).
+    pub axis_names: [&'a str; 3],
+    /// Largest number of CEC tables the control holds: 8 on the SINUMERIK 828D (its
+    /// `$AN_CEC` tables 0…7), more on the 840D sl ([`CEC_TABLES_840D`]).
+    pub max_tables: usize,
+    /// Tool offset (tool point from the spindle gauge line, mm) the grid was computed for:
+    /// the Abbe terms, hence the tables, change with it.
+    pub tool_offset_mm: Option<[f64; 3]>,
+}
+
+/// The SINUMERIK 828D's number of CEC tables.
+pub const CEC_TABLES_828D: usize = 8;
+/// Enough for all nine tables on the 840D sl (which holds more; see `docs/methods.md`).
+pub const CEC_TABLES_840D: usize = 9;
+
+/// SINUMERIK "interpolatory compensation" (CEC, sag/cross compensation) tables for an 840D sl
+/// and a tool offset not stated: [`siemens_cec_for`] with all nine tables.
+pub fn siemens_cec(points: &[GridPoint], grid: &GridSpec, axis_names: [&str; 3]) -> CecTables {
+    siemens_cec_for(
+        points,
+        grid,
+        &CecOptions {
+            axis_names,
+            max_tables: CEC_TABLES_840D,
+            tool_offset_mm: None,
+        },
+    )
+}
+
+/// One (input, output) table sampled along the grid line through the grid's first corner;
+/// the constant correction at that corner goes into the X-input tables.
+fn cec_table(points: &[GridPoint], n: [usize; 3], input: usize, out: usize) -> Vec<f64> {
+    let idx = |i: usize, j: usize, k: usize| (i * n[1] + j) * n[2] + k;
+    let corr = |i: usize, j: usize, k: usize| -points[idx(i, j, k)].error_um[out];
+    (0..n[input])
+        .map(|q| {
+            let (i, j, k) = match input {
+                0 => (q, 0, 0),
+                1 => (0, q, 0),
+                _ => (0, 0, q),
+            };
+            if input == 0 {
+                corr(i, j, k)
+            } else {
+                corr(i, j, k) - corr(0, 0, 0)
+            }
+        })
+        .collect()
+}
+
+/// SINUMERIK "interpolatory compensation" (CEC, sag/cross compensation) tables: up to nine
+/// tables, one per (input axis, output axis) pair, so that correction_k(x, y, z) ≈
+/// Σ_j table_jk(q_j).
 ///
 /// Format from the SINUMERIK 840D sl Function Manual Extended Functions, K3 Compensation,
 /// §4.4 "Interpolatory compensation" (6FC5397-1BP40-3BA1, 03/2013): system variables
 /// `$AN_CEC[t,N]` (value in mm at interpolation point N), `$AN_CEC_INPUT_AXIS[t]`,
 /// `$AN_CEC_OUTPUT_AXIS[t]`, `$AN_CEC_STEP[t]`, `$AN_CEC_MIN[t]`, `$AN_CEC_MAX[t]`,
 /// `$AN_CEC_DIRECTION[t]`, `$AN_CEC_MULT_BY_TABLE[t]`, `$AN_CEC_IS_MODULO[t]`, in a file
-/// `%_N_NC_CEC_INI` under `CHANDATA(1)`. The machine data enabling the tables (MD18342
-/// `MM_CEC_MAX_POINTS`, MD32710 `CEC_ENABLE`, MD18094 number of tables) must be set on the
-/// control by the commissioning engineer; we do not write them. Siemens VCS (volumetric
-/// compensation) uses its own proprietary file format, which we do not know and do not write.
-///
-/// The tables are sampled along the grid lines through the grid's first corner; the constant
-/// correction at that corner goes into the X-input tables. `axis_names` are the machine axis
-/// names (e.g. `["AX1", "AX2", "AX3"]` for X, Y, Z).
-pub fn siemens_cec(points: &[GridPoint], grid: &GridSpec, axis_names: [&str; 3]) -> CecTables {
+/// `%_N_NC_CEC_INI` under `CHANDATA(1)`; each table is switched on by the setting data
+/// SD41300 `$SN_CEC_TABLE_ENABLE[t]`, which we write. The machine data (MD18342
+/// `MM_CEC_MAX_POINTS[t]`, MD32710 `CEC_ENABLE` per output axis) must be set on the control
+/// by the commissioning engineer; the file's comments list them. When the control holds fewer
+/// tables than nine (828D: eight), the tables with the smallest corrections are left out and
+/// the residual says what that costs. Siemens VCS (volumetric compensation) uses its own
+/// proprietary file format, which we do not know and do not write.
+pub fn siemens_cec_for(points: &[GridPoint], grid: &GridSpec, o: &CecOptions) -> CecTables {
     let n = [grid.ranges[0].2, grid.ranges[1].2, grid.ranges[2].2];
-    let idx = |i: usize, j: usize, k: usize| (i * n[1] + j) * n[2] + k;
-    let corr = |i: usize, j: usize, k: usize, out: usize| -points[idx(i, j, k)].error_um[out];
+    let xyz = |a: usize| "XYZ".as_bytes()[a] as char;
+    let mut all: Vec<(usize, usize, Vec<f64>)> = (0..3)
+        .flat_map(|i| (0..3).map(move |o| (i, o)))
+        .map(|(i, out)| (i, out, cec_table(points, n, i, out)))
+        .collect();
+    let size = |v: &[f64]| v.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let mut omitted = Vec::new();
+    while all.len() > o.max_tables {
+        let (k, _) = all
+            .iter()
+            .enumerate()
+            .min_by(|a, b| size(&a.1.2).total_cmp(&size(&b.1.2)))
+            .unwrap_or((0, &all[0]));
+        let (i, out, v) = all.remove(k);
+        omitted.push(format!(
+            "correction of {} from {} (up to {:.2} µm)",
+            xyz(out),
+            xyz(i),
+            size(&v)
+        ));
+    }
     let mut ini = String::from(
-        "%_N_NC_CEC_INI\n; written by metrolog volumetric: correction = −volumetric error\nCHANDATA(1)\n",
+        "%_N_NC_CEC_INI\n; written by metrolog volumetric: correction = −volumetric error\n",
     );
-    let mut tables = vec![vec![vec![0.0; 0]; 3]; 3];
-    let mut t = 0;
-    for input in 0..3 {
-        for out in 0..3 {
-            let vals: Vec<f64> = (0..n[input])
-                .map(|q| {
-                    let (i, j, k) = match input {
-                        0 => (q, 0, 0),
-                        1 => (0, q, 0),
-                        _ => (0, 0, q),
-                    };
-                    let c = corr(i, j, k, out);
-                    if input == 0 {
-                        c
-                    } else {
-                        c - corr(0, 0, 0, out)
-                    }
-                })
-                .collect();
-            let (min, max, cnt) = grid.ranges[input];
-            let step = if cnt > 1 {
-                (max - min) / (cnt - 1) as f64
-            } else {
-                0.0
-            };
+    match o.tool_offset_mm {
+        Some(t) => {
             let _ = writeln!(
                 ini,
-                "; table {t}: correction of {} from the position of {}",
-                "XYZ".as_bytes()[out] as char,
-                "XYZ".as_bytes()[input] as char
+                "; valid for the tool offset ({:.3}, {:.3}, {:.3}) mm: the Abbe terms change with the tool length",
+                t[0], t[1], t[2]
             );
-            for (p, v) in vals.iter().enumerate() {
-                let _ = writeln!(ini, "$AN_CEC[{t},{p}]={:.6}", v * 1e-3);
-            }
-            let _ = writeln!(ini, "$AN_CEC_INPUT_AXIS[{t}]=({})", axis_names[input]);
-            let _ = writeln!(ini, "$AN_CEC_OUTPUT_AXIS[{t}]=({})", axis_names[out]);
-            let _ = writeln!(ini, "$AN_CEC_STEP[{t}]={step:.6}");
-            let _ = writeln!(ini, "$AN_CEC_MIN[{t}]={min:.6}");
-            let _ = writeln!(ini, "$AN_CEC_MAX[{t}]={max:.6}");
-            let _ = writeln!(ini, "$AN_CEC_DIRECTION[{t}]=0");
-            let _ = writeln!(ini, "$AN_CEC_MULT_BY_TABLE[{t}]=0");
-            let _ = writeln!(ini, "$AN_CEC_IS_MODULO[{t}]=0");
-            tables[input][out] = vals;
-            t += 1;
         }
+        None => ini.push_str(
+            "; tool offset not stated: valid only for the tool length the grid was measured with\n",
+        ),
+    }
+    for s in &omitted {
+        let _ = writeln!(ini, "; left out for the control's table limit: {s}");
+    }
+    let _ = writeln!(
+        ini,
+        "; set MD18342 $MN_MM_CEC_MAX_POINTS[t] >= the points of table t and MD32710 $MA_CEC_ENABLE=1 for {}, {}, {}",
+        o.axis_names[0], o.axis_names[1], o.axis_names[2]
+    );
+    ini.push_str("CHANDATA(1)\n");
+    for (t, (input, out, vals)) in all.iter().enumerate() {
+        let (min, max, cnt) = grid.ranges[*input];
+        let step = if cnt > 1 {
+            (max - min) / (cnt - 1) as f64
+        } else {
+            0.0
+        };
+        let _ = writeln!(
+            ini,
+            "; table {t}: correction of {} from the position of {}",
+            xyz(*out),
+            xyz(*input)
+        );
+        for (p, v) in vals.iter().enumerate() {
+            let _ = writeln!(ini, "$AN_CEC[{t},{p}]={:.6}", v * 1e-3);
+        }
+        let _ = writeln!(ini, "$AN_CEC_INPUT_AXIS[{t}]=({})", o.axis_names[*input]);
+        let _ = writeln!(ini, "$AN_CEC_OUTPUT_AXIS[{t}]=({})", o.axis_names[*out]);
+        let _ = writeln!(ini, "$AN_CEC_STEP[{t}]={step:.6}");
+        let _ = writeln!(ini, "$AN_CEC_MIN[{t}]={min:.6}");
+        let _ = writeln!(ini, "$AN_CEC_MAX[{t}]={max:.6}");
+        let _ = writeln!(ini, "$AN_CEC_DIRECTION[{t}]=0");
+        let _ = writeln!(ini, "$AN_CEC_MULT_BY_TABLE[{t}]=0");
+        let _ = writeln!(ini, "$AN_CEC_IS_MODULO[{t}]=0");
+        let _ = writeln!(ini, "$SN_CEC_TABLE_ENABLE[{t}]=1");
     }
     ini.push_str("M17\n");
+    let idx = |i: usize, j: usize, k: usize| (i * n[1] + j) * n[2] + k;
     let mut worst: f64 = 0.0;
-    for i in 0..n[0] {
-        for j in 0..n[1] {
-            for k in 0..n[2] {
-                for (out, ((tx, ty), tz)) in
-                    tables[0].iter().zip(&tables[1]).zip(&tables[2]).enumerate()
-                {
-                    let sum = tx[i] + ty[j] + tz[k];
-                    worst = worst.max((sum - corr(i, j, k, out)).abs());
-                }
-            }
+    for (i, j, k) in
+        (0..n[0]).flat_map(|i| (0..n[1]).flat_map(move |j| (0..n[2]).map(move |k| (i, j, k))))
+    {
+        for out in 0..3 {
+            let sum: f64 = all
+                .iter()
+                .filter(|(_, o2, _)| *o2 == out)
+                .map(|(input, _, v)| v[[i, j, k][*input]])
+                .sum();
+            worst = worst.max((sum + points[idx(i, j, k)].error_um[out]).abs());
         }
     }
     CecTables {
         ini,
         max_separation_residual_um: worst,
+        omitted,
     }
 }
 

@@ -34,6 +34,13 @@ pub struct PositioningArgs {
     /// scatter].
     #[arg(long, value_name = "INDEX")]
     pub plot_target: Option<usize>,
+    /// Also evaluate by these standards (repeat or comma-separate): iso230-2:2014,
+    /// iso230-2:2006, iso230-2:1997, iso230-2:1988, vdi3441, asme-b5.54, jis-b6192, gb17421.2.
+    #[arg(long, value_delimiter = ',')]
+    pub standard: Vec<metrology::standards::Standard>,
+    /// Also write readings.csv, targets.csv and results.csv (every standard's parameters) here.
+    #[arg(long, value_name = "DIR")]
+    pub csv: Option<PathBuf>,
     /// MCAP log only: trajectory CSV of the run instead of the log's attachment.
     #[arg(long, value_name = "FILE")]
     pub trajectory: Option<PathBuf>,
@@ -93,10 +100,23 @@ fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
         crate::cmd::plots::draw_positioning(p, &data, &an, target)
             .with_context(|| format!("drawing {}", p.display()))?;
     }
+    let standards: Vec<_> = a
+        .standard
+        .iter()
+        .map(|s| metrology::standards::evaluate(&data, *s))
+        .collect();
+    if let Some(dir) = &a.csv {
+        metrolog_analysis::export::write_csv_dir(dir, &data, &an.targets, &standards)
+            .with_context(|| format!("writing CSV into {}", dir.display()))?;
+    }
     let text = if a.json {
-        serde_json::to_string_pretty(&an)? + "\n"
+        let mut v = serde_json::to_value(&an)?;
+        if let Some(o) = v.as_object_mut().filter(|_| !standards.is_empty()) {
+            o.insert("standards".into(), serde_json::to_value(&standards)?);
+        }
+        serde_json::to_string_pretty(&v)? + "\n"
     } else {
-        render_text(&an)
+        render_text(&an) + &metrolog_analysis::export::render_standards(&standards)
     };
     crate::cmd::input::print_out(&text)
 }

@@ -1,14 +1,17 @@
 //! One module per subcommand.
 
 pub mod analyze;
+pub mod compensate;
 pub mod demo;
 pub mod diagnose;
 pub mod identify;
 pub mod info;
 pub mod input;
 pub mod parts;
+pub mod plan;
 pub mod plots;
 pub mod replay;
+pub mod report;
 pub mod run;
 pub mod sim;
 pub mod uncertainty;

@@ -39,6 +39,10 @@ pub struct Args {
     /// Write SINUMERIK CEC tables (`%_N_NC_CEC_INI`) here.
     #[arg(long)]
     pub siemens: Option<PathBuf>,
+    /// Number of CEC tables the control holds (SINUMERIK 828D: 8); the tables with the
+    /// smallest corrections are left out and listed.
+    #[arg(long, default_value_t = volumetric::CEC_TABLES_840D)]
+    pub cec_tables: usize,
     /// Machine axis names for the CEC tables, for X, Y, Z.
     #[arg(long, default_value = "AX1,AX2,AX3")]
     pub axis_names: String,
@@ -92,8 +96,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 args.axis_names
             );
         }
-        let cec = volumetric::siemens_cec(&points, &grid, [names[0], names[1], names[2]]);
+        let t = machine.tool_offset_mm;
+        let cec = volumetric::siemens_cec_for(
+            &points,
+            &grid,
+            &volumetric::CecOptions {
+                axis_names: [names[0], names[1], names[2]],
+                max_tables: args.cec_tables.max(1),
+                tool_offset_mm: Some([t.x, t.y, t.z]),
+            },
+        );
         std::fs::write(p, &cec.ini).with_context(|| format!("writing {}", p.display()))?;
+        for o in &cec.omitted {
+            eprintln!("CEC table left out (--cec-tables {}): {o}", args.cec_tables);
+        }
         cec_resid = Some(cec.max_separation_residual_um);
     }
     if args.json {

@@ -1,0 +1,113 @@
+//! `metrolog plan positioning`: the ISO 230-2 test of one axis — targets, cycle, the
+//! trajectory the daemon runs with and the part program in a controller's dialect
+//! (`docs/methods.md` "Planning a positioning test").
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use metrolog_log::trajectory::{TrajectoryRow, write_trajectory};
+use metrology::plan::{Dialect, PlanOptions, plan};
+
+#[derive(Debug, clap::Subcommand)]
+pub enum Command {
+    /// Plan an ISO 230-2 positioning test: trajectory CSV and part program.
+    Positioning(PositioningArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct PositioningArgs {
+    /// Axis: X, Y or Z.
+    #[arg(long, default_value = "X")]
+    pub axis: char,
+    /// Start of the travel to test, mm.
+    #[arg(long)]
+    pub from: f64,
+    /// End of the travel to test, mm.
+    #[arg(long)]
+    pub to: f64,
+    /// Number of targets (ISO 230-2: at least 5, and 5 per metre).
+    #[arg(long, default_value_t = 11)]
+    pub targets: usize,
+    /// Number of bidirectional cycles (ISO 230-2: 5).
+    #[arg(long, default_value_t = 5)]
+    pub cycles: usize,
+    /// Seed of the random target offsets (the same seed gives the same targets).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Largest random offset of a target from the even grid, mm [default: a tenth of the
+    /// target interval; use at least half the screw pitch].
+    #[arg(long, value_name = "MM")]
+    pub offset: Option<f64>,
+    /// Travel past the end targets before each reversal, mm.
+    #[arg(long, default_value_t = 5.0)]
+    pub overrun: f64,
+    /// Dwell at each target, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub dwell: f64,
+    /// Feed, mm/min.
+    #[arg(long, default_value_t = 1000.0)]
+    pub feed: f64,
+    /// M-function that pulses the exact-stop trigger (not LinuxCNC, which uses M64 P0).
+    #[arg(long, default_value_t = 101)]
+    pub trigger_m: u32,
+    /// Part program dialect: sinumerik, fanuc, heidenhain or linuxcnc.
+    #[arg(long, default_value = "sinumerik")]
+    pub dialect: Dialect,
+    /// Directory for trajectory.csv and the part program.
+    #[arg(long, short = 'o', default_value = ".")]
+    pub out: PathBuf,
+}
+
+pub fn run(c: Command) -> anyhow::Result<()> {
+    let Command::Positioning(a) = c;
+    let o = PlanOptions {
+        axis: a.axis.to_ascii_uppercase(),
+        from_mm: a.from,
+        to_mm: a.to,
+        targets: a.targets,
+        cycles: a.cycles,
+        seed: a.seed,
+        max_offset_mm: a.offset,
+        overrun_mm: a.overrun,
+        dwell_s: a.dwell,
+        feed_mm_min: a.feed,
+        trigger_m: a.trigger_m,
+    };
+    let p = plan(&o)?;
+    let rows: Vec<TrajectoryRow> = p
+        .positions_xyz_mm()
+        .iter()
+        .enumerate()
+        .map(|(i, xyz)| TrajectoryRow {
+            pose: i as u32 + 1,
+            x_mm: xyz[0],
+            y_mm: xyz[1],
+            z_mm: xyz[2],
+            a_deg: None,
+            c_deg: None,
+        })
+        .collect();
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let traj = a.out.join("trajectory.csv");
+    std::fs::write(&traj, write_trajectory(&rows))
+        .with_context(|| format!("writing {}", traj.display()))?;
+    let ext = match a.dialect {
+        Dialect::Sinumerik => "MPF",
+        Dialect::Fanuc => "NC",
+        Dialect::Heidenhain => "H",
+        Dialect::LinuxCnc => "ngc",
+    };
+    let prog = a.out.join(format!("iso230_{}.{ext}", o.axis));
+    std::fs::write(&prog, p.part_program(a.dialect))
+        .with_context(|| format!("writing {}", prog.display()))?;
+    let targets: Vec<String> = p.targets_mm.iter().map(|t| format!("{t:.3}")).collect();
+    crate::cmd::input::print_out(&format!(
+        "targets (mm): {}\n{} poses, {} measured stops\ntrajectory: {}\npart program ({:?}): {}\n",
+        targets.join(" "),
+        p.poses.len(),
+        p.poses.iter().filter(|x| x.target.is_some()).count(),
+        traj.display(),
+        a.dialect,
+        prog.display()
+    ))
+}

@@ -1,0 +1,65 @@
+//! `metrolog report`: the positioning report a customer signs, as one self-contained HTML
+//! file (`metrolog_analysis::html_report`), optionally with the CSV export.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use metrolog_analysis::html_report::{ReportHeader, positioning_html};
+use metrolog_analysis::positioning_report::analyze_positioning;
+use metrology::standards::{Standard, evaluate};
+
+use crate::cmd::input::{load_positioning, print_out};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Positioning dataset (CSV, see datasets.md) or MCAP log of a run.
+    pub input: PathBuf,
+    /// The HTML file to write.
+    #[arg(long, short = 'o')]
+    pub out: PathBuf,
+    /// Standards to evaluate by (repeat or comma-separate): iso230-2:2014, iso230-2:2006,
+    /// iso230-2:1997, iso230-2:1988, vdi3441, asme-b5.54, jis-b6192, gb17421.2.
+    #[arg(long, value_delimiter = ',', default_value = "iso230-2:2014")]
+    pub standard: Vec<Standard>,
+    /// Machine name [default: the dataset's `machine` metadata].
+    #[arg(long)]
+    pub machine: Option<String>,
+    /// Operator [default: the dataset's `operator` metadata].
+    #[arg(long)]
+    pub operator: Option<String>,
+    /// Date of the test [default: the dataset's `date` metadata].
+    #[arg(long)]
+    pub date: Option<String>,
+    /// An instrument and its serial number (repeatable), e.g. "LI-80 s/n 12345".
+    #[arg(long)]
+    pub instrument: Vec<String>,
+    /// Compensation active during the run, e.g. "none" or "SINUMERIK LEC 2026-11-20".
+    #[arg(long)]
+    pub compensation: Option<String>,
+    /// Also write readings.csv, targets.csv and results.csv here.
+    #[arg(long, value_name = "DIR")]
+    pub csv: Option<PathBuf>,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let data = load_positioning(&a.input)?;
+    let an = analyze_positioning(&data, None);
+    let standards: Vec<_> = a.standard.iter().map(|s| evaluate(&data, *s)).collect();
+    let mut h = ReportHeader::from_metadata(&data);
+    h.machine = a.machine.clone().or(h.machine);
+    h.operator = a.operator.clone().or(h.operator);
+    h.date = a.date.clone().or(h.date);
+    h.compensation = a.compensation.clone().or(h.compensation);
+    h.instruments.extend(a.instrument.iter().cloned());
+    let html = positioning_html(&data, &an, &standards, &h);
+    std::fs::write(&a.out, html).with_context(|| format!("writing {}", a.out.display()))?;
+    let mut msg = format!("report: {}\n", a.out.display());
+    if let Some(dir) = &a.csv {
+        for p in metrolog_analysis::export::write_csv_dir(dir, &data, &an.targets, &standards)
+            .with_context(|| format!("writing CSV into {}", dir.display()))?
+        {
+            msg.push_str(&format!("csv: {}\n", p.display()));
+        }
+    }
+    print_out(&msg)
+}

@@ -1,0 +1,250 @@
+//! The laser calibration of an axis from the command line: `plan` → (run) → `analyze
+//! --standard` / `report` → `compensate`, on the published measured run
+//! (`metrology/tests/data/psi_ecmc_iso230.csv`). The report is rendered by headless Chromium
+//! when it is installed (`.ci/run` installs it as root) and its DOM checked for the key numbers;
+//! the screenshot stays in the target directory as an artifact.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use metrology::positioning_data::PositioningData;
+use metrology::standards::{Standard, evaluate};
+
+const RUN: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../metrology/tests/data/psi_ecmc_iso230.csv"
+);
+
+fn metrolog(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "metrolog {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+#[test]
+fn plan_writes_a_trajectory_the_daemon_reads_and_a_program() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    for dialect in ["sinumerik", "fanuc", "heidenhain", "linuxcnc"] {
+        metrolog(&[
+            "plan",
+            "positioning",
+            "--axis",
+            "X",
+            "--from",
+            "0",
+            "--to",
+            "500",
+            "--targets",
+            "11",
+            "--cycles",
+            "5",
+            "--seed",
+            "3",
+            "--dialect",
+            dialect,
+            "-o",
+            d,
+        ]);
+    }
+    let traj = std::fs::read_to_string(dir.path().join("trajectory.csv")).unwrap();
+    let rows = metrolog_log::trajectory::parse_trajectory(&traj).unwrap();
+    assert_eq!(rows.len(), 1 + 5 * 24);
+    for ext in ["MPF", "NC", "H", "ngc"] {
+        let p = dir.path().join(format!("iso230_X.{ext}"));
+        assert!(
+            std::fs::read_to_string(&p).unwrap().lines().count() > 500,
+            "{}",
+            p.display()
+        );
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["plan", "positioning", "--from", "10", "--to", "0", "-o", d])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--to must be greater"));
+}
+
+#[test]
+fn analyze_by_several_standards_with_csv_export() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = metrolog(&[
+        "analyze",
+        "positioning",
+        RUN,
+        "--standard",
+        "vdi3441,jis-b6192",
+        "--csv",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(
+        text.contains("VDI/DGQ 3441:1977") && text.contains("JIS B 6192:1999"),
+        "{text}"
+    );
+    let res = std::fs::read_to_string(dir.path().join("results.csv")).unwrap();
+    assert_eq!(res.lines().count(), 1 + 6 + 12);
+    let readings = std::fs::read_to_string(dir.path().join("readings.csv")).unwrap();
+    assert_eq!(
+        PositioningData::from_csv_str(&readings)
+            .unwrap()
+            .readings
+            .len(),
+        50
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["analyze", "positioning", RUN, "--standard", "din-1"])
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown standard"));
+}
+
+#[test]
+fn compensate_writes_the_table_and_predicts_the_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = metrolog(&[
+        "compensate",
+        "positioning",
+        RUN,
+        "--dialect",
+        "linuxcnc",
+        "--bidirectional",
+        "-o",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(text.contains("predicted after compensation"), "{text}");
+    let comp = std::fs::read_to_string(dir.path().join("m1_comp.txt")).unwrap();
+    assert!(comp.lines().count() >= 5);
+    let json = metrolog(&[
+        "compensate",
+        "positioning",
+        RUN,
+        "--dialect",
+        "sinumerik",
+        "--backlash",
+        "--json",
+        "-o",
+        dir.path().to_str().unwrap(),
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let (before, after) = (
+        v["iso230_2_before"]["E"].as_f64().unwrap(),
+        v["iso230_2_predicted_after"]["E"].as_f64().unwrap(),
+    );
+    assert!(after < before, "E {before} → {after}");
+}
+
+fn chromium() -> Option<PathBuf> {
+    ["chromium", "chromium-browser", "google-chrome"]
+        .iter()
+        .find_map(|c| {
+            let ok = Command::new(c)
+                .arg("--version")
+                .output()
+                .is_ok_and(|o| o.status.success());
+            ok.then(|| PathBuf::from(c))
+        })
+}
+
+fn headless(bin: &Path, profile: &Path, extra: &[String], html: &Path) -> std::process::Output {
+    Command::new(bin)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-first-run",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .args(extra)
+        .arg(format!("file://{}", html.display()))
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn report_renders_in_chromium_with_the_key_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let html = dir.path().join("report.html");
+    metrolog(&[
+        "report",
+        RUN,
+        "-o",
+        html.to_str().unwrap(),
+        "--standard",
+        "iso230-2:2014,vdi3441",
+        "--operator",
+        "A. Tester",
+        "--instrument",
+        "LI-80 s/n 0042",
+    ]);
+    let text = std::fs::read_to_string(&html).unwrap();
+    // Self-contained: no scripts, no external resources.
+    for external in ["<script", "<link", "src=", "url("] {
+        assert!(!text.contains(external), "{external} in the report");
+    }
+    assert!(!text.contains("-0.00"), "negative zero printed");
+    let d = PositioningData::from_csv_path(Path::new(RUN)).unwrap();
+    let iso = evaluate(&d, Standard::Iso230_2_2014);
+    let vdi = evaluate(&d, Standard::Vdi3441);
+    let want = [
+        format!("{:.2}", iso.value("A").unwrap()),
+        format!("{:.2}", vdi.value("P").unwrap()),
+    ];
+    for w in &want {
+        assert!(text.contains(w), "{w} not in the report");
+    }
+    let Some(bin) = chromium() else {
+        eprintln!("SKIPPED: chromium not installed (apt-get install chromium)");
+        return;
+    };
+    let profile = tempfile::tempdir().unwrap();
+    let dom = headless(&bin, profile.path(), &["--dump-dom".into()], &html);
+    assert!(
+        dom.status.success(),
+        "{}",
+        String::from_utf8_lossy(&dom.stderr)
+    );
+    let dom = String::from_utf8_lossy(&dom.stdout);
+    assert!(
+        dom.contains("A. Tester") && dom.contains("LI-80 s/n 0042"),
+        "header"
+    );
+    for w in &want {
+        assert!(dom.contains(w.as_str()), "{w} not in the rendered DOM");
+    }
+    assert!(dom.matches("<svg").count() >= 2, "both charts rendered");
+    let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("report_chromium.png");
+    let _ = std::fs::remove_file(&shot);
+    let profile2 = tempfile::tempdir().unwrap();
+    let out = headless(
+        &bin,
+        profile2.path(),
+        &[
+            format!("--screenshot={}", shot.display()),
+            "--window-size=1100,2400".into(),
+        ],
+        &html,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let png = std::fs::read(&shot).unwrap();
+    assert!(
+        png.starts_with(b"\x89PNG") && png.len() > 20_000,
+        "screenshot {} bytes",
+        png.len()
+    );
+    eprintln!("screenshot kept: {}", shot.display());
+}

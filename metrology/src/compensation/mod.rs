@@ -1,0 +1,263 @@
+//! Pitch-error (leadscrew) compensation tables from a positioning run, one writer per
+//! controller dialect, and the verification that predicts the ISO 230-2 result after the
+//! table is loaded (`docs/methods.md` "Pitch-error compensation"; each dialect's conventions
+//! and their sources are listed there and in the dialect's file).
+//!
+//! Every table is built from the same *error curve*: the measured mean deviation (actual −
+//! nominal, µm) interpolated linearly at equally spaced table points aligned on the reference
+//! point, and re-referenced so that the error at the reference point is zero (a controller
+//! takes its reference point as exact; a constant cannot be compensated by a pitch table).
+//! The dialect then writes the error, or the correction (−error), absolute or incremental,
+//! in its units, and quantises it as the control stores it.
+
+mod fanuc;
+mod heidenhain;
+mod linuxcnc;
+mod sinumerik;
+
+use serde::{Deserialize, Serialize};
+
+use crate::axis_model::Direction;
+use crate::iso230::{AxisStats, evaluate};
+use crate::positioning_data::PositioningData;
+
+/// A controller's compensation dialect.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Dialect {
+    Sinumerik,
+    Fanuc,
+    Heidenhain,
+    LinuxCnc,
+}
+
+impl std::str::FromStr for Dialect {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "sinumerik" | "siemens" => Ok(Dialect::Sinumerik),
+            "fanuc" => Ok(Dialect::Fanuc),
+            "heidenhain" => Ok(Dialect::Heidenhain),
+            "linuxcnc" => Ok(Dialect::LinuxCnc),
+            _ => Err(format!(
+                "unknown dialect `{s}` (known: sinumerik, fanuc, heidenhain, linuxcnc)"
+            )),
+        }
+    }
+}
+
+/// How the two directions of approach are compensated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Mode {
+    /// One table from the mean bidirectional deviation x̄ = (x̄↑ + x̄↓)/2; no backlash value.
+    Mean,
+    /// One table from the positive-direction deviation x̄↑ plus a backlash value
+    /// b = mean(x̄↓ − x̄↑) that the control adds on negative-direction moves.
+    Backlash,
+    /// One table per direction (x̄↑ and x̄↓), where the dialect has direction-dependent tables.
+    Bidirectional,
+}
+
+/// What to build.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Options {
+    pub dialect: Dialect,
+    pub mode: Mode,
+    /// Table point spacing, mm; default: the mean target spacing of the run.
+    pub spacing_mm: Option<f64>,
+    /// Reference (home) position, mm; default: the lowest target.
+    pub reference_mm: Option<f64>,
+    /// The axis name as the control knows it (e.g. `X1`, `AX1`); default: the run's axis.
+    pub axis_name: Option<String>,
+    /// Axis number for dialects that address axes by number (Fanuc parameter axis, LinuxCNC
+    /// joint), 1-based.
+    pub axis_number: usize,
+}
+
+/// Why no table could be built.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum CompensationError {
+    #[error(
+        "the run has no mean deviation in the {0} direction at two targets or more: measure the axis bidirectionally (ISO 230-2 cycle) first"
+    )]
+    NotEnoughData(&'static str),
+    #[error("spacing must be a positive number of mm (got {0})")]
+    BadSpacing(f64),
+    #[error("{dialect:?}: {message}")]
+    Unsupported { dialect: Dialect, message: String },
+    #[error("{dialect:?}: {message}")]
+    Limit { dialect: Dialect, message: String },
+}
+
+/// A table as the control will apply it: errors (actual − nominal, µm) at the points after
+/// the dialect's quantisation, and the backlash value, µm.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CompensationTable {
+    pub dialect: Dialect,
+    pub mode: Mode,
+    pub reference_mm: f64,
+    pub points_mm: Vec<f64>,
+    /// Error the control compensates on positive-direction moves (all moves in `Mean`).
+    pub error_up_um: Vec<f64>,
+    /// Error the control compensates on negative-direction moves (`Bidirectional`) or the
+    /// positive-direction curve shifted by the backlash (`Backlash`).
+    pub error_down_um: Vec<f64>,
+    /// Backlash value written to the control, µm (`Backlash` mode).
+    pub backlash_um: Option<f64>,
+    /// The files to load: (suggested file name, text).
+    pub files: Vec<(String, String)>,
+    /// What the commissioning engineer must set or check on the control.
+    pub notes: Vec<String>,
+}
+
+/// The error curve before the dialect's conventions.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Curve {
+    pub axis: String,
+    pub axis_number: usize,
+    pub reference_mm: f64,
+    pub spacing_mm: f64,
+    pub points_mm: Vec<f64>,
+    /// Index of the reference point in `points_mm`.
+    pub reference_index: usize,
+    pub up_um: Vec<f64>,
+    pub down_um: Vec<f64>,
+    pub backlash_um: Option<f64>,
+    pub mode: Mode,
+}
+
+/// Linear interpolation in a sorted table, holding the end values outside it.
+pub fn interpolate(xs: &[f64], ys: &[f64], x: f64) -> f64 {
+    match xs.iter().position(|&p| p > x) {
+        None => *ys.last().unwrap_or(&0.0),
+        Some(0) => ys[0],
+        Some(i) => {
+            let (x0, x1, y0, y1) = (xs[i - 1], xs[i], ys[i - 1], ys[i]);
+            y0 + (y1 - y0) * (x - x0) / (x1 - x0)
+        }
+    }
+}
+
+/// Per-target means (position, x̄↑, x̄↓) sorted by position, targets lacking one direction
+/// left out of that direction's curve.
+fn means(data: &PositioningData) -> [(Vec<f64>, Vec<f64>); 2] {
+    let r = evaluate(data);
+    let mut t: Vec<_> = r.targets.iter().collect();
+    t.sort_by(|a, b| a.target_mm.total_cmp(&b.target_mm));
+    let curve = |f: &dyn Fn(&crate::iso230::TargetStats) -> Option<f64>| {
+        t.iter()
+            .filter_map(|x| f(x).map(|v| (x.target_mm, v)))
+            .unzip::<f64, f64, Vec<f64>, Vec<f64>>()
+    };
+    [curve(&|x| x.mean_up_um), curve(&|x| x.mean_down_um)]
+}
+
+pub(crate) fn curve(data: &PositioningData, o: &Options) -> Result<Curve, CompensationError> {
+    let [(xu, yu), (xd, yd)] = means(data);
+    if xu.len() < 2 {
+        return Err(CompensationError::NotEnoughData("positive"));
+    }
+    if xd.len() < 2 {
+        return Err(CompensationError::NotEnoughData("negative"));
+    }
+    let (lo, hi) = (xu[0].min(xd[0]), xu[xu.len() - 1].max(xd[xd.len() - 1]));
+    let spacing = o
+        .spacing_mm
+        .unwrap_or((hi - lo) / (data.n_targets().max(2) - 1) as f64);
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(CompensationError::BadSpacing(spacing));
+    }
+    let reference = o.reference_mm.unwrap_or(lo);
+    // Points aligned on the reference, covering the travel and the reference.
+    let k0 = ((lo.min(reference) - reference) / spacing + 1e-9).floor() as i64;
+    let k1 = ((hi.max(reference) - reference) / spacing - 1e-9).ceil() as i64;
+    let points_mm: Vec<f64> = (k0..=k1).map(|k| reference + k as f64 * spacing).collect();
+    let reference_index = (-k0) as usize;
+    let at = |xs: &[f64], ys: &[f64]| -> Vec<f64> {
+        points_mm.iter().map(|&p| interpolate(xs, ys, p)).collect()
+    };
+    let (up, down) = (at(&xu, &yu), at(&xd, &yd));
+    let (mut up_um, mut down_um, backlash_um) = match o.mode {
+        Mode::Mean => {
+            let m: Vec<f64> = up.iter().zip(&down).map(|(a, b)| 0.5 * (a + b)).collect();
+            (m.clone(), m, None)
+        }
+        Mode::Backlash => {
+            let b = down.iter().zip(&up).map(|(d, u)| d - u).sum::<f64>() / up.len() as f64;
+            let d: Vec<f64> = up.iter().map(|u| u + b).collect();
+            (up, d, Some(b))
+        }
+        Mode::Bidirectional => (up, down, None),
+    };
+    let e0 = up_um[reference_index];
+    for v in up_um.iter_mut().chain(down_um.iter_mut()) {
+        *v -= e0;
+    }
+    Ok(Curve {
+        axis: o
+            .axis_name
+            .clone()
+            .or_else(|| data.axis.clone())
+            .unwrap_or_else(|| "X".to_string()),
+        axis_number: o.axis_number.max(1),
+        reference_mm: reference,
+        spacing_mm: spacing,
+        points_mm,
+        reference_index,
+        up_um,
+        down_um,
+        backlash_um,
+        mode: o.mode,
+    })
+}
+
+/// Builds the table for a run in the chosen dialect.
+pub fn build(data: &PositioningData, o: &Options) -> Result<CompensationTable, CompensationError> {
+    let mut o = o.clone();
+    if o.dialect == Dialect::Heidenhain {
+        // The TNC needs a power-of-two spacing starting at its datum (heidenhain.rs).
+        let c = curve(data, &o)?;
+        o.spacing_mm = Some(heidenhain::spacing_mm(c.spacing_mm));
+    }
+    if o.dialect == Dialect::Fanuc {
+        let c = curve(data, &o)?;
+        o.spacing_mm = Some(fanuc::spacing_mm(c.spacing_mm));
+    }
+    let c = curve(data, &o)?;
+    match o.dialect {
+        Dialect::Sinumerik => sinumerik::write(&c),
+        Dialect::Fanuc => fanuc::write(&c),
+        Dialect::Heidenhain => heidenhain::write(&c),
+        Dialect::LinuxCnc => linuxcnc::write(&c),
+    }
+}
+
+/// The run as it would read with the table loaded: each reading minus the error the control
+/// compensates at its target and direction (interpolated linearly between table points, as
+/// the controls do).
+pub fn apply(data: &PositioningData, t: &CompensationTable) -> PositioningData {
+    let mut out = data.clone();
+    for r in &mut out.readings {
+        let ys = match r.direction {
+            Direction::Up => &t.error_up_um,
+            Direction::Down => &t.error_down_um,
+        };
+        r.deviation_um -= interpolate(&t.points_mm, ys, r.target_mm);
+    }
+    out.metadata
+        .insert("compensation".into(), format!("predicted, {:?}", t.dialect));
+    out
+}
+
+/// ISO 230-2 before and predicted after compensation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Verification {
+    pub before: AxisStats,
+    pub after: AxisStats,
+}
+
+pub fn verify(data: &PositioningData, t: &CompensationTable) -> Verification {
+    Verification {
+        before: evaluate(data).axis,
+        after: evaluate(&apply(data, t)).axis,
+    }
+}

@@ -1,0 +1,188 @@
+//! Planning an ISO 230-2 positioning test of one linear axis (`docs/methods.md` "Planning a
+//! positioning test"): the targets with a random offset per target, the bidirectional
+//! cycle with overrun for the reversal, and the part program that drives the machine
+//! through it in a controller's dialect, with the exact-stop trigger the daemon listens to
+//! (`docs/instruments.md` §4). The trajectory CSV is the daemon's pose table
+//! (`pose,x_mm,y_mm,z_mm`); its row numbers are the pose indices the trigger carries.
+
+mod programs;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::axis_model::Direction;
+pub use crate::compensation::Dialect;
+
+/// What to plan.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlanOptions {
+    /// Axis letter: X, Y or Z.
+    pub axis: char,
+    pub from_mm: f64,
+    pub to_mm: f64,
+    /// Number of targets m (ISO 230-2: at least 5 per metre, at least 5).
+    pub targets: usize,
+    /// Number of bidirectional cycles n (ISO 230-2: 5).
+    pub cycles: usize,
+    /// Seed of the random offsets.
+    pub seed: u64,
+    /// Largest random offset |r|, mm; default a tenth of the interval.
+    pub max_offset_mm: Option<f64>,
+    /// Travel past the end targets before each reversal, mm.
+    pub overrun_mm: f64,
+    /// Dwell at each target, s.
+    pub dwell_s: f64,
+    /// Feed, mm/min.
+    pub feed_mm_min: f64,
+    /// The M-function that pulses the exact-stop trigger (the PLC sends the CAN frame with
+    /// the pose index it finds in the program's parameter [`POSE_PARAMETER`]).
+    pub trigger_m: u32,
+}
+
+impl Default for PlanOptions {
+    fn default() -> Self {
+        PlanOptions {
+            axis: 'X',
+            from_mm: 0.0,
+            to_mm: 500.0,
+            targets: 11,
+            cycles: 5,
+            seed: 1,
+            max_offset_mm: None,
+            overrun_mm: 5.0,
+            dwell_s: 2.0,
+            feed_mm_min: 1000.0,
+            trigger_m: 101,
+        }
+    }
+}
+
+/// The program parameter (R/#/Q number) that carries the pose index for the trigger.
+pub const POSE_PARAMETER: u32 = 100;
+
+/// Why no plan could be made.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum PlanError {
+    #[error("{0}")]
+    Bad(String),
+}
+
+/// One programmed stop.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    /// Row of the trajectory, from 1.
+    pub pose: usize,
+    pub position_mm: f64,
+    /// `Some((cycle, direction, target index))` for a measured stop, `None` for a reversal.
+    pub target: Option<(usize, Direction, usize)>,
+}
+
+/// A planned test.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    pub options: PlanOptions,
+    /// The targets P_i, mm.
+    pub targets_mm: Vec<f64>,
+    pub poses: Vec<Pose>,
+}
+
+fn check(o: &PlanOptions) -> Result<(), PlanError> {
+    let bad = |m: &str| Err(PlanError::Bad(m.to_string()));
+    if !"XYZ".contains(o.axis) {
+        return bad("--axis must be X, Y or Z");
+    }
+    if !(o.from_mm.is_finite() && o.to_mm.is_finite() && o.to_mm > o.from_mm) {
+        return bad("--to must be greater than --from");
+    }
+    if o.targets < 2 || o.cycles < 1 {
+        return bad("a test needs at least 2 targets and 1 cycle (ISO 230-2: 5 targets, 5 cycles)");
+    }
+    if !(o.overrun_mm >= 0.0 && o.dwell_s >= 0.0 && o.feed_mm_min > 0.0) {
+        return bad("--overrun and --dwell must not be negative, the feed must be positive");
+    }
+    let p = (o.to_mm - o.from_mm) / (o.targets - 1) as f64;
+    if o.max_offset_mm
+        .is_some_and(|r| !(0.0..p / 2.0).contains(&r))
+    {
+        return bad("the random offset must be below half the target interval");
+    }
+    Ok(())
+}
+
+/// Plans the test: P_i = from + (i − 1)p + r_i, r_i uniform in ±r_max (the first target only
+/// upward, the last only downward, so the targets stay in the travel); each cycle runs
+/// from below P_1 − overrun up through the targets to P_m + overrun and back down through
+/// them to P_1 − overrun.
+pub fn plan(o: &PlanOptions) -> Result<Plan, PlanError> {
+    check(o)?;
+    let m = o.targets;
+    let p = (o.to_mm - o.from_mm) / (m - 1) as f64;
+    let r_max = o.max_offset_mm.unwrap_or(0.1 * p);
+    let mut rng = ChaCha8Rng::seed_from_u64(o.seed);
+    let targets_mm: Vec<f64> = (0..m)
+        .map(|i| {
+            let (lo, hi) = match i {
+                0 => (0.0, r_max),
+                _ if i == m - 1 => (-r_max, 0.0),
+                _ => (-r_max, r_max),
+            };
+            let r = if hi > lo {
+                rng.random_range(lo..=hi)
+            } else {
+                0.0
+            };
+            // Programmed to 1 µm: what the controller can be told.
+            ((o.from_mm + i as f64 * p + r) * 1e3).round() / 1e3
+        })
+        .collect();
+    let mut poses = Vec::new();
+    let mut push = |position_mm: f64, target| {
+        poses.push(Pose {
+            pose: poses.len() + 1,
+            position_mm,
+            target,
+        })
+    };
+    let (below, above) = (
+        targets_mm[0] - o.overrun_mm,
+        targets_mm[m - 1] + o.overrun_mm,
+    );
+    push(below, None);
+    for c in 1..=o.cycles {
+        for (i, &t) in targets_mm.iter().enumerate() {
+            push(t, Some((c, Direction::Up, i + 1)));
+        }
+        push(above, None);
+        for (i, &t) in targets_mm.iter().enumerate().rev() {
+            push(t, Some((c, Direction::Down, i + 1)));
+        }
+        push(below, None);
+    }
+    Ok(Plan {
+        options: o.clone(),
+        targets_mm,
+        poses,
+    })
+}
+
+impl Plan {
+    /// Machine positions (x, y, z mm) of each pose, in trajectory order: the rows of the
+    /// daemon's trajectory (`docs/instruments.md` §4; written by `metrolog_log::trajectory`).
+    pub fn positions_xyz_mm(&self) -> Vec<[f64; 3]> {
+        let k = (self.options.axis as u8 - b'X') as usize;
+        self.poses
+            .iter()
+            .map(|p| {
+                let mut xyz = [0.0; 3];
+                xyz[k] = p.position_mm;
+                xyz
+            })
+            .collect()
+    }
+
+    /// The part program in a dialect.
+    pub fn part_program(&self, d: Dialect) -> String {
+        programs::program(self, d)
+    }
+}

@@ -63,7 +63,9 @@ fn unit_has_the_settings_the_service_relies_on() {
         "DevicePolicy=closed",
         "DeviceAllow=char-ttyUSB rw",
         "DeviceAllow=char-ttyACM rw",
-        "RestrictAddressFamilies=AF_UNIX AF_CAN",
+        "RestrictAddressFamilies=AF_UNIX",
+        "PrivateNetwork=yes",
+        "PrivateMounts=yes",
     ] {
         assert!(has(k), "missing `{k}`");
     }
@@ -157,4 +159,47 @@ fn binary_exits_with_the_documented_codes() {
     let (code, err) = run_binary(&["run", "--config", cfg.to_str().unwrap()]);
     assert_eq!(code, Some(metrolog::exit::CANT_CREATE as i32), "{err}");
     assert!(err.contains("cannot create the output directory"), "{err}");
+}
+
+/// The exposure `systemd-analyze security` gives a unit file (with its drop-ins beside it).
+fn exposure(unit: &Path) -> Option<f64> {
+    let out = Command::new("systemd-analyze")
+        .args(["security", "--offline=true", "--no-pager"])
+        .arg(unit)
+        .output()
+        .ok()?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text.lines().find(|l| l.contains("Overall exposure level"))?;
+    let after = line.split(':').nth(1)?.trim();
+    after.split_whitespace().next()?.parse().ok()
+}
+
+/// `systemd-analyze security` rates the default unit at most 1.1, and the SocketCAN drop-in
+/// opens only the network namespace and AF_CAN (at most 1.2).
+#[test]
+fn unit_exposure_is_at_most_1_1() {
+    let dir = tempfile::tempdir().unwrap();
+    let unit = dir.path().join("metrolog.service");
+    std::fs::write(
+        &unit,
+        unit_text().replace("/usr/local/bin/metrolog", env!("CARGO_BIN_EXE_metrolog")),
+    )
+    .unwrap();
+    let Some(default) = exposure(&unit) else {
+        println!("SKIPPED: systemd-analyze security --offline is not available (systemd >= 250)");
+        return;
+    };
+    assert!(default <= 1.1, "exposure of the default unit {default}");
+    let dropins = dir.path().join("metrolog.service.d");
+    std::fs::create_dir_all(&dropins).unwrap();
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/metrolog-socketcan.conf"),
+        dropins.join("socketcan.conf"),
+    )
+    .unwrap();
+    let socketcan = exposure(&unit).unwrap();
+    assert!(
+        socketcan > default && socketcan <= 1.2,
+        "exposure with the SocketCAN drop-in {socketcan}"
+    );
 }

@@ -755,7 +755,7 @@ async fn garbage_flood_on_one_port_does_not_starve_the_others() {
         sc.clone(),
         &which,
         Rates {
-            li80: 10_000,
+            li80: 2000,
             cb3: 5000,
             psd: 1000,
         },

@@ -31,7 +31,10 @@ pub const ALL: [(u8, &str); 7] = [
     (USAGE, "command-line usage error"),
     (SOFTWARE, "internal error (pipeline thread panicked)"),
     (CANT_CREATE, "the log file could not be created"),
-    (IO_ERROR, "the log could not be written (disk full, I/O error)"),
+    (
+        IO_ERROR,
+        "the log could not be written (disk full, I/O error)",
+    ),
     (CONFIG, "invalid configuration"),
 ];
 

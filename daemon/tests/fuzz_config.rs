@@ -68,11 +68,53 @@ fn replay_config_corpus() {
 }
 
 const TOKENS: &[&str] = &[
-    "=", "[", "]", "[[", "]]", "\"", "'", "\n", "#", ",", "{", "}", ".", "0", "-1", "1e400",
-    "nan", "inf", "-inf", "0x181", "0x800", "true", "4294967296", "18446744073709551616",
-    "\"\"\"", "\\u0000", "é", "[run]", "[capball]", "[trigger]", "[psd]", "[interferometer]",
-    "[detector]", "port", "rate_hz", "samples", "poly", "transform", "trajectory", "slcan",
-    "socketcan", "can_id", "baud", "min_sum_pa", "time_scale", "output_dir", "machine",
+    "=",
+    "[",
+    "]",
+    "[[",
+    "]]",
+    "\"",
+    "'",
+    "\n",
+    "#",
+    ",",
+    "{",
+    "}",
+    ".",
+    "0",
+    "-1",
+    "1e400",
+    "nan",
+    "inf",
+    "-inf",
+    "0x181",
+    "0x800",
+    "true",
+    "4294967296",
+    "18446744073709551616",
+    "\"\"\"",
+    "\\u0000",
+    "é",
+    "[run]",
+    "[capball]",
+    "[trigger]",
+    "[psd]",
+    "[interferometer]",
+    "[detector]",
+    "port",
+    "rate_hz",
+    "samples",
+    "poly",
+    "transform",
+    "trajectory",
+    "slcan",
+    "socketcan",
+    "can_id",
+    "baud",
+    "min_sum_pa",
+    "time_scale",
+    "output_dir",
+    "machine",
 ];
 
 /// xorshift64*: reproducible inputs from a seed, no dependency.
@@ -147,6 +189,13 @@ fn mutate_configs() {
         }
     }
     let _ = std::panic::take_hook();
-    println!("config fuzz: {iters} inputs (seed {seed}): {ok} valid, {rejected} rejected, {crashes} crashes");
-    assert_eq!(crashes, 0, "crashing inputs written to {}", corpus_dir().display());
+    println!(
+        "config fuzz: {iters} inputs (seed {seed}): {ok} valid, {rejected} rejected, {crashes} crashes"
+    );
+    assert_eq!(
+        crashes,
+        0,
+        "crashing inputs written to {}",
+        corpus_dir().display()
+    );
 }

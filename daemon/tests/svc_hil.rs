@@ -266,15 +266,26 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
         .unwrap()
         .iter()
         .filter(|p| p["status"] != "ok")
-        .map(|p| format!("{} pose {}: {} (n {})", p["instrument"], p["pose"], p["status"], p["n"]))
+        .map(|p| {
+            format!(
+                "{} pose {}: {} (n {})",
+                p["instrument"], p["pose"], p["status"], p["n"]
+            )
+        })
         .collect();
     // 11 poses, one reversal, pose 4 without exact stop: at most 9 ok per instrument.
     assert!(
         ok.get("interferometer").copied().unwrap_or(0) >= 8,
         "{ok:?}; not ok: {not_ok:#?}"
     );
-    assert!(ok.get("psd").copied().unwrap_or(0) >= 8, "{ok:?}; not ok: {not_ok:#?}");
-    assert!(ok.get("capball").copied().unwrap_or(0) >= 6, "{ok:?}; not ok: {not_ok:#?}");
+    assert!(
+        ok.get("psd").copied().unwrap_or(0) >= 8,
+        "{ok:?}; not ok: {not_ok:#?}"
+    );
+    assert!(
+        ok.get("capball").copied().unwrap_or(0) >= 6,
+        "{ok:?}; not ok: {not_ok:#?}"
+    );
 
     // The counters saw the injected faults.
     let st = &r["last_status"]["instruments"];
@@ -440,7 +451,25 @@ async fn full_disk_stops_the_run_with_exit_74_and_a_readable_log() {
     std::fs::write(&cfg, toml).unwrap();
     let notify_path = dir.path().join("notify.sock");
     let notify = std::os::unix::net::UnixDatagram::bind(&notify_path).unwrap();
-    notify.set_nonblocking(true).unwrap();
+    // Read the notifications as they come, like systemd: a full datagram queue would block
+    // the daemon's sends.
+    notify
+        .set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let listening = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let listener = {
+        let listening = listening.clone();
+        std::thread::spawn(move || {
+            let mut states = Vec::new();
+            let mut buf = vec![0u8; 65536];
+            while listening.load(std::sync::atomic::Ordering::Relaxed) {
+                if let Ok(n) = notify.recv(&mut buf) {
+                    states.push(String::from_utf8_lossy(&buf[..n]).to_string());
+                }
+            }
+            states
+        })
+    };
 
     let mut child = Command::new(env!("CARGO_BIN_EXE_metrolog"))
         .args(["run", "--config"])
@@ -463,11 +492,8 @@ async fn full_disk_stops_the_run_with_exit_74_and_a_readable_log() {
         stderr.contains("stopping the run") && stderr.contains("No space left on device"),
         "{stderr}"
     );
-    let mut states = Vec::new();
-    let mut buf = vec![0u8; 65536];
-    while let Ok(n) = notify.recv(&mut buf) {
-        states.push(String::from_utf8_lossy(&buf[..n]).to_string());
-    }
+    listening.store(false, std::sync::atomic::Ordering::Relaxed);
+    let states = listener.join().unwrap();
     assert!(
         states.iter().any(|s| s.contains("READY=1")),
         "READY before the failure: {states:?}"
@@ -493,7 +519,10 @@ async fn full_disk_stops_the_run_with_exit_74_and_a_readable_log() {
         let r = read_log(&log);
         assert_eq!(r["n_errors"], 0, "schema violations: {}", r["errors"]);
         assert!(
-            r["counts"]["/interferometer/position"].as_u64().unwrap_or(0) > 1000,
+            r["counts"]["/interferometer/position"]
+                .as_u64()
+                .unwrap_or(0)
+                > 1000,
             "{}",
             r["counts"]
         );

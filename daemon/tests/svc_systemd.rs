@@ -84,7 +84,10 @@ fn restart_prevent_codes(text: &str) -> Vec<u8> {
         .lines()
         .filter_map(|l| l.trim().strip_prefix("RestartPreventExitStatus="))
         .flat_map(|v| v.split_whitespace())
-        .map(|c| c.parse().expect("RestartPreventExitStatus takes numbers here"))
+        .map(|c| {
+            c.parse()
+                .expect("RestartPreventExitStatus takes numbers here")
+        })
         .collect();
     codes.sort_unstable();
     codes
@@ -99,7 +102,11 @@ fn unit_prevents_restart_exactly_on_the_documented_codes() {
     let mut want = metrolog::exit::NO_RESTART.to_vec();
     want.sort_unstable();
     assert_eq!(restart_prevent_codes(&unit_text()), want);
-    assert!(unit_text().lines().any(|l| l.trim() == "Restart=on-failure"));
+    assert!(
+        unit_text()
+            .lines()
+            .any(|l| l.trim() == "Restart=on-failure")
+    );
 }
 
 /// The README's deploy section has a row for every exit code the binary uses.
@@ -110,7 +117,9 @@ fn readme_lists_every_exit_code() {
             .unwrap();
     for (code, what) in metrolog::exit::ALL {
         assert!(
-            readme.lines().any(|l| l.starts_with(&format!("| {code} |"))),
+            readme
+                .lines()
+                .any(|l| l.starts_with(&format!("| {code} |"))),
             "README has no row for exit code {code} ({what})"
         );
     }
@@ -169,7 +178,9 @@ fn exposure(unit: &Path) -> Option<f64> {
         .output()
         .ok()?;
     let text = String::from_utf8_lossy(&out.stdout);
-    let line = text.lines().find(|l| l.contains("Overall exposure level"))?;
+    let line = text
+        .lines()
+        .find(|l| l.contains("Overall exposure level"))?;
     let after = line.split(':').nth(1)?.trim();
     after.split_whitespace().next()?.parse().ok()
 }

@@ -805,10 +805,17 @@ async fn garbage_flood_on_one_port_does_not_starve_the_others() {
         for (g, w) in got.iter().zip(&sent) {
             check_values(i, g, w, &sc);
         }
-        assert_eq!((gaps, gap_samples), (0, 0), "{i:?}: no faults were injected");
+        assert_eq!(
+            (gaps, gap_samples),
+            (0, 0),
+            "{i:?}: no faults were injected"
+        );
         let k = c.counters.clone().unwrap();
         assert_eq!((k.gaps, k.dropped), (0, 0), "{i:?}: {k:?}");
-        assert_eq!(r.faults.overflow, 0, "{i:?}: the simulator's port never overflowed");
+        assert_eq!(
+            r.faults.overflow, 0,
+            "{i:?}: the simulator's port never overflowed"
+        );
     }
     sim.shutdown().await;
 }

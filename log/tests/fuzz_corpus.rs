@@ -3,8 +3,9 @@
 //! the fuzz targets (`metrolog_log::fuzzcheck`), so CI re-runs them on stable. Files named
 //! `valid_*` must parse (trajectory) or read to the end (MCAP).
 //!
-//! The MCAP seeds are written by `cargo test -p metrolog-log --test fuzz_corpus -- --ignored
-//! write_mcap_seeds`.
+//! The committed MCAP seeds were written by the Python `mcap` package (an independent writer:
+//! a small file, cut at 10/50/90/99.9 % and bit-flipped); `cargo test -p metrolog-log --test
+//! fuzz_corpus -- --ignored write_mcap_seeds` adds the same from our writer.
 
 use std::path::PathBuf;
 

@@ -216,12 +216,13 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
     );
 
     // Pose values against the simulation's truth (independent: the sim's physics at mid-dwell).
-    // Known to fail under heavy load (issue 15, `.ci/hil-under-load` at load average ~22): an
-    // "ok" LI-80 value 97 mm from its pose. The trigger's time is its host arrival time, which
-    // load delays, while the samples' times come from the clock fit's lower envelope, which
-    // load does not: the window lands in the next move. A real loss in the daemon, not a test
-    // timing assumption; the fix is to put the triggers on a fitted clock too (the SLCAN
-    // timestamp or the frame's nc_ms), not done yet.
+    // Known to fail under heavy load (issue 15, `.ci/hil-under-load` at load average ~22, 2 of
+    // 2 rounds): "ok" LI-80 values about 97-100 mm from their pose, once at the next pose's
+    // position, once at the previous one's. So the samples' fitted times and the triggers'
+    // times disagree by more than a move under load: a real fault of the daemon, not a timing
+    // assumption of the test. Cause not established; candidates: the trigger time (host
+    // arrival, delayed by load) and the LI-80 clock fit under load. What would confirm it:
+    // log the fit's offset and the trigger delay per pose in such a run.
     // A value equal to the previous pose's position means the samples' fitted times and the
     // triggers' host times disagree by more than a move (seen under heavy CPU load for the
     // LI-80 and CB-3: windows of one pose 0.4 s apart between instruments).

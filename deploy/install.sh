@@ -39,6 +39,14 @@ else
     echo "   kept the existing /etc/metrolog/metrolog.toml"
 fi
 
+# SocketCAN needs the host's network namespace and AF_CAN (see metrolog.service).
+if grep -Eq '^[[:space:]]*socketcan[[:space:]]*=' /etc/metrolog/metrolog.toml; then
+    install -D -m 0644 "$here/metrolog-socketcan.conf" /etc/systemd/system/metrolog.service.d/socketcan.conf
+    echo "   SocketCAN trigger configured: installed the socketcan.conf drop-in"
+else
+    rm -f /etc/systemd/system/metrolog.service.d/socketcan.conf
+fi
+
 echo "== user and state directory"
 if ! id metrolog >/dev/null 2>&1; then
     useradd --system --home-dir /var/lib/metrolog --no-create-home --shell /usr/sbin/nologin \

@@ -5,3 +5,4 @@
 pub mod acquire;
 pub mod cli;
 pub mod cmd;
+pub mod exit;

@@ -132,6 +132,33 @@ impl StderrText for Child {
     }
 }
 
+/// Poll the run's log in `dir` (its intact prefix, as written so far) until a message on
+/// `topic` is in it or `limit` has passed. Returns whether it was seen.
+async fn wait_for_topic(dir: &Path, topic: &str, limit: Duration) -> bool {
+    let t0 = Instant::now();
+    while t0.elapsed() < limit {
+        let log = std::fs::read_dir(dir).ok().and_then(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path()))
+                .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        });
+        if let Some(log) = log {
+            let mut found = false;
+            let _ = metrolog_log::reader::read_log_until(&log, |item| match item {
+                metrolog_log::reader::LogItem::Message { topic: t, .. } if t == topic => {
+                    found = true;
+                    std::ops::ControlFlow::Break(())
+                }
+                _ => std::ops::ControlFlow::Continue(()),
+            });
+            if found {
+                return true;
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    false
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
     let dir = tempfile::tempdir().unwrap();
@@ -189,6 +216,13 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
     );
 
     // Pose values against the simulation's truth (independent: the sim's physics at mid-dwell).
+    // Known to fail under heavy load (issue 15, `.ci/hil-under-load` at load average ~22, 2 of
+    // 2 rounds): "ok" LI-80 values about 97-100 mm from their pose, once at the next pose's
+    // position, once at the previous one's. So the samples' fitted times and the triggers'
+    // times disagree by more than a move under load: a real fault of the daemon, not a timing
+    // assumption of the test. Cause not established; candidates: the trigger time (host
+    // arrival, delayed by load) and the LI-80 clock fit under load. What would confirm it:
+    // log the fit's offset and the trigger delay per pose in such a run.
     // A value equal to the previous pose's position means the samples' fitted times and the
     // triggers' host times disagree by more than a move (seen under heavy CPU load for the
     // LI-80 and CB-3: windows of one pose 0.4 s apart between instruments).
@@ -233,13 +267,32 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
         }
     }
     assert!(wrong.is_empty(), "{}\n{}", wrong.join("\n"), r["poses"]);
+    // What was not ok, and why (the status says it: gap, away, too few samples...).
+    let not_ok: Vec<String> = r["poses"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["status"] != "ok")
+        .map(|p| {
+            format!(
+                "{} pose {}: {} (n {})",
+                p["instrument"], p["pose"], p["status"], p["n"]
+            )
+        })
+        .collect();
     // 11 poses, one reversal, pose 4 without exact stop: at most 9 ok per instrument.
     assert!(
         ok.get("interferometer").copied().unwrap_or(0) >= 8,
-        "{ok:?}"
+        "{ok:?}; not ok: {not_ok:#?}"
     );
-    assert!(ok.get("psd").copied().unwrap_or(0) >= 8, "{ok:?}");
-    assert!(ok.get("capball").copied().unwrap_or(0) >= 6, "{ok:?}");
+    assert!(
+        ok.get("psd").copied().unwrap_or(0) >= 8,
+        "{ok:?}; not ok: {not_ok:#?}"
+    );
+    assert!(
+        ok.get("capball").copied().unwrap_or(0) >= 6,
+        "{ok:?}; not ok: {not_ok:#?}"
+    );
 
     // The counters saw the injected faults.
     let st = &r["last_status"]["instruments"];
@@ -286,11 +339,17 @@ async fn run_killed_in_the_middle_leaves_a_readable_log() {
     std::fs::write(&cfg, toml).unwrap();
 
     let mut child = start_daemon(&cfg);
-    tokio::time::timeout(Duration::from_secs(30), sim.wait_program_started())
+    tokio::time::timeout(Duration::from_secs(60), sim.wait_program_started())
         .await
         .expect("the program started");
-    // The program starts start_delay_s (2 s) after it is scheduled; kill 3 s into it.
-    tokio::time::sleep(Duration::from_secs(5)).await;
+    // Kill once the log on disk holds a pose value (not after a fixed time: on a loaded
+    // machine the first pose can take longer to reach the file). The deadline is generous.
+    let seen = wait_for_topic(&logs, "/pose", Duration::from_secs(90)).await;
+    assert!(
+        seen,
+        "no /pose reached the log within 90 s of the program start; stderr:\n{}",
+        child.wait_with_output_stderr()
+    );
     assert!(
         child.try_wait().unwrap().is_none(),
         "still running before the kill"
@@ -338,4 +397,141 @@ async fn run_killed_in_the_middle_leaves_a_readable_log() {
     let lost_s = kill_ns.saturating_sub(last_ns) as f64 / 1e9;
     // Chunks are flushed at least once a second.
     assert!(lost_s < 2.0, "the log ends {lost_s:.2} s before the kill");
+}
+
+/// A small tmpfs mounted for the life of the value (unmounted on drop).
+struct SmallFs(PathBuf);
+
+impl SmallFs {
+    /// Mount a tmpfs of `size` (e.g. "1m") on `dir`; None (with the reason) when not root or
+    /// the mount is refused (a container without CAP_SYS_ADMIN).
+    fn mount(dir: &Path, size: &str) -> Result<SmallFs, String> {
+        // SAFETY: geteuid has no preconditions and cannot fail.
+        if unsafe { libc::geteuid() } != 0 {
+            return Err("not root".into());
+        }
+        let out = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(dir)
+            .output()
+            .map_err(|e| format!("mount: {e}"))?;
+        if !out.status.success() {
+            return Err(format!(
+                "mount refused: {}",
+                String::from_utf8_lossy(&out.stderr).trim()
+            ));
+        }
+        Ok(SmallFs(dir.to_path_buf()))
+    }
+}
+
+impl Drop for SmallFs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg("-l").arg(&self.0).status();
+    }
+}
+
+/// A full disk: the daemon writes its log to a 1 MiB tmpfs while the instruments stream at
+/// full rates. At the first failed write the run stops: exit 74 (EX_IOERR) within the deadline
+/// (it does not spin on the failing write), the journal (stderr) and systemd's STATUS (read
+/// from a NOTIFY_SOCKET the test binds) say so, and the file's prefix reads.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn full_disk_stops_the_run_with_exit_74_and_a_readable_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let ports = dir.path().join("ports");
+    let logs = dir.path().join("logs");
+    std::fs::create_dir_all(&ports).unwrap();
+    std::fs::create_dir_all(&logs).unwrap();
+    let _fs = match SmallFs::mount(&logs, "1m") {
+        Ok(fs) => fs,
+        Err(why) => {
+            println!("SKIPPED the disk-full test: cannot mount a small tmpfs ({why}); run as root");
+            return;
+        }
+    };
+    let mut sc = scenario();
+    sc.faults = Default::default();
+    let sim = sim::Sim::start(sc, &ports).unwrap();
+    // The run would go on past program end: only the full disk can end it.
+    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
+    let cfg = dir.path().join("metrolog.toml");
+    std::fs::write(&cfg, toml).unwrap();
+    let notify_path = dir.path().join("notify.sock");
+    let notify = std::os::unix::net::UnixDatagram::bind(&notify_path).unwrap();
+    // Read the notifications as they come, like systemd: a full datagram queue would block
+    // the daemon's sends.
+    notify
+        .set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let listening = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let listener = {
+        let listening = listening.clone();
+        std::thread::spawn(move || {
+            let mut states = Vec::new();
+            let mut buf = vec![0u8; 65536];
+            while listening.load(std::sync::atomic::Ordering::Relaxed) {
+                if let Ok(n) = notify.recv(&mut buf) {
+                    states.push(String::from_utf8_lossy(&buf[..n]).to_string());
+                }
+            }
+            states
+        })
+    };
+
+    let mut child = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .env("RUST_LOG", "info")
+        .env("NOTIFY_SOCKET", &notify_path)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let status = wait_exit(&mut child, Duration::from_secs(180)).await;
+    let stderr = child.wait_with_output_stderr();
+    sim.shutdown().await;
+    assert_eq!(
+        status.code(),
+        Some(metrolog::exit::IO_ERROR as i32),
+        "{status}\n{stderr}"
+    );
+    assert!(
+        stderr.contains("stopping the run") && stderr.contains("No space left on device"),
+        "{stderr}"
+    );
+    listening.store(false, std::sync::atomic::Ordering::Relaxed);
+    let states = listener.join().unwrap();
+    assert!(
+        states.iter().any(|s| s.contains("READY=1")),
+        "READY before the failure: {states:?}"
+    );
+    assert!(
+        states
+            .iter()
+            .any(|s| s.contains("STATUS=LOG WRITE FAILED, run stopped")),
+        "systemd's STATUS says the log failed: {states:?}"
+    );
+    // The prefix reads with our reader (and, where Python is, with the mcap package).
+    let log = the_log(&logs);
+    let mut topics = std::collections::BTreeSet::new();
+    let summary = metrolog_log::read_log(&log, |item| {
+        if let metrolog_log::LogItem::Message { topic, .. } = item {
+            topics.insert(topic.to_string());
+        }
+    })
+    .unwrap();
+    assert!(summary.messages > 1000, "{summary:?}");
+    assert!(topics.contains("/interferometer/position"), "{topics:?}");
+    if python_ok() {
+        let r = read_log(&log);
+        assert_eq!(r["n_errors"], 0, "schema violations: {}", r["errors"]);
+        assert!(
+            r["counts"]["/interferometer/position"]
+                .as_u64()
+                .unwrap_or(0)
+                > 1000,
+            "{}",
+            r["counts"]
+        );
+    }
 }

@@ -40,6 +40,8 @@
 //! it was closed cleanly is visible in the file itself — footer and end magic — and
 //! `metrolog info` reports it).
 
+#[doc(hidden)]
+pub mod fuzzcheck;
 pub mod reader;
 pub mod synthetic;
 pub mod topics;

@@ -119,3 +119,21 @@ pub fn slcan(data: &[u8]) {
         }
     }
 }
+
+/// The CAN trigger path: a payload decodes to a trigger or a typed error (never a panic), and
+/// a decoded trigger re-encodes to the same 8 bytes; the payloads of the frames an SLCAN
+/// stream carries take the same path (`drivers::trigger` hands both transports' frames to
+/// [`crate::can::TriggerFrame::decode`]).
+pub fn can(data: &[u8]) {
+    let payload = &data[..data.len().min(16)];
+    if let Ok(t) = crate::can::TriggerFrame::decode(payload) {
+        assert_eq!(t.encode().as_slice(), payload);
+    }
+    for f in frames(run::<slcan::Decoder>(&[data])) {
+        if let slcan::Message::Frame(c) = f
+            && let Ok(t) = crate::can::TriggerFrame::decode(&c.data)
+        {
+            assert_eq!(t.encode().as_slice(), c.data.as_slice());
+        }
+    }
+}

@@ -8,7 +8,7 @@
 use protocol::{Decoded, StreamDecoder, cb3, fuzzcheck, li80, psd, slcan};
 use std::path::PathBuf;
 
-const TARGETS: [&str; 4] = ["li80", "cb3", "psd", "slcan"];
+const TARGETS: [&str; 5] = ["li80", "cb3", "psd", "slcan", "can"];
 
 fn corpus_dir(target: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -37,10 +37,11 @@ fn replay_corpus() {
                 "li80" => fuzzcheck::li80(&data),
                 "cb3" => fuzzcheck::cb3(&data),
                 "psd" => fuzzcheck::psd(&data),
+                "can" => fuzzcheck::can(&data),
                 _ => fuzzcheck::slcan(&data),
             }
             let name = path.file_name().unwrap().to_string_lossy().into_owned();
-            if name.starts_with("valid_") {
+            if name.starts_with("valid_") && target != "can" {
                 let (frames, rejects) = match target {
                     "li80" => rejections::<li80::Decoder>(&data),
                     "cb3" => rejections::<cb3::Decoder>(&data),

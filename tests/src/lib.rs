@@ -137,6 +137,19 @@ impl FakeDevice {
         })
     }
 
+    /// The command lines received, once there are at least `n` of them or `limit` has passed
+    /// (the device thread reads them in its own time: a loaded machine delays it).
+    pub fn wait_commands(&self, n: usize, limit: Duration) -> Vec<String> {
+        let t0 = Instant::now();
+        loop {
+            let cmds = self.commands.lock().unwrap().clone();
+            if cmds.len() >= n || t0.elapsed() > limit {
+                return cmds;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
     /// Whether every chunk of the script has been written.
     pub fn script_done(&self) -> bool {
         self.done.load(Ordering::Relaxed)

@@ -242,8 +242,8 @@ async fn psd_values_gating_and_bad_lines() {
         c.errors
     );
     finish(cancel, task, &mut rx, &mut c).await;
-    tokio::time::sleep(Duration::from_millis(100)).await;
-    let cmds = dev.commands.lock().unwrap().clone();
+    // The closing INIT:CONT OFF, *OPC? are the 9th and 10th commands: wait for them.
+    let cmds = dev.wait_commands(10, Duration::from_secs(20));
     drop(dev);
     assert_eq!(
         cmds,
@@ -600,8 +600,8 @@ async fn li80_values_compensation_validity_and_fault_counts() {
     );
     tokio::time::sleep(Duration::from_millis(100)).await;
     finish(cancel, task, &mut rx, &mut c).await;
-    tokio::time::sleep(Duration::from_millis(100)).await;
-    let cmds = dev.commands.lock().unwrap().clone();
+    // The closing STREAM OFF is the 7th command: wait for it, not for a fixed time.
+    let cmds = dev.wait_commands(7, Duration::from_secs(20));
     drop(dev);
     assert_eq!(
         cmds,

@@ -40,13 +40,35 @@ struct Rates {
 
 impl Rig {
     async fn start(sc: Scenario, which: &[Instrument], rates: Rates) -> Rig {
+        Rig::start_with_ports(sc, which, rates, BTreeMap::new()).await
+    }
+
+    /// [`Rig::start`] with some instruments' drivers pointed at other ports than the
+    /// simulator's (a scripted device of the test).
+    async fn start_with_ports(
+        sc: Scenario,
+        which: &[Instrument],
+        rates: Rates,
+        ports: BTreeMap<Instrument, String>,
+    ) -> Rig {
         hil::init_tracing();
         let dir = tempfile::tempdir().unwrap();
         let sim = sim::Sim::start(sc, dir.path()).unwrap();
         let (tx, rx) = tokio::sync::mpsc::channel(200_000);
         let cancel = CancellationToken::new();
         let clock = HostClock::new();
-        let port = |d: Device| sim.port(d).display().to_string();
+        let port = |d: Device| {
+            let i = match d {
+                Device::Interferometer => Instrument::Interferometer,
+                Device::Capball => Instrument::Capball,
+                Device::Psd => Instrument::Psd,
+                Device::Trigger => Instrument::Trigger,
+            };
+            ports
+                .get(&i)
+                .cloned()
+                .unwrap_or_else(|| sim.port(d).display().to_string())
+        };
         let mut tasks = Vec::new();
         for &i in which {
             let t = match i {
@@ -688,4 +710,112 @@ async fn device_found_streaming_mid_frame_is_taken_over_cleanly() {
         );
     }
     first.sim.shutdown().await;
+}
+
+/// Random bytes (xorshift64*: the test needs noise, not a crate).
+fn noise(n: usize, seed: &mut u64) -> Vec<u8> {
+    (0..n)
+        .map(|_| {
+            *seed ^= *seed >> 12;
+            *seed ^= *seed << 25;
+            *seed ^= *seed >> 27;
+            (seed.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 56) as u8
+        })
+        .collect()
+}
+
+/// A device that floods random bytes at its full line rate (921 600 baud, 92 kB/s, from the
+/// first command the driver sends) must not starve the others: every sample the LI-80 and the
+/// CB-3 simulators sent arrives, exactly once, while the PSD-2 driver chews through the noise.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn garbage_flood_on_one_port_does_not_starve_the_others() {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("psd-flood");
+    let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+    // 1 kB every 11.1 ms is 92 kB/s, the line rate of 921 600 baud (10 bits a byte); 5 s of it.
+    let chunks: Vec<Vec<u8>> = (0..450).map(|_| noise(1024, &mut seed)).collect();
+    let flood = hil::FakeDevice::start(
+        &link,
+        b'\n',
+        Box::new(|_cmd: &str, _out: &mut Vec<u8>| Some(true)),
+        chunks,
+        Duration::from_micros(11_111),
+    )
+    .unwrap();
+    let mut sc = Scenario::demo();
+    sc.faults = Default::default();
+    let mut ports = BTreeMap::new();
+    ports.insert(Instrument::Psd, link.display().to_string());
+    let which = [
+        Instrument::Interferometer,
+        Instrument::Capball,
+        Instrument::Psd,
+    ];
+    let mut rig = Rig::start_with_ports(
+        sc.clone(),
+        &which,
+        Rates {
+            li80: 2000,
+            cb3: 5000,
+            psd: 1000,
+        },
+        ports,
+    )
+    .await;
+    let streaming = rig
+        .until(Duration::from_secs(30), |by| {
+            !by[&Instrument::Interferometer].connected.is_empty()
+                && !by[&Instrument::Capball].connected.is_empty()
+        })
+        .await;
+    assert!(streaming, "LI-80 and CB-3 connected beside the flood");
+    // Until the whole flood has been sent (a condition, not a time: on a loaded machine the
+    // flood thread itself runs late), collecting all the while.
+    let t0 = std::time::Instant::now();
+    while !flood.script_done() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "the flood did not get out in 120 s"
+        );
+        rig.run_for(Duration::from_millis(200)).await;
+    }
+    let commands = flood.commands.lock().unwrap().len();
+    let (sim, by) = rig.stop().await;
+    drop(flood);
+    let rec = sim.record();
+    assert!(commands > 0, "the PSD driver talked to the flooding device");
+    assert!(
+        by[&Instrument::Psd].connected.is_empty(),
+        "noise is never taken for a PSD-2: {:?}",
+        by[&Instrument::Psd].connected
+    );
+    for (i, d) in [
+        (Instrument::Interferometer, Device::Interferometer),
+        (Instrument::Capball, Device::Capball),
+    ] {
+        let c = &by[&i];
+        let r = rec.device(d);
+        let (sent, gaps, gap_samples) = expected(r, 1);
+        let got = stream_of(c);
+        assert_eq!(
+            got.len(),
+            sent.len(),
+            "{i:?}: every sample sent arrives once beside the flood"
+        );
+        for (g, w) in got.iter().zip(&sent) {
+            check_values(i, g, w, &sc);
+        }
+        assert_eq!(
+            (gaps, gap_samples),
+            (0, 0),
+            "{i:?}: no faults were injected"
+        );
+        let k = c.counters.clone().unwrap();
+        assert_eq!((k.gaps, k.dropped), (0, 0), "{i:?}: {k:?}");
+        assert_eq!(
+            r.faults.overflow, 0,
+            "{i:?}: the simulator's port never overflowed"
+        );
+    }
+    sim.shutdown().await;
 }

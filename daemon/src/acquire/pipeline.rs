@@ -209,6 +209,9 @@ pub struct Status {
     pub pose_latency_max_ms: f64,
     /// Records the log writer refused (disk full, ...).
     pub log_errors: u64,
+    /// Why the log could not be written, once it failed (the run then stops: see
+    /// [`StopReason::LogFailed`]).
+    pub log_failed: Option<String>,
 }
 
 impl Status {
@@ -237,8 +240,12 @@ impl Status {
             .filter(|(_, s)| s.connected)
             .map(|(i, _)| i.name())
             .collect();
+        let failed = match &self.log_failed {
+            Some(e) => format!("LOG WRITE FAILED, run stopped ({e}); "),
+            None => String::new(),
+        };
         format!(
-            "poses {} ({} ok), samples {}, faults {}, lost {}, connected: {}",
+            "{failed}poses {} ({} ok), samples {}, faults {}, lost {}, connected: {}",
             self.poses,
             self.poses_ok,
             self.samples(),
@@ -262,6 +269,9 @@ pub enum StopReason {
     ProgramEnd,
     /// Every driver ended (their senders are gone).
     DriversGone,
+    /// The log could not be written (disk full, I/O error): the run stops rather than go on
+    /// acquiring what it cannot keep. The file's prefix stays readable.
+    LogFailed,
 }
 
 /// What the pipeline hands back at the end.
@@ -320,6 +330,8 @@ impl Pipeline {
         }
     }
 
+    /// A failed write stops the run (disk full: going on would only retry a failing write for
+    /// every sample, and acquire what cannot be kept); the journal and the status say why.
     fn sink_result<T: Default>(&mut self, r: anyhow::Result<T>) -> T {
         match r {
             Ok(v) => v,
@@ -327,9 +339,9 @@ impl Pipeline {
                 self.status.log_errors += 1;
                 if !self.log_error_reported {
                     self.log_error_reported = true;
-                    tracing::error!(
-                        "the log writer failed (further failures are only counted): {e:#}"
-                    );
+                    tracing::error!("the log writer failed; stopping the run: {e:#}");
+                    self.status.log_failed = Some(format!("{e:#}"));
+                    self.stop = Some(StopReason::LogFailed);
                 }
                 T::default()
             }
@@ -469,8 +481,20 @@ impl Pipeline {
             &mut self.sink,
             Box::new(DetectOnly(PoseEngine::new(&DetectorSettings::default())?)),
         );
-        let last = sink.finish(now)?;
-        self.count_poses(last);
+        let mut reason = reason;
+        match sink.finish(now) {
+            Ok(last) => self.count_poses(last),
+            // The file could not be closed (its footer not written): what was written before
+            // stays readable, as after a kill (the reader reads the intact prefix).
+            Err(e) => {
+                tracing::error!("the log could not be closed cleanly: {e:#}");
+                self.status.log_errors += 1;
+                if self.status.log_failed.is_none() {
+                    self.status.log_failed = Some(format!("{e:#}"));
+                }
+                reason = StopReason::LogFailed;
+            }
+        }
         let status = self.status(queue_len);
         Ok(Outcome {
             reason,
@@ -510,6 +534,9 @@ impl Pipeline {
                         }
                     }
                     progress.send_replace(st);
+                    if let Some(r) = self.stop.clone() {
+                        break r;
+                    }
                 }
                 ev = rx.recv() => {
                     let Some(ev) = ev else { break StopReason::DriversGone };
@@ -536,7 +563,7 @@ impl Pipeline {
         };
         // Whatever is already queued belongs to the run (not so after program end: the next
         // program's samples belong to the next run).
-        if reason != StopReason::ProgramEnd {
+        if !matches!(reason, StopReason::ProgramEnd | StopReason::LogFailed) {
             while let Ok(ev) = rx.try_recv() {
                 self.handle(ev);
             }

@@ -51,6 +51,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
     ))?;
     let st = &report.outcome.status;
+    if report.outcome.reason == StopReason::LogFailed {
+        let why = st.log_failed.clone().unwrap_or_default();
+        // STATUS= stays visible in `systemctl status` after the exit.
+        notifier.status(&st.summary());
+        tracing::error!(
+            "run stopped: the log could not be written; {} keeps what was written before ({})",
+            report.log_path.display(),
+            st.summary()
+        );
+        return Err(crate::exit::LogWriteFailed(why).into());
+    }
     tracing::info!(
         "run ended ({}); log {}; {}; queue at most {} of {}; pose latency at most {:.1} ms",
         report.reason_text(),
@@ -129,6 +140,7 @@ impl RunReport {
             (StopReason::ProgramEnd, _) => "program end".into(),
             (StopReason::Cancelled, _) => "stopped".into(),
             (StopReason::DriversGone, _) => "every driver ended".into(),
+            (StopReason::LogFailed, _) => "the log could not be written".into(),
         }
     }
 }
@@ -139,7 +151,8 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
-    let recorder = crate::acquire::pipeline::open_log(cfg, &clock)?;
+    let recorder = crate::acquire::pipeline::open_log(cfg, &clock)
+        .map_err(|e| crate::exit::LogCreateFailed(format!("{e:#}")))?;
     let log_path = recorder.path().to_path_buf();
     tracing::info!("logging to {}", log_path.display());
 
@@ -264,7 +277,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let outcome = match joined {
         Ok(Ok(r)) => r?,
         Ok(Err(_)) | Err(_) => {
-            anyhow::bail!("the pipeline thread panicked; the log may be incomplete")
+            return Err(crate::exit::PipelinePanicked.into());
         }
     };
     Ok(RunReport {

@@ -1,0 +1,10 @@
+//! The positioning dataset reader (`docs/datasets.md`): a clear error or a dataset, no panic.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = metrology::positioning_data::PositioningData::from_csv_str(text);
+    }
+});

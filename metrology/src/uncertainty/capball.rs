@@ -185,6 +185,9 @@ pub struct CapballMc {
     p_hat: Vec<f64>,
     /// J⁺ (n_params × 3·n_poses).
     pinv: DMatrix<f64>,
+    /// J⁺ with column r scaled by σ_r: the per-point path projects unit normals with it, so no
+    /// trial scales its 2421 draws.
+    pinv_sigma: DMatrix<f64>,
     /// Standard deviation of the per-point normal noise for each row of ΔE.
     sigma: Vec<f64>,
     /// (order k, A_k, B_k): the cyclic drift's projection.
@@ -196,11 +199,13 @@ pub struct CapballMc {
     reduced: Option<DMatrix<f64>>,
 }
 
-/// Worker scratch: the noise batch and its projection.
+/// Worker scratch: the normals of a batch, their projection, the start phases.
 pub struct CapballScratch {
     noise: DMatrix<f64>,
     proj: DMatrix<f64>,
     phase: Vec<f64>,
+    /// cos(kφ), sin(kφ) for k = 0..=max order (recurrence from one sin_cos).
+    harm: Vec<(f64, f64)>,
 }
 
 /// Moore–Penrose pseudo-inverse of a full-column-rank `J` by SVD.
@@ -265,7 +270,7 @@ impl CapballMc {
             DriftModel::Statistical { u_um } => *u_um,
             _ => [0.0; 3],
         };
-        let sigma = (0..j.nrows())
+        let sigma: Vec<f64> = (0..j.nrows())
             .map(|r| {
                 let a = r % 3;
                 (sources.sensor_u_um[a].powi(2) + sources.frame_u_um[a].powi(2) + stat[a].powi(2))
@@ -300,6 +305,13 @@ impl CapballMc {
         Ok(CapballMc {
             names: names.to_vec(),
             p_hat: p_hat.to_vec(),
+            pinv_sigma: {
+                let mut m = pinv.clone();
+                for (c, sd) in sigma.iter().enumerate() {
+                    m.column_mut(c).scale_mut(*sd);
+                }
+                m
+            },
             pinv,
             sigma,
             drift_terms,
@@ -342,67 +354,79 @@ impl TrialSource for CapballMc {
     }
 
     fn scratch(&self) -> CapballScratch {
+        // The reduced path draws a whole block's normals at once (n_params × BLOCK_TRIALS); the
+        // per-point path batches BATCH trials (2421 × BATCH stays in cache).
+        let (rows, cols) = match &self.reduced {
+            Some(_) => (self.p_hat.len(), super::mc::BLOCK_TRIALS),
+            None => (self.sigma.len(), BATCH),
+        };
+        let max_order = self
+            .drift_terms
+            .iter()
+            .map(|t| t.0 as usize)
+            .max()
+            .unwrap_or(0);
         CapballScratch {
-            noise: DMatrix::zeros(self.sigma.len(), BATCH),
-            proj: DMatrix::zeros(self.p_hat.len(), BATCH),
-            phase: vec![0.0; BATCH],
+            noise: DMatrix::zeros(rows, cols),
+            proj: DMatrix::zeros(self.p_hat.len(), cols),
+            phase: vec![0.0; cols],
+            harm: vec![(1.0, 0.0); max_order + 1],
         }
     }
 
+    /// Trials of a block draw from a fast generator (xoshiro256++, `SmallRng`) seeded from the
+    /// block's ChaCha8 stream: as reproducible as before (the block's seed fixes everything)
+    /// and the 2421 normals per trial no longer dominate the cost. Each batch is one matrix
+    /// product: the per-point normals by σ-scaled J⁺ (2421 → 14), or in the reduced form the
+    /// 14 normals by the root of J⁺ΣJ⁺ᵀ.
     fn fill(&self, rng: &mut ChaCha8Rng, s: &mut CapballScratch, out: &mut [f64]) {
+        let mut fast = rand::rngs::SmallRng::from_rng(rng);
         let n_out = self.p_hat.len();
         let n_trials = out.len() / n_out;
-        if let Some(l) = &self.reduced {
-            let z = &mut s.phase; // reused as the normals of one trial (BATCH ≥ n_params)
-            if z.len() < n_out {
-                z.resize(n_out, 0.0);
-            }
-            for y in out.chunks_exact_mut(n_out) {
-                let phase = rng.random::<f64>() * std::f64::consts::TAU;
-                for v in z.iter_mut().take(n_out) {
-                    *v = StandardNormal.sample(rng);
-                }
-                for (j, yj) in y.iter_mut().enumerate() {
-                    let mut acc = self.p_hat[j];
-                    for k in 0..n_out {
-                        acc += l[(j, k)] * z[k];
-                    }
-                    *yj = acc;
-                }
-                for (k, a, b) in &self.drift_terms {
-                    let (sn, cs) = (k * phase).sin_cos();
-                    for j in 0..n_out {
-                        y[j] += cs * a[j] + sn * b[j];
-                    }
-                }
-            }
-            return;
-        }
+        let (project, batch) = match &self.reduced {
+            Some(l) => (l, s.noise.ncols()),
+            None => (&self.pinv_sigma, BATCH),
+        };
         let mut done = 0;
         while done < n_trials {
-            let nb = BATCH.min(n_trials - done);
+            let nb = batch.min(n_trials - done);
             for t in 0..nb {
-                s.phase[t] = rng.random::<f64>() * std::f64::consts::TAU;
-                let col = s.noise.column_mut(t);
-                for (e, sd) in col.into_iter().zip(&self.sigma) {
-                    let z: f64 = StandardNormal.sample(rng);
-                    *e = sd * z;
-                }
+                s.phase[t] = fast.random::<f64>() * std::f64::consts::TAU;
             }
-            s.proj.gemm(1.0, &self.pinv, &s.noise, 0.0);
+            for e in s.noise.columns_mut(0, nb).iter_mut() {
+                *e = StandardNormal.sample(&mut fast);
+            }
+            let mut proj = s.proj.columns_mut(0, nb);
+            proj.gemm(1.0, project, &s.noise.columns(0, nb), 0.0);
             for t in 0..nb {
                 let y = &mut out[(done + t) * n_out..(done + t + 1) * n_out];
-                for (j, yj) in y.iter_mut().enumerate() {
-                    *yj = self.p_hat[j] + s.proj[(j, t)];
+                for ((yj, pj), p) in y.iter_mut().zip(proj.column(t).iter()).zip(&self.p_hat) {
+                    *yj = p + pj;
                 }
-                for (k, a, b) in &self.drift_terms {
-                    let (sn, cs) = (k * s.phase[t]).sin_cos();
-                    for j in 0..n_out {
-                        y[j] += cs * a[j] + sn * b[j];
-                    }
-                }
+                self.add_drift(s.phase[t], &mut s.harm, y);
             }
             done += nb;
+        }
+    }
+}
+
+impl CapballMc {
+    /// Adds the cyclic drift's projection for start phase `phase`: Σ cos(kφ)·A_k + sin(kφ)·B_k,
+    /// the harmonics' cos/sin by the angle-addition recurrence from one sin_cos.
+    fn add_drift(&self, phase: f64, harm: &mut [(f64, f64)], y: &mut [f64]) {
+        if self.drift_terms.is_empty() {
+            return;
+        }
+        let (s1, c1) = phase.sin_cos();
+        for k in 1..harm.len() {
+            let (c, s) = harm[k - 1];
+            harm[k] = (c * c1 - s * s1, s * c1 + c * s1);
+        }
+        for (k, a, b) in &self.drift_terms {
+            let (cs, sn) = harm[*k as usize];
+            for ((yj, aj), bj) in y.iter_mut().zip(a).zip(b) {
+                *yj += cs * aj + sn * bj;
+            }
         }
     }
 }

@@ -188,7 +188,11 @@ fn drift_dominates_the_interval_widths_which_do_not_add_in_quadrature() {
             assert!(r.quadrature < r.total, "{}: {r:?}", r.name);
             below += 1;
         } else {
-            assert!((r.quadrature / r.total - 1.0).abs() < 0.025, "{}: {r:?}", r.name);
+            assert!(
+                (r.quadrature / r.total - 1.0).abs() < 0.025,
+                "{}: {r:?}",
+                r.name
+            );
         }
         // ... and no wider than the plain sum of the widths.
         assert!(r.total <= r.drift + r.sensor + r.frame, "{}: {r:?}", r.name);
@@ -329,25 +333,15 @@ fn reduced_noise_gives_the_same_distribution() {
 fn cyclic_drift_is_fitted_from_a_drift_record() {
     // Two hours at one fixed pose, one sample every 5 s, the case's cooling cycle (25 min,
     // 2/2/6 µm peak to valley) plus 0.1 µm sensor noise; written as the drift-record CSV.
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
     let case = Paper001Case::paper001();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-    let noise = Normal::new(0.0, 0.1).unwrap();
-    let mut csv = String::from("# simulated\ntime_s,ex_um,ey_um,ez_um\n");
-    for i in 0..1440 {
-        let t = 5.0 * i as f64;
-        let d = case.drift.value_um(t + 300.0);
-        csv.push_str(&format!(
-            "{t},{},{},{}\n",
-            d[0] + noise.sample(&mut rng),
-            d[1] + noise.sample(&mut rng),
-            d[2] + noise.sample(&mut rng)
-        ));
-    }
+    let csv = drift_record_csv(&case, 1440, 3);
     let rec = parse_drift_record(&csv).unwrap();
     let fit = CyclicDrift::fit(&rec, 3).unwrap();
-    assert!((fit.period_s / 1500.0 - 1.0).abs() < 0.005, "{}", fit.period_s);
+    assert!(
+        (fit.period_s / 1500.0 - 1.0).abs() < 0.005,
+        "{}",
+        fit.period_s
+    );
     let ptv = fit.peak_to_valley_um();
     for (a, b) in ptv.iter().zip([2.0, 2.0, 6.0]) {
         assert!((a - b).abs() < 0.1, "{ptv:?}");
@@ -359,28 +353,59 @@ fn cyclic_drift_is_fitted_from_a_drift_record() {
     let e = CyclicDrift::fit(&rec[..200], 3).unwrap_err().to_string();
     assert!(e.contains("full cycle") || e.contains("period"), "{e}");
     // Bad input: a clear error.
-    let e = parse_drift_record("time_s,ex_um\n1,2\n").unwrap_err().to_string();
+    let e = parse_drift_record("time_s,ex_um\n1,2\n")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("ey_um"), "{e}");
 }
 
-#[test]
-fn measured_runs_give_the_monte_carlo_and_the_coverage_check() {
-    // A measured dataset as docs/datasets.md describes it: 8 back-to-back runs of the 807-pose
-    // trajectory on a machine whose loop drifts cyclically; the first 3 are warm-up runs with
-    // an extra parameter shift that the analysis must leave out.
+
+/// Two hours at one fixed pose (one sample every 5 s for `n` samples), the case's cooling cycle
+/// (25 min, 2/2/6 µm peak to valley) plus 0.1 µm sensor noise, as the drift-record CSV.
+fn drift_record_csv(case: &Paper001Case, n: usize, seed: u64) -> String {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, 0.1).unwrap();
+    let mut csv = String::from(
+        "# simulated: paper 001 case, cooling cycle 1500 s, 2/2/6 µm peak to valley, 0.1 µm noise\n\
+         time_s,ex_um,ey_um,ez_um\n",
+    );
+    for i in 0..n {
+        let t = 5.0 * i as f64;
+        let d = case.drift.value_um(t + 300.0);
+        csv.push_str(&format!(
+            "{t},{:.4},{:.4},{:.4}\n",
+            d[0] + noise.sample(&mut rng),
+            d[1] + noise.sample(&mut rng),
+            d[2] + noise.sample(&mut rng)
+        ));
+    }
+    csv
+}
+
+/// A measured dataset as docs/datasets.md describes it: `n_runs` back-to-back runs of the
+/// 807-pose trajectory on a machine whose loop drifts cyclically (the case's drift), sensor and
+/// frame noise per point; the first `warmup` runs carry an extra shift of EC0Y (the joints
+/// still warming) that the analysis must leave out.
+fn simulated_runs(
+    case: &Paper001Case,
+    n_runs: u32,
+    warmup: u32,
+    seed: u64,
+) -> Vec<metrology::capball::CapballRecord> {
     use metrology::capball::{CapballErrors, CapballRecord, CapballSetup, TrajectorySpec};
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    let case = Paper001Case::paper001();
     let setup = CapballSetup::paper_default();
     let poses = setup.trajectory(&TrajectorySpec::default());
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let n = Normal::new(0.0, (0.1f64.powi(2) + 0.3f64.powi(2)).sqrt()).unwrap();
     let mut records = Vec::new();
-    for run in 1..=8u32 {
+    for run in 1..=n_runs {
         let mut p = case.p_true.clone();
-        if run <= 3 {
-            p[0] += 3.0 * (4 - run) as f64; // warm-up: the joints still move
+        if run <= warmup {
+            p[0] += 3.0 * (warmup + 1 - run) as f64;
         }
         let truth = CapballErrors::from_slice(&p);
         let t0 = (run - 1) as f64 * case.run_period_s;
@@ -401,6 +426,34 @@ fn measured_runs_give_the_monte_carlo_and_the_coverage_check() {
             });
         }
     }
+    records
+}
+
+/// `cargo test -p metrolog-metrology --test uncertainty_capball -- --ignored` regenerates the
+/// example files of `metrolog identify capball --uncertainty mc` (README).
+#[test]
+#[ignore = "writes examples/budgets/capball_runs.csv and capball_drift_record.csv"]
+fn write_capball_mc_examples() {
+    let case = Paper001Case::paper001();
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/budgets");
+    let runs = simulated_runs(&case, 6, 2, 11);
+    let text = format!(
+        "# simulated: paper 001 case, 6 back-to-back runs (18 min apart), runs 1-2 warm-up\n{}",
+        metrology::capball::write_dataset(&runs)
+    );
+    std::fs::write(format!("{dir}/capball_runs.csv"), text).unwrap();
+    std::fs::write(
+        format!("{dir}/capball_drift_record.csv"),
+        drift_record_csv(&case, 1440, 3),
+    )
+    .unwrap();
+}
+
+#[test]
+fn measured_runs_give_the_monte_carlo_and_the_coverage_check() {
+    let case = Paper001Case::paper001();
+    let setup = metrology::capball::CapballSetup::paper_default();
+    let records = simulated_runs(&case, 8, 3, 5);
     let m = MeasuredCapball::from_records(&setup.machine, &records, 3).unwrap();
     assert_eq!(m.warmup, vec![1, 2, 3]);
     assert_eq!(m.runs.len(), 5);
@@ -420,7 +473,12 @@ fn measured_runs_give_the_monte_carlo_and_the_coverage_check() {
         drift: DriftModel::statistical_from_range(case.drift.peak_to_valley_um()),
         ..sources
     };
-    let rs = mc::run(&m.model(&stat).unwrap().with_reduced_noise(), &quick(), None).unwrap();
+    let rs = mc::run(
+        &m.model(&stat).unwrap().with_reduced_noise(),
+        &quick(),
+        None,
+    )
+    .unwrap();
     let cs = coverage_check(&rs, &m.run_params());
     assert!(cs.overall < c.overall, "{cs:?} vs {c:?}");
     // Too many warm-up runs: a clear error.

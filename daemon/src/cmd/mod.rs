@@ -4,6 +4,7 @@ pub mod analyze;
 pub mod demo;
 pub mod diagnose;
 pub mod identify;
+pub mod identify_mc;
 pub mod info;
 pub mod input;
 pub mod parts;

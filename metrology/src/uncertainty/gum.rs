@@ -295,7 +295,7 @@ pub fn propagate_with_dof<M: Model + ?Sized>(
         }
         let row: Vec<f64> = c.row(j).iter().copied().collect();
         let dof_eff = match output_dof.get(j).copied().flatten() {
-            Some(nu) => (nu.is_finite()).then_some(nu),
+            Some(nu) => nu.is_finite().then_some(nu),
             None => match effective_dof(&row, inputs, &ux, &output_names[j]) {
                 Ok(v) => v,
                 // A fixed k needs no ν; report it as unknown (infinite) rather than fail.

@@ -206,6 +206,10 @@ fn drift_dominates_the_interval_widths_which_do_not_add_in_quadrature() {
         dominated >= 12,
         "drift dominates {dominated} of 14 parameters"
     );
+    assert!(
+        below >= 7,
+        "quadratic sum below the total for {below} parameters"
+    );
 }
 
 #[test]
@@ -358,7 +362,6 @@ fn cyclic_drift_is_fitted_from_a_drift_record() {
         .to_string();
     assert!(e.contains("ey_um"), "{e}");
 }
-
 
 /// Two hours at one fixed pose (one sample every 5 s for `n` samples), the case's cooling cycle
 /// (25 min, 2/2/6 µm peak to valley) plus 0.1 µm sensor noise, as the drift-record CSV.

@@ -140,8 +140,8 @@ pub fn run(
     let build = |s: &CapballSources| measured.model(s).map(|m| m.with_reduced_noise());
     let (total, widths) = ucb::source_widths(&build, &sources, &opts, Some(&cb))?;
     bar.finish_and_clear();
-    let coverage_check = (measured.runs.len() >= 2)
-        .then(|| ucb::coverage_check(&total, &measured.run_params()));
+    let coverage_check =
+        (measured.runs.len() >= 2).then(|| ucb::coverage_check(&total, &measured.run_params()));
     let report = McReport {
         kept_runs: measured.runs.iter().map(|r| r.0).collect(),
         warmup_runs: measured.warmup.clone(),

@@ -50,6 +50,8 @@ pub struct CapballArgs {
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub mc: super::identify_mc::CapballMcArgs,
 }
 
 #[derive(Debug, clap::Args)]
@@ -196,6 +198,9 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     } else {
         load_capball(&a.data, &machine)?
     };
+    if a.mc.uncertainty.is_some() {
+        return super::identify_mc::run(&a.data, &machine, &recs, &a.mc, a.json);
+    }
     let mut runs = split_runs(&recs);
     if let Some(r) = a.run {
         runs.retain(|x| x.0 == r);

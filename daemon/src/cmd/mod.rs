@@ -5,6 +5,7 @@ pub mod compensate;
 pub mod demo;
 pub mod diagnose;
 pub mod identify;
+pub mod identify_mc;
 pub mod info;
 pub mod input;
 pub mod parts;

@@ -98,7 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn progress_bar(opts: &McOptions) -> ProgressBar {
+pub(crate) fn progress_bar(opts: &McOptions) -> ProgressBar {
     match opts.fixed_trials {
         Some(n) => {
             let b = ProgressBar::new(n as u64);
@@ -120,7 +120,7 @@ fn progress_bar(opts: &McOptions) -> ProgressBar {
     }
 }
 
-fn update_bar(b: &ProgressBar, p: &McProgress) {
+pub(crate) fn update_bar(b: &ProgressBar, p: &McProgress) {
     if b.length().is_some() {
         b.set_position(p.trials as u64);
     } else {
@@ -253,11 +253,7 @@ fn render(r: &Report, budget: &Budget) -> String {
             num(v.d_low),
             num(v.d_high),
             num(v.tolerance),
-            if v.passed {
-                "validated"
-            } else {
-                "NOT validated: use the Monte Carlo result"
-            }
+            v.message()
         );
     }
     s

@@ -7,10 +7,13 @@ drift's projection (3 harmonics, random phase per trial). Vectorised NumPy in ba
 how one would write it in NumPy. The Jacobian is a random 2421 x 14 matrix: the cost does not
 depend on its values.
 
-    python3 metrology/benches/py/capball_mc.py [--trials 200000] [--threads 1]
+    python3 metrology/benches/py/capball_mc.py [--trials 200000] [--threads 1] [--reduced]
 
-Prints trials per second; compare with `capball_mc/block_of_500_trials_one_core` and the
-"trials per CPU-second" line of `cargo bench -p metrolog-metrology --bench uncertainty`.
+`--reduced` draws the per-point noise in parameter space instead (14 normals times a square
+root of J+ Sigma J+^T, exact for Gaussian per-point noise), the same shortcut as the Rust
+`CapballMc::with_reduced_noise`. Prints trials per CPU-second;
+`cargo bench -p metrolog-metrology --bench capball_vs_numpy` runs this script and the Rust code
+in one run and prints the ratios.
 """
 
 import argparse
@@ -24,6 +27,7 @@ def main() -> int:
     ap.add_argument("--trials", type=int, default=200_000)
     ap.add_argument("--batch", type=int, default=500)
     ap.add_argument("--threads", type=int, default=1, help="BLAS threads (1 = one core)")
+    ap.add_argument("--reduced", action="store_true", help="noise drawn in parameter space")
     a = ap.parse_args()
     for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[v] = str(a.threads)
@@ -37,9 +41,16 @@ def main() -> int:
     p_hat = rng.standard_normal(n_par)
     harmonics = [(k, rng.standard_normal(n_par), rng.standard_normal(n_par)) for k in (1, 2, 3)]
 
+    scaled = pinv * sigma
+    w, v = np.linalg.eigh(scaled @ scaled.T)
+    root = v * np.sqrt(np.clip(w, 0, None))  # 14 x 14
+
     def batch(m: int) -> np.ndarray:
-        e = rng.standard_normal((m, n_rows)) * sigma
-        p = e @ pinv.T + p_hat
+        if a.reduced:
+            p = rng.standard_normal((m, n_par)) @ root.T + p_hat
+        else:
+            e = rng.standard_normal((m, n_rows)) * sigma
+            p = e @ pinv.T + p_hat
         phi = rng.random(m) * 2 * np.pi
         for k, a_k, b_k in harmonics:
             p += np.cos(k * phi)[:, None] * a_k + np.sin(k * phi)[:, None] * b_k

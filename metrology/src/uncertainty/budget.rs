@@ -15,6 +15,8 @@
 //! name = "X1"
 //! unit = "mm"             # optional, for display
 //! dof = 8                 # optional degrees of freedom (default infinite)
+//! group = "fit"           # optional: inputs of one evaluation (one fit) share a group and a
+//!                         # dof; they are one Welch–Satterthwaite component (JCGM 100 H.3)
 //! distribution = "normal" # + the distribution's fields: see `Distribution`
 //! mean = 0.0
 //! u = 1.0
@@ -30,6 +32,7 @@
 //! [[output]]
 //! name = "Y"
 //! expr = "s + X3"
+//! dof = 9                 # optional: ν instead of ν_eff (correlated inputs of several evaluations)
 //! ```
 
 use nalgebra::DMatrix;
@@ -69,6 +72,10 @@ pub struct Input {
     /// Degrees of freedom of the standard uncertainty (JCGM 100 G.3); infinite when absent.
     #[serde(default)]
     pub dof: Option<f64>,
+    /// Inputs from one evaluation (e.g. intercept and slope of one fit) share a group name and
+    /// one `dof`; the group is one Welch–Satterthwaite component (JCGM 100 H.3).
+    #[serde(default)]
+    pub group: Option<String>,
     #[serde(flatten)]
     pub distribution: Distribution,
 }
@@ -91,6 +98,10 @@ pub struct Quantity {
     pub unit: Option<String>,
     #[serde(default)]
     pub description: Option<String>,
+    /// Outputs only: degrees of freedom to use instead of ν_eff (for a correlation structure
+    /// the Welch–Satterthwaite formula cannot express).
+    #[serde(default)]
+    pub dof: Option<f64>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -187,6 +198,24 @@ impl Budget {
                 });
             }
         }
+        for q in &f.intermediates {
+            if q.dof.is_some() {
+                return Err(UncertaintyError::Format(format!(
+                    "intermediate `{}`: `dof` belongs to outputs only",
+                    q.name
+                )));
+            }
+        }
+        if let Some(q) = f
+            .outputs
+            .iter()
+            .find(|q| q.dof.is_some_and(|d| d.is_nan() || d <= 0.0))
+        {
+            return Err(UncertaintyError::Format(format!(
+                "output `{}`: `dof` must be positive",
+                q.name
+            )));
+        }
         let n_in = f.inputs.len();
         let mut intermediate_exprs = Vec::new();
         for (k, q) in f.intermediates.iter().enumerate() {
@@ -263,6 +292,7 @@ impl Budget {
                     .dof
                     .or_else(|| i.distribution.implied_dof())
                     .unwrap_or(f64::INFINITY),
+                group: i.group.clone(),
             })
             .collect()
     }
@@ -305,12 +335,13 @@ impl Budget {
 
     /// The GUM evaluation.
     pub fn gum(&self) -> Result<GumResult, UncertaintyError> {
-        gum::propagate(
+        gum::propagate_with_dof(
             self,
             &self.output_names(),
             &self.gum_inputs(),
             self.correlation_matrix.as_ref(),
             self.coverage(),
+            &self.outputs.iter().map(|q| q.dof).collect::<Vec<_>>(),
         )
     }
 
@@ -323,29 +354,23 @@ impl Budget {
         mc::run(self, opts, progress)
     }
 
-    /// Runs the chosen method(s) and, for both, the JCGM 101 §8 validation.
+    /// Runs the chosen method(s) and, for both, the JCGM 101 §8 validation: the Monte Carlo run
+    /// is then the adaptive one of [`mc::run_for_validation`] (continued until each verdict is
+    /// decided) unless `opts` fixes the number of trials.
     pub fn evaluate(
         &self,
         method: Method,
         opts: &McOptions,
         progress: Option<&(dyn Fn(&McProgress) + Sync)>,
     ) -> Result<Report, UncertaintyError> {
-        let gum = match method {
-            Method::Gum | Method::Both => Some(self.gum()?),
-            Method::Mc => None,
-        };
-        let monte_carlo = match method {
-            Method::Mc | Method::Both => Some(self.monte_carlo(opts, progress)?),
-            Method::Gum => None,
-        };
-        let validation = match (&gum, &monte_carlo) {
-            (Some(g), Some(m)) => g
-                .outputs
-                .iter()
-                .zip(&m.outputs)
-                .map(|(go, mo)| mc::validate(go, mo, opts.ndig))
-                .collect(),
-            _ => Vec::new(),
+        let (gum, monte_carlo, validation) = match method {
+            Method::Gum => (Some(self.gum()?), None, Vec::new()),
+            Method::Mc => (None, Some(self.monte_carlo(opts, progress)?), Vec::new()),
+            Method::Both => {
+                let g = self.gum()?;
+                let (m, v) = mc::run_for_validation(self, &g.outputs, opts, progress)?;
+                (Some(g), Some(m), v)
+            }
         };
         Ok(Report {
             title: self.title.clone(),

@@ -185,6 +185,9 @@ pub struct CapballMc {
     p_hat: Vec<f64>,
     /// J⁺ (n_params × 3·n_poses).
     pinv: DMatrix<f64>,
+    /// J⁺ with column r scaled by σ_r: the per-point path projects unit normals with it, so no
+    /// trial scales its 2421 draws.
+    pinv_sigma: DMatrix<f64>,
     /// Standard deviation of the per-point normal noise for each row of ΔE.
     sigma: Vec<f64>,
     /// (order k, A_k, B_k): the cyclic drift's projection.
@@ -196,11 +199,13 @@ pub struct CapballMc {
     reduced: Option<DMatrix<f64>>,
 }
 
-/// Worker scratch: the noise batch and its projection.
+/// Worker scratch: the normals of a batch, their projection, the start phases.
 pub struct CapballScratch {
     noise: DMatrix<f64>,
     proj: DMatrix<f64>,
     phase: Vec<f64>,
+    /// cos(kφ), sin(kφ) for k = 0..=max order (recurrence from one sin_cos).
+    harm: Vec<(f64, f64)>,
 }
 
 /// Moore–Penrose pseudo-inverse of a full-column-rank `J` by SVD.
@@ -265,7 +270,7 @@ impl CapballMc {
             DriftModel::Statistical { u_um } => *u_um,
             _ => [0.0; 3],
         };
-        let sigma = (0..j.nrows())
+        let sigma: Vec<f64> = (0..j.nrows())
             .map(|r| {
                 let a = r % 3;
                 (sources.sensor_u_um[a].powi(2) + sources.frame_u_um[a].powi(2) + stat[a].powi(2))
@@ -300,6 +305,13 @@ impl CapballMc {
         Ok(CapballMc {
             names: names.to_vec(),
             p_hat: p_hat.to_vec(),
+            pinv_sigma: {
+                let mut m = pinv.clone();
+                for (c, sd) in sigma.iter().enumerate() {
+                    m.column_mut(c).scale_mut(*sd);
+                }
+                m
+            },
             pinv,
             sigma,
             drift_terms,
@@ -342,67 +354,79 @@ impl TrialSource for CapballMc {
     }
 
     fn scratch(&self) -> CapballScratch {
+        // The reduced path draws a whole block's normals at once (n_params × BLOCK_TRIALS); the
+        // per-point path batches BATCH trials (2421 × BATCH stays in cache).
+        let (rows, cols) = match &self.reduced {
+            Some(_) => (self.p_hat.len(), super::mc::BLOCK_TRIALS),
+            None => (self.sigma.len(), BATCH),
+        };
+        let max_order = self
+            .drift_terms
+            .iter()
+            .map(|t| t.0 as usize)
+            .max()
+            .unwrap_or(0);
         CapballScratch {
-            noise: DMatrix::zeros(self.sigma.len(), BATCH),
-            proj: DMatrix::zeros(self.p_hat.len(), BATCH),
-            phase: vec![0.0; BATCH],
+            noise: DMatrix::zeros(rows, cols),
+            proj: DMatrix::zeros(self.p_hat.len(), cols),
+            phase: vec![0.0; cols],
+            harm: vec![(1.0, 0.0); max_order + 1],
         }
     }
 
+    /// Trials of a block draw from a fast generator (xoshiro256++, `SmallRng`) seeded from the
+    /// block's ChaCha8 stream: as reproducible as before (the block's seed fixes everything)
+    /// and the 2421 normals per trial no longer dominate the cost. Each batch is one matrix
+    /// product: the per-point normals by σ-scaled J⁺ (2421 → 14), or in the reduced form the
+    /// 14 normals by the root of J⁺ΣJ⁺ᵀ.
     fn fill(&self, rng: &mut ChaCha8Rng, s: &mut CapballScratch, out: &mut [f64]) {
+        let mut fast = rand::rngs::SmallRng::from_rng(rng);
         let n_out = self.p_hat.len();
         let n_trials = out.len() / n_out;
-        if let Some(l) = &self.reduced {
-            let z = &mut s.phase; // reused as the normals of one trial (BATCH ≥ n_params)
-            if z.len() < n_out {
-                z.resize(n_out, 0.0);
-            }
-            for y in out.chunks_exact_mut(n_out) {
-                let phase = rng.random::<f64>() * std::f64::consts::TAU;
-                for v in z.iter_mut().take(n_out) {
-                    *v = StandardNormal.sample(rng);
-                }
-                for (j, yj) in y.iter_mut().enumerate() {
-                    let mut acc = self.p_hat[j];
-                    for k in 0..n_out {
-                        acc += l[(j, k)] * z[k];
-                    }
-                    *yj = acc;
-                }
-                for (k, a, b) in &self.drift_terms {
-                    let (sn, cs) = (k * phase).sin_cos();
-                    for j in 0..n_out {
-                        y[j] += cs * a[j] + sn * b[j];
-                    }
-                }
-            }
-            return;
-        }
+        let (project, batch) = match &self.reduced {
+            Some(l) => (l, s.noise.ncols()),
+            None => (&self.pinv_sigma, BATCH),
+        };
         let mut done = 0;
         while done < n_trials {
-            let nb = BATCH.min(n_trials - done);
+            let nb = batch.min(n_trials - done);
             for t in 0..nb {
-                s.phase[t] = rng.random::<f64>() * std::f64::consts::TAU;
-                let col = s.noise.column_mut(t);
-                for (e, sd) in col.into_iter().zip(&self.sigma) {
-                    let z: f64 = StandardNormal.sample(rng);
-                    *e = sd * z;
-                }
+                s.phase[t] = fast.random::<f64>() * std::f64::consts::TAU;
             }
-            s.proj.gemm(1.0, &self.pinv, &s.noise, 0.0);
+            for e in s.noise.columns_mut(0, nb).iter_mut() {
+                *e = StandardNormal.sample(&mut fast);
+            }
+            let mut proj = s.proj.columns_mut(0, nb);
+            proj.gemm(1.0, project, &s.noise.columns(0, nb), 0.0);
             for t in 0..nb {
                 let y = &mut out[(done + t) * n_out..(done + t + 1) * n_out];
-                for (j, yj) in y.iter_mut().enumerate() {
-                    *yj = self.p_hat[j] + s.proj[(j, t)];
+                for ((yj, pj), p) in y.iter_mut().zip(proj.column(t).iter()).zip(&self.p_hat) {
+                    *yj = p + pj;
                 }
-                for (k, a, b) in &self.drift_terms {
-                    let (sn, cs) = (k * s.phase[t]).sin_cos();
-                    for j in 0..n_out {
-                        y[j] += cs * a[j] + sn * b[j];
-                    }
-                }
+                self.add_drift(s.phase[t], &mut s.harm, y);
             }
             done += nb;
+        }
+    }
+}
+
+impl CapballMc {
+    /// Adds the cyclic drift's projection for start phase `phase`: Σ cos(kφ)·A_k + sin(kφ)·B_k,
+    /// the harmonics' cos/sin by the angle-addition recurrence from one sin_cos.
+    fn add_drift(&self, phase: f64, harm: &mut [(f64, f64)], y: &mut [f64]) {
+        if self.drift_terms.is_empty() {
+            return;
+        }
+        let (s1, c1) = phase.sin_cos();
+        for k in 1..harm.len() {
+            let (c, s) = harm[k - 1];
+            harm[k] = (c * c1 - s * s1, s * c1 + c * s1);
+        }
+        for (k, a, b) in &self.drift_terms {
+            let (cs, sn) = harm[*k as usize];
+            for ((yj, aj), bj) in y.iter_mut().zip(a).zip(b) {
+                *yj += cs * aj + sn * bj;
+            }
         }
     }
 }
@@ -545,5 +569,330 @@ impl Paper001Case {
         sources: &CapballSources,
     ) -> Result<CapballMc, UncertaintyError> {
         CapballMc::new(&self.jacobian, p_hat, &self.names, &self.times_s, sources)
+    }
+}
+
+/// One parameter's line of paper 001's Table 5: the width of the 95 % coverage interval
+/// (probabilistically symmetric) with all sources and with each source alone.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SourceWidths {
+    pub name: String,
+    pub total: f64,
+    pub drift: f64,
+    pub sensor: f64,
+    pub frame: f64,
+    /// √(drift² + sensor² + frame²): what the widths would give if they added like standard
+    /// uncertainties. Paper 001 finds it *below* the total for every parameter: with a cyclic
+    /// (arcsine-like) drift the widths do not add in quadrature.
+    pub quadrature: f64,
+}
+
+fn width(o: &super::McOutput) -> f64 {
+    o.symmetric_interval[1] - o.symmetric_interval[0]
+}
+
+/// The per-source coverage-interval widths of paper 001's Table 5: four Monte Carlo runs with
+/// the same options (all sources, then each alone). `build` makes the model for a set of
+/// sources (e.g. `|s| CapballMc::new(&j, &p, &names, &t, s)`).
+pub fn source_widths(
+    build: &dyn Fn(&CapballSources) -> Result<CapballMc, UncertaintyError>,
+    sources: &CapballSources,
+    opts: &super::McOptions,
+    progress: Option<&(dyn Fn(&super::McProgress) + Sync)>,
+) -> Result<(McResult, Vec<SourceWidths>), UncertaintyError> {
+    let run = |s: &CapballSources| super::mc::run(&build(s)?, opts, progress);
+    let total = run(sources)?;
+    let drift = run(&sources.only(Source::Drift))?;
+    let sensor = run(&sources.only(Source::Sensor))?;
+    let frame = run(&sources.only(Source::Frame))?;
+    let widths = (0..total.outputs.len())
+        .map(|j| {
+            let (d, s, f) = (
+                width(&drift.outputs[j]),
+                width(&sensor.outputs[j]),
+                width(&frame.outputs[j]),
+            );
+            SourceWidths {
+                name: total.outputs[j].name.clone(),
+                total: width(&total.outputs[j]),
+                drift: d,
+                sensor: s,
+                frame: f,
+                quadrature: (d * d + s * s + f * f).sqrt(),
+            }
+        })
+        .collect();
+    Ok((total, widths))
+}
+
+/// Parses a drift record taken at one fixed pose (docs/datasets.md, CapBall dataset):
+/// CSV `time_s,ex_um,ey_um,ez_um`, `#` lines are comments, columns in any order.
+pub fn parse_drift_record(text: &str) -> Result<Vec<(f64, [f64; 3])>, UncertaintyError> {
+    let bad = |m: String| UncertaintyError::Format(format!("drift record: {m}"));
+    let mut rdr = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let headers = rdr.headers().map_err(|e| bad(e.to_string()))?.clone();
+    let col = |n: &str| {
+        headers.iter().position(|h| h == n).ok_or_else(|| {
+            bad(format!(
+                "no `{n}` column (expected time_s,ex_um,ey_um,ez_um)"
+            ))
+        })
+    };
+    let idx = [col("time_s")?, col("ex_um")?, col("ey_um")?, col("ez_um")?];
+    let mut out = Vec::new();
+    for (line, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| bad(e.to_string()))?;
+        let mut v = [0.0; 4];
+        for (k, i) in idx.iter().enumerate() {
+            let s = rec.get(*i).unwrap_or("");
+            v[k] = s
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| bad(format!("row {}: `{s}` is not a number", line + 2)))?;
+        }
+        out.push((v[0], [v[1], v[2], v[3]]));
+    }
+    if out.windows(2).any(|w| w[1].0 <= w[0].0) {
+        return Err(bad("time_s must increase from row to row".into()));
+    }
+    Ok(out)
+}
+
+/// Least-squares fit of a mean plus `harmonics` harmonics of period `period_s` to each
+/// direction; returns the harmonics and the residual sum of squares over x, y, z.
+fn fit_harmonics(record: &[(f64, [f64; 3])], period_s: f64, harmonics: u32) -> (CyclicDrift, f64) {
+    let n = record.len();
+    let m = 1 + 2 * harmonics as usize;
+    let w = std::f64::consts::TAU / period_s;
+    let a = DMatrix::from_fn(n, m, |i, c| {
+        if c == 0 {
+            return 1.0;
+        }
+        let k = c.div_ceil(2) as f64;
+        let (s, co) = (k * w * record[i].0).sin_cos();
+        if c % 2 == 1 { co } else { s }
+    });
+    let svd = a.clone().svd(true, true);
+    let mut hs: Vec<DriftHarmonic> = (1..=harmonics)
+        .map(|k| DriftHarmonic {
+            order: k,
+            cos_um: [0.0; 3],
+            sin_um: [0.0; 3],
+        })
+        .collect();
+    let mut rss = 0.0;
+    for d in 0..3 {
+        let b = nalgebra::DVector::from_iterator(n, record.iter().map(|r| r.1[d]));
+        let Ok(x) = svd.solve(&b, 1e-12) else {
+            return (
+                CyclicDrift {
+                    period_s,
+                    harmonics: hs,
+                },
+                f64::INFINITY,
+            );
+        };
+        rss += (&a * &x - &b).norm_squared();
+        for (k, h) in hs.iter_mut().enumerate() {
+            h.cos_um[d] = x[1 + 2 * k];
+            h.sin_um[d] = x[2 + 2 * k];
+        }
+    }
+    (
+        CyclicDrift {
+            period_s,
+            harmonics: hs,
+        },
+        rss,
+    )
+}
+
+impl CyclicDrift {
+    /// Fits the cyclic drift of paper 001 to a drift record: the period (scanned from four
+    /// sample spacings up to the record's length, then refined), and per direction the
+    /// amplitude and shape as `harmonics` Fourier terms (3 follow a cooling cycle's slow rise
+    /// and fast fall). The record must span at least one full period; a best period at the
+    /// record's length means it does not, and is refused.
+    pub fn fit(
+        record: &[(f64, [f64; 3])],
+        harmonics: u32,
+    ) -> Result<CyclicDrift, UncertaintyError> {
+        let h = harmonics.max(1);
+        let n = record.len();
+        if n < 4 * (1 + 2 * h as usize) {
+            return Err(UncertaintyError::Invalid(format!(
+                "the drift record has {n} rows; fitting {h} harmonics needs at least {}",
+                4 * (1 + 2 * h as usize)
+            )));
+        }
+        let span = record[n - 1].0 - record[0].0;
+        let dt = span / (n - 1) as f64;
+        let (p_min, p_max) = (4.0 * dt * h as f64, span);
+        if p_min >= p_max {
+            return Err(UncertaintyError::Invalid(
+                "the drift record is too short or too coarse to show a cycle".into(),
+            ));
+        }
+        // Log-spaced scan, then golden-section refinement around the best candidate.
+        let steps = 400;
+        let period = |i: f64| p_min * (p_max / p_min).powf(i / steps as f64);
+        let rss = |p: f64| fit_harmonics(record, p, h).1;
+        let best = (0..=steps)
+            .map(|i| (i, rss(period(i as f64))))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(0, |b| b.0);
+        let (mut lo, mut hi) = (
+            period(best as f64 - 1.0),
+            period(best as f64 + 1.0).min(p_max),
+        );
+        let g = 0.5 * (5f64.sqrt() - 1.0);
+        for _ in 0..40 {
+            let (a, b) = (hi - g * (hi - lo), lo + g * (hi - lo));
+            if rss(a) < rss(b) {
+                hi = b;
+            } else {
+                lo = a;
+            }
+        }
+        let p = 0.5 * (lo + hi);
+        if p > 0.95 * span {
+            return Err(UncertaintyError::Invalid(format!(
+                "the drift record ({span:.0} s) does not cover a full cycle (best period \
+                 {p:.0} s): record for longer, or use --drift statistical"
+            )));
+        }
+        Ok(fit_harmonics(record, p, h).0)
+    }
+}
+
+/// E_VE of ISO/TR 230-9 from a drift record: the peak-to-valley per direction.
+pub fn drift_range_um(record: &[(f64, [f64; 3])]) -> [f64; 3] {
+    let mut r = [0.0; 3];
+    for (d, rd) in r.iter_mut().enumerate() {
+        let (lo, hi) = record
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+                (l.min(x.1[d]), h.max(x.1[d]))
+            });
+        *rd = if hi >= lo { hi - lo } else { 0.0 };
+    }
+    r
+}
+
+/// Paper 001's Monte Carlo set up from a measured CapBall dataset (docs/datasets.md): each run
+/// identified separately, the first `warmup_runs` left out (paper 001 drops 5 of 15: the joints
+/// were still warming), the Monte Carlo centred on the mean of the kept runs as in the paper,
+/// its Jacobian and pose times from the first kept run.
+#[derive(Debug, Clone)]
+pub struct MeasuredCapball {
+    pub jacobian: DMatrix<f64>,
+    /// Time of each pose from the start of the run (s).
+    pub times_s: Vec<f64>,
+    pub names: Vec<String>,
+    /// Mean of the kept runs' identified parameters.
+    pub p_hat: Vec<f64>,
+    /// The kept runs and their identified parameters (for [`coverage_check`]).
+    pub runs: Vec<(u32, Vec<f64>)>,
+    /// The runs left out as warm-up.
+    pub warmup: Vec<u32>,
+    /// Residual standard deviation of the first kept run (µm): the scatter the 14 parameters do
+    /// not explain, for comparison with the sensor and frame uncertainties given.
+    pub residual_sigma_um: f64,
+}
+
+impl MeasuredCapball {
+    pub fn from_records(
+        machine: &crate::kinematics::Machine,
+        records: &[crate::capball::CapballRecord],
+        warmup_runs: usize,
+    ) -> Result<MeasuredCapball, UncertaintyError> {
+        use crate::capball::{CapballSetup, PARAM_NAMES, split_run};
+        let mut run_ids: Vec<u32> = records.iter().map(|r| r.run).collect();
+        run_ids.sort_unstable();
+        run_ids.dedup();
+        if run_ids.len() <= warmup_runs {
+            return Err(UncertaintyError::Invalid(format!(
+                "the dataset has {} run(s); {warmup_runs} warm-up run(s) leave none",
+                run_ids.len()
+            )));
+        }
+        let (warmup, kept) = run_ids.split_at(warmup_runs);
+        let mut runs = Vec::new();
+        let mut first = None;
+        for &run in kept {
+            let (poses, meas) = split_run(records, run);
+            let fail = |e: crate::capball::CapballError| {
+                UncertaintyError::Invalid(format!("run {run}: {e}"))
+            };
+            let setup =
+                CapballSetup::with_ball_from_poses(machine.clone(), &poses).map_err(fail)?;
+            let id = setup.identify(&poses, &meas).map_err(fail)?;
+            if first.is_none() {
+                let times: Option<Vec<f64>> = records
+                    .iter()
+                    .filter(|r| r.run == run)
+                    .map(|r| r.time_s)
+                    .collect();
+                let times = times.ok_or_else(|| {
+                    UncertaintyError::Invalid(format!(
+                        "run {run} has no time_s for every pose: the cyclic drift needs the \
+                         measurement times (or use the statistical drift model)"
+                    ))
+                });
+                first = Some((setup.stacked_jacobian(&poses), times, id.residual_sigma_um));
+            }
+            runs.push((run, id.params));
+        }
+        let Some((jacobian, times, residual_sigma_um)) = first else {
+            return Err(UncertaintyError::Invalid("no run to identify".into()));
+        };
+        // Times are only needed by the cyclic model; without them, pose indices stand in and
+        // the statistical model (which ignores time) still runs.
+        let times_s = match times {
+            Ok(t) => {
+                let t0 = t.first().copied().unwrap_or(0.0);
+                t.iter().map(|v| v - t0).collect()
+            }
+            Err(_) => Vec::new(),
+        };
+        let n = runs.len() as f64;
+        let p_hat = (0..PARAM_NAMES.len())
+            .map(|j| runs.iter().map(|r| r.1[j]).sum::<f64>() / n)
+            .collect();
+        Ok(MeasuredCapball {
+            jacobian,
+            times_s,
+            names: PARAM_NAMES.iter().map(|s| s.to_string()).collect(),
+            p_hat,
+            runs,
+            warmup: warmup.to_vec(),
+            residual_sigma_um,
+        })
+    }
+
+    /// The Monte Carlo model with `sources`.
+    pub fn model(&self, sources: &CapballSources) -> Result<CapballMc, UncertaintyError> {
+        let times: Vec<f64> = if self.times_s.is_empty() {
+            if matches!(sources.drift, DriftModel::Cyclic(_)) {
+                return Err(UncertaintyError::Invalid(
+                    "the dataset has no time_s: the cyclic drift needs the measurement times \
+                     (or use the statistical drift model)"
+                        .into(),
+                ));
+            }
+            (0..self.jacobian.nrows() / 3).map(|i| i as f64).collect()
+        } else {
+            self.times_s.clone()
+        };
+        CapballMc::new(&self.jacobian, &self.p_hat, &self.names, &times, sources)
+    }
+
+    /// The identified parameters of the kept runs (for [`coverage_check`]).
+    pub fn run_params(&self) -> Vec<Vec<f64>> {
+        self.runs.iter().map(|r| r.1.clone()).collect()
     }
 }

@@ -17,6 +17,11 @@ pub struct GumInput {
     pub standard_uncertainty: f64,
     #[serde(serialize_with = "ser_dof")]
     pub dof: f64,
+    /// Inputs evaluated together (e.g. the intercept and slope of one least-squares fit) share a
+    /// group: their correlated contributions form one component of the Welch–Satterthwaite
+    /// formula with the group's degrees of freedom (JCGM 100 H.3), see [`effective_dof`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub group: Option<String>,
 }
 
 /// How the expanded uncertainty is formed.
@@ -134,17 +139,101 @@ pub fn coverage_factor(p: f64, dof: Option<f64>) -> f64 {
     }
 }
 
+/// Effective degrees of freedom of one output (JCGM 100 G.4, eq. G.2b), `None` = infinite.
+///
+/// The Welch–Satterthwaite formula needs independent components. An uncorrelated input is one;
+/// inputs that share a `group` (one evaluation, as the intercept and slope of one straight-line
+/// fit) are one together, with variance Σ c_i c_k u(x_i, x_k) over the group and the group's
+/// ν — for JCGM 100 H.3 this gives ν = n − 2 = 9, where treating intercept and slope as two
+/// independent contributions gives a meaningless value. A correlation between different
+/// components that carry finite ν has no Welch–Satterthwaite form (G.4 gives none): that is an
+/// error naming the inputs and the ways out.
+pub fn effective_dof(
+    c: &[f64],
+    inputs: &[GumInput],
+    ux: &DMatrix<f64>,
+    output: &str,
+) -> Result<Option<f64>, UncertaintyError> {
+    let n = inputs.len();
+    let same = |i: usize, k: usize| {
+        i == k || matches!((&inputs[i].group, &inputs[k].group), (Some(a), Some(b)) if a == b)
+    };
+    for i in 0..n {
+        for k in (i + 1)..n {
+            let finite = inputs[i].dof.is_finite() || inputs[k].dof.is_finite();
+            if ux[(i, k)] != 0.0 && !same(i, k) && finite {
+                return Err(UncertaintyError::Invalid(format!(
+                    "output `{output}`: ν_eff is undefined because `{}` and `{}` are correlated \
+                     and have finite degrees of freedom (JCGM 100 G.4 covers independent \
+                     inputs only). If they come from one evaluation (as the intercept and slope \
+                     of one fit, JCGM 100 H.3), give both the same `group` and `dof`; otherwise \
+                     give the output's `dof` or a fixed `coverage_factor` in [settings]",
+                    inputs[i].name, inputs[k].name
+                )));
+            }
+        }
+    }
+    let mut denom = 0.0;
+    let mut var_total = 0.0;
+    let mut done = vec![false; n];
+    for i in 0..n {
+        if done[i] {
+            continue;
+        }
+        let members: Vec<usize> = (i..n).filter(|k| same(i, *k)).collect();
+        let mut v = 0.0;
+        for &a in &members {
+            done[a] = true;
+            for &b in &members {
+                v += c[a] * c[b] * ux[(a, b)];
+            }
+        }
+        var_total += v;
+        let nu = inputs[i].dof;
+        if let Some(m) = members.iter().find(|m| inputs[**m].dof != nu) {
+            return Err(UncertaintyError::Invalid(format!(
+                "inputs `{}` and `{}` are in one group but have different `dof`: a group is one \
+                 evaluation with one number of degrees of freedom",
+                inputs[i].name, inputs[*m].name
+            )));
+        }
+        if nu.is_finite() && v > 0.0 {
+            denom += v * v / nu;
+        }
+    }
+    Ok((denom > 0.0).then(|| var_total * var_total / denom))
+}
+
 /// Propagates `inputs` through `model` by the GUM law of propagation.
 ///
-/// `correlation` is the inputs' correlation matrix (identity when `None`). The Welch–Satterthwaite
-/// formula is applied to the contributions as if the inputs were independent; JCGM 100 G.4 gives
-/// no form for correlated inputs.
+/// `correlation` is the inputs' correlation matrix (identity when `None`). ν_eff by
+/// [`effective_dof`].
 pub fn propagate<M: Model + ?Sized>(
     model: &M,
     output_names: &[String],
     inputs: &[GumInput],
     correlation: Option<&DMatrix<f64>>,
     coverage: Coverage,
+) -> Result<GumResult, UncertaintyError> {
+    propagate_with_dof(
+        model,
+        output_names,
+        inputs,
+        correlation,
+        coverage,
+        &vec![None; output_names.len()],
+    )
+}
+
+/// [`propagate`] with degrees of freedom given per output (`Some` replaces ν_eff: for a
+/// correlation structure the Welch–Satterthwaite formula cannot express).
+pub fn propagate_with_dof<M: Model + ?Sized>(
+    model: &M,
+    output_names: &[String],
+    inputs: &[GumInput],
+    correlation: Option<&DMatrix<f64>>,
+    coverage: Coverage,
+    output_dof: &[Option<f64>],
 ) -> Result<GumResult, UncertaintyError> {
     let n_in = inputs.len();
     let n_out = model.n_outputs();
@@ -188,31 +277,31 @@ pub fn propagate<M: Model + ?Sized>(
             }
         }
     }
-    let uy = &c * ux * c.transpose();
+    let uy = &c * &ux * c.transpose();
     let mut outputs = Vec::with_capacity(n_out);
     for j in 0..n_out {
         let uc = uy[(j, j)].max(0.0).sqrt();
-        let mut denom = 0.0;
         let mut budget = Vec::with_capacity(n_in);
         for (i, inp) in inputs.iter().enumerate() {
             let ci = c[(j, i)];
-            let contrib = ci * inp.standard_uncertainty;
-            if inp.dof.is_finite() && contrib != 0.0 {
-                denom += contrib.powi(4) / inp.dof;
-            }
             budget.push(BudgetLine {
                 input: inp.name.clone(),
                 estimate: inp.estimate,
                 standard_uncertainty: inp.standard_uncertainty,
                 dof: inp.dof,
                 sensitivity: ci,
-                contribution: contrib,
+                contribution: ci * inp.standard_uncertainty,
             });
         }
-        let dof_eff = if denom > 0.0 {
-            Some(uc.powi(4) / denom)
-        } else {
-            None
+        let row: Vec<f64> = c.row(j).iter().copied().collect();
+        let dof_eff = match output_dof.get(j).copied().flatten() {
+            Some(nu) => nu.is_finite().then_some(nu),
+            None => match effective_dof(&row, inputs, &ux, &output_names[j]) {
+                Ok(v) => v,
+                // A fixed k needs no ν; report it as unknown (infinite) rather than fail.
+                Err(_) if coverage.factor.is_some() => None,
+                Err(e) => return Err(e),
+            },
         };
         let k = coverage
             .factor

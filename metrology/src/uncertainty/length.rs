@@ -112,6 +112,7 @@ impl LengthBudget {
         .zip(NAMES)
         .enumerate()
         .map(|(i, ((_, u), name))| GumInput {
+            group: None,
             name: name.to_string(),
             estimate: if i == 5 { -l_um * th2 / 6.0 } else { 0.0 },
             standard_uncertainty: u,

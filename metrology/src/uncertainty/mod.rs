@@ -49,7 +49,9 @@ pub mod psd;
 pub use budget::{Budget, Method, Report};
 pub use dist::{Distribution, DriftShape};
 pub use gum::{BudgetLine, Coverage, GumInput, GumOutput, GumResult};
-pub use mc::{IntervalKind, McOptions, McOutput, McProgress, McResult, TrialSource, Validation};
+pub use mc::{
+    IntervalKind, McOptions, McOutput, McProgress, McResult, TrialSource, Validation, Verdict,
+};
 
 /// A measurement model Y = f(X): `evaluate` writes the outputs for the input values `x`.
 pub trait Model: Sync {

@@ -14,6 +14,8 @@ pub mod positioning_data;
 
 // Machine error models and identification (papers 001, 003, 004).
 pub mod capball;
+// What the 14-parameter CapBall model gets wrong (docs/datasets.md, CapBall effects).
+pub mod capball_diagnosis;
 pub mod kinematics;
 pub mod parts;
 pub mod psd_frame;

@@ -1,0 +1,386 @@
+//! Diagnosis of CapBall data (paper 001): what the 14-parameter link/setup model plus white
+//! sensor noise gets wrong, which effect explains it, and how much the model gains.
+//!
+//! Method (the issue leaves it open; `docs/datasets.md`, "CapBall effects", documents it):
+//! - Baseline: the 14 parameters identified on the identification run (run 1); its residual
+//!   and the residual it leaves on the validation runs (A reversed) are the "before".
+//! - White-noise level per channel from second differences of the residuals in measuring
+//!   order (smooth effects nearly cancel there), with a robust scale.
+//! - Outlying poses: departures from the running median of the neighbouring poses beyond a
+//!   Bonferroni bound; they are left out of every fit.
+//! - Candidate effects are extra columns of the identification least squares
+//!   ([`model::Candidate`]). Columns (or combinations of them) that the 14 parameters take up
+//!   exactly are dropped and reported as absorbed: the data cannot show them. Forward
+//!   selection: the candidate with the largest BIC decrease (its grid search — period,
+//!   channel, axis and harmonic — counted as one parameter) is accepted when the decrease
+//!   exceeds [`Options::min_bic_gain`] **and** the validation runs' residual sum of squares
+//!   drops by more than [`Options::min_validation_gain`] noise variances beyond the BIC
+//!   penalty of what is fitted again there. On the validation runs the 14 parameters, the
+//!   sensor gain and the axis errors carry over unchanged; a drift of the measuring loop is a
+//!   function of time belonging to one run, so its coefficients (period kept) and one offset
+//!   per channel are fitted again.
+//! - `unexplained`: what is left exceeds the white-noise level by more than five standard
+//!   deviations of that comparison, on the identification or the validation run.
+
+mod checks;
+mod model;
+mod report;
+mod select;
+
+pub use checks::{Profile, ResidualSummary};
+pub use model::{Candidate, CapballRun, RotaryAxis};
+pub use report::{
+    Absorption, CapballBaseline, CapballDiagnosis, CapballDiagnosisReport, CapballFinding,
+    ParameterShift,
+};
+
+use nalgebra::DVector;
+
+use crate::capball::{CapballError, CapballRecord, CapballSetup};
+use select::{ModelFit, candidate_list, fit_terms, model_basis, screen, validate};
+
+/// Tuning of the CapBall diagnosis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    /// BIC decrease an effect needs on the identification run.
+    pub min_bic_gain: f64,
+    /// Decrease of the validation RSS, in noise variances beyond the refit penalty.
+    pub min_validation_gain: f64,
+    /// Family-wise false-alarm probability of the outlier test.
+    pub outlier_alpha: f64,
+    /// Highest harmonic of the A and C angles tried.
+    pub max_harmonic: u32,
+    /// Most effects accepted.
+    pub max_effects: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            min_bic_gain: 10.0,
+            min_validation_gain: 10.0,
+            outlier_alpha: 0.005,
+            max_harmonic: 4,
+            max_effects: 3,
+        }
+    }
+}
+
+/// A drift record at one fixed pose (`docs/datasets.md`: `time_s,ex_um,ey_um,ez_um`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DriftRecord {
+    pub time_s: Vec<f64>,
+    pub e_um: Vec<[f64; 3]>,
+}
+
+/// The runs of a parsed dataset: run 1 identifies, the others validate. Without a `time_s`
+/// column the pose number stands in for the time (the caller notes it).
+pub fn runs_from_records(records: &[CapballRecord]) -> Result<(CapballRun, Vec<CapballRun>), CapballError> {
+    let mut ids: Vec<u32> = records.iter().map(|r| r.run).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let mut runs = Vec::new();
+    for id in ids {
+        let recs: Vec<&CapballRecord> = records.iter().filter(|r| r.run == id).collect();
+        runs.push(CapballRun {
+            poses: recs.iter().map(|r| r.pose).collect(),
+            time_s: recs
+                .iter()
+                .map(|r| r.time_s.unwrap_or(r.pose_index as f64))
+                .collect(),
+            e_um: recs.iter().map(|r| r.e_um).collect(),
+        });
+    }
+    if runs.len() < 2 {
+        return Err(CapballError::Dataset(
+            "the diagnosis needs an identification run (run 1) and a validation run (run 2, e.g. A reversed) in the `run` column".into(),
+        ));
+    }
+    let id = runs.remove(0);
+    Ok((id, runs))
+}
+
+/// Parse a drift record (`time_s,ex_um,ey_um,ez_um`, `#` comments).
+pub fn parse_drift_record(text: &str) -> Result<DriftRecord, CapballError> {
+    let err = |m: String| CapballError::Dataset(format!("drift record: {m}"));
+    let mut rdr = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let h = rdr.headers().map_err(|e| err(e.to_string()))?.clone();
+    let need = ["time_s", "ex_um", "ey_um", "ez_um"];
+    let mut idx = Vec::new();
+    for n in need {
+        idx.push(
+            h.iter()
+                .position(|x| x == n)
+                .ok_or_else(|| err(format!("missing column `{n}` (header must name {need:?})")))?,
+        );
+    }
+    let mut out = DriftRecord::default();
+    for (line, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| err(e.to_string()))?;
+        let v: Vec<f64> = idx
+            .iter()
+            .map(|&i| {
+                let s = rec.get(i).unwrap_or("");
+                s.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| err(format!("row {}: `{s}` is not a finite number", line + 2)))
+            })
+            .collect::<Result<_, _>>()?;
+        out.time_s.push(v[0]);
+        out.e_um.push([v[1], v[2], v[3]]);
+    }
+    if out.time_s.len() < 20 {
+        return Err(err(format!(
+            "{} rows: a drift record needs at least 20 readings",
+            out.time_s.len()
+        )));
+    }
+    Ok(out)
+}
+
+fn check_run(run: &CapballRun, what: &str) -> Result<(), CapballError> {
+    let n = run.len();
+    if run.time_s.len() != n || run.e_um.len() != n {
+        return Err(CapballError::LengthMismatch {
+            poses: n,
+            values: run.e_um.len().min(run.time_s.len()),
+        });
+    }
+    if n < 30 {
+        return Err(CapballError::Dataset(format!(
+            "the {what} run has {n} poses: the diagnosis needs at least 30"
+        )));
+    }
+    if run.time_s.iter().any(|t| !t.is_finite()) {
+        return Err(CapballError::Dataset(format!(
+            "the {what} run has a time that is not a finite number"
+        )));
+    }
+    Ok(())
+}
+
+/// Rows (3 per pose) kept when the poses flagged in `out` are left out.
+fn row_mask(out: &[bool]) -> Vec<bool> {
+    out.iter().flat_map(|o| [!o, !o, !o]).collect()
+}
+
+/// Diagnose an identification run against one or more validation runs.
+pub fn diagnose(
+    setup: &CapballSetup,
+    ident: &CapballRun,
+    validation: &[CapballRun],
+    drift: Option<&DriftRecord>,
+    opt: &Options,
+) -> Result<CapballDiagnosis, CapballError> {
+    check_run(ident, "identification")?;
+    for v in validation {
+        check_run(v, "validation")?;
+    }
+    if validation.is_empty() {
+        return Err(CapballError::Dataset(
+            "no validation run: the diagnosis measures each effect's gain on a second run (A reversed)".into(),
+        ));
+    }
+    let base = setup.identify(&ident.poses, &ident.e_um)?;
+    let p0 = DVector::from_column_slice(&base.params);
+    let all_rows = vec![true; 3 * ident.len()];
+    let baseline = fit_terms(setup, ident, &all_rows, Vec::new(), &p0).ok_or(CapballError::Singular {
+        condition: base.condition_number,
+        worst: "?".into(),
+    })?;
+    // Outliers: judged on the baseline residuals of every run.
+    let out_id = checks::outlier_poses(&baseline.fit.resid, ident.len(), opt.outlier_alpha);
+    let keep = row_mask(&out_id);
+    let val_all: Vec<Vec<bool>> = validation.iter().map(|v| vec![true; 3 * v.len()]).collect();
+    let (_, _, _, val_res0) = validate(setup, validation, &val_all, &baseline);
+    let out_val: Vec<Vec<bool>> = validation
+        .iter()
+        .zip(&val_res0)
+        .map(|(v, r)| checks::outlier_poses(r, v.len(), opt.outlier_alpha))
+        .collect();
+    let val_keep: Vec<Vec<bool>> = out_val.iter().map(|o| row_mask(o)).collect();
+    let periods = drift_periods(ident, drift);
+    let ctx = report::Context {
+        setup,
+        ident,
+        validation,
+        keep: &keep,
+        val_keep: &val_keep,
+        out_id: &out_id,
+        out_val: &out_val,
+        opt,
+        record_period: periods.from_record,
+    };
+    let start = fit_terms(setup, ident, &keep, Vec::new(), &p0).ok_or(CapballError::Singular {
+        condition: base.condition_number,
+        worst: "?".into(),
+    })?;
+    let (fin, steps) = forward_select(&ctx, start.clone(), &periods)?;
+    Ok(report::assemble(&ctx, &base, &baseline, &start, &fin, &steps, &periods))
+}
+
+/// The periods tried for a cyclic drift: from a drift record when one is given (its best
+/// period only), otherwise a log grid from 60 s to four times the identification run.
+pub(crate) struct Periods {
+    pub grid: Vec<f64>,
+    /// Period and its standard uncertainty found in the drift record.
+    pub from_record: Option<(f64, f64)>,
+}
+
+fn drift_periods(ident: &CapballRun, drift: Option<&DriftRecord>) -> Periods {
+    if let Some(rec) = drift
+        && let Some(p) = report::record_period(rec)
+    {
+        return Periods {
+            grid: vec![p.0],
+            from_record: Some(p),
+        };
+    }
+    let t0 = ident.time_s.iter().copied().fold(f64::INFINITY, f64::min);
+    let t1 = ident.time_s.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    Periods {
+        grid: log_grid(60.0, (4.0 * (t1 - t0)).max(120.0), 48),
+        from_record: None,
+    }
+}
+
+pub(crate) fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64))
+        .collect()
+}
+
+/// One accepted step of the forward selection.
+#[derive(Debug, Clone)]
+pub(crate) struct Step {
+    pub before: ModelFit,
+    pub after: ModelFit,
+    pub bic_drop: f64,
+    pub val_before: (f64, usize, usize),
+    pub val_after: (f64, usize, usize),
+}
+
+fn forward_select(
+    ctx: &report::Context,
+    start: ModelFit,
+    periods: &Periods,
+) -> Result<(ModelFit, Vec<Step>), CapballError> {
+    let (setup, ident, keep, opt) = (ctx.setup, ctx.ident, ctx.keep, ctx.opt);
+    let n_eq = keep.iter().filter(|k| **k).count() as f64;
+    let sigma2_val = ctx.val_noise_var();
+    let mut cur = start;
+    let mut steps = Vec::new();
+    let grid_penalty = |c: &Candidate| match c {
+        Candidate::LinearDrift => 0.0,
+        Candidate::CyclicDrift { .. } if periods.from_record.is_some() => 0.0,
+        _ => 1.0,
+    };
+    while steps.len() < opt.max_effects {
+        let q = model_basis(setup, ident, &cur, keep);
+        let have: Vec<Candidate> = cur.terms.iter().map(|t| t.cand).collect();
+        let mut best: Vec<(f64, select::Screened)> = Vec::new();
+        for fam in candidate_list(&have, &periods.grid, opt.max_harmonic) {
+            let top = fam
+                .into_iter()
+                .filter_map(|c| screen(setup, ident, keep, &cur, &q, c))
+                .map(|s| {
+                    let k = s.term.rank() as f64 + grid_penalty(&s.term.cand);
+                    let bic = n_eq * (cur.fit.rss / (cur.fit.rss - s.drss).max(1e-300)).ln() - k * n_eq.ln();
+                    (bic, s)
+                })
+                .max_by(|a, b| a.0.total_cmp(&b.0));
+            if let Some(t) = top {
+                best.push(t);
+            }
+        }
+        best.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let vb = validate(setup, ctx.validation, ctx.val_keep, &cur);
+        let mut accepted = None;
+        for (bic, s) in best {
+            if bic < opt.min_bic_gain {
+                break;
+            }
+            let term = refine(ctx, &cur, &q, s.term);
+            let mut terms = cur.terms.clone();
+            terms.push(term);
+            let Some(next) = fit_terms(setup, ident, keep, terms, &cur.p) else {
+                continue;
+            };
+            let va = validate(setup, ctx.validation, ctx.val_keep, &next);
+            let n_val = va.1 as f64;
+            let stat = (vb.0 - va.0) / sigma2_val - (va.2 as f64 - vb.2 as f64) * n_val.ln();
+            if stat > opt.min_validation_gain {
+                let bic_drop = n_eq * (cur.fit.rss / next.fit.rss).ln()
+                    - (next.n_params() - cur.n_params()) as f64 * n_eq.ln();
+                accepted = Some(Step {
+                    before: cur.clone(),
+                    after: next,
+                    bic_drop: bic_drop.max(bic),
+                    val_before: (vb.0, vb.1, vb.2),
+                    val_after: (va.0, va.1, va.2),
+                });
+                break;
+            }
+        }
+        match accepted {
+            Some(s) => {
+                cur = s.after.clone();
+                steps.push(s);
+            }
+            None => break,
+        }
+    }
+    Ok((cur, steps))
+}
+
+/// Refine a cyclic drift's period (golden-section search between the grid neighbours, on the
+/// screened RSS decrease); other candidates are returned as they are.
+fn refine(ctx: &report::Context, cur: &ModelFit, q: &nalgebra::DMatrix<f64>, term: select::Term) -> select::Term {
+    let Candidate::CyclicDrift { period_s } = term.cand else {
+        return term;
+    };
+    if ctx_has_record(ctx) {
+        return term;
+    }
+    let f = |p: f64| {
+        screen(ctx.setup, ctx.ident, ctx.keep, cur, q, Candidate::CyclicDrift { period_s: p })
+            .map(|s| s.drss)
+            .unwrap_or(f64::NEG_INFINITY)
+    };
+    let ratio = 1.1f64;
+    let (mut a, mut b) = ((period_s / ratio).ln(), (period_s * ratio).ln());
+    let g = 0.618_033_988_75;
+    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+    let (mut fc, mut fd) = (f(c.exp()), f(d.exp()));
+    for _ in 0..25 {
+        if fc > fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - g * (b - a);
+            fc = f(c.exp());
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + g * (b - a);
+            fd = f(d.exp());
+        }
+    }
+    let p = (0.5 * (a + b)).exp();
+    screen(ctx.setup, ctx.ident, ctx.keep, cur, q, Candidate::CyclicDrift { period_s: p })
+        .map(|s| s.term)
+        .unwrap_or(term)
+}
+
+fn ctx_has_record(ctx: &report::Context) -> bool {
+    ctx.record_period.is_some()
+}
+
+/// Parameters of the 14 that shift by more than this many baseline standard uncertainties are
+/// named in a finding's cause.
+pub(crate) const SHIFT_NAMED_SIGMA: f64 = 2.0;

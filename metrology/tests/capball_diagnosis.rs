@@ -155,7 +155,14 @@ fn sweep(per_class: usize, seed0: u64) -> Vec<(Class, bool, Tally)> {
             for i in 0..per_class {
                 let d = generate(class, seed0 + 1000 * i as u64 + class as u64, record);
                 let r = run_diag(&d);
+                let before = (t.detected, t.params_ok, t.extra);
                 score(&d, &r, &mut t);
+                if std::env::var("CAPBALL_VERBOSE").is_ok() && (t.detected, t.params_ok + usize::from(d.truth.effects.is_empty()), t.extra) != (before.0 + 1, before.1 + 1, before.2) {
+                    println!("--- {} seed {} truth {:?}", class.name(), seed0 + 1000 * i as u64 + class as u64, d.truth);
+                    for f in &r.findings {
+                        println!("    {} {} sig {:.1} val {:.3}->{:.3} | {}", f.effect, serde_json::to_string(&f.params).unwrap_or_default(), f.significance, f.heldout_rms_before_um, f.heldout_rms_after_um, serde_json::to_string(&f.params_u).unwrap_or_default());
+                    }
+                }
             }
             out.push((class, record, t));
         }

@@ -262,6 +262,64 @@ pub(crate) struct Step {
     pub bic_drop: f64,
     pub val_before: (f64, usize, usize),
     pub val_after: (f64, usize, usize),
+    /// Other effects whose evidence came within [`Options::min_bic_gain`] of this one's: the
+    /// data cannot tell them apart.
+    pub rivals: Vec<Candidate>,
+}
+
+/// A candidate fitted in full: evidence on the identification run (BIC decrease) and on the
+/// validation runs (RSS decrease in noise variances, less the refit penalty).
+struct Tried {
+    next: ModelFit,
+    bic: f64,
+    val: (f64, usize, usize),
+    stat: f64,
+}
+
+/// Screen every candidate family against the current model; the best two of each family by
+/// BIC decrease (grid search counted as one parameter) above the threshold.
+fn shortlist(ctx: &report::Context, cur: &ModelFit, periods: &Periods) -> Vec<select::Term> {
+    let (setup, ident, keep, opt) = (ctx.setup, ctx.ident, ctx.keep, ctx.opt);
+    let n_eq = keep.iter().filter(|k| **k).count() as f64;
+    let grid_penalty = |c: &Candidate| match c {
+        Candidate::LinearDrift => 0.0,
+        Candidate::CyclicDrift { .. } if periods.from_record.is_some() => 0.0,
+        _ => 1.0,
+    };
+    let q = model_basis(setup, ident, cur, keep);
+    let have: Vec<Candidate> = cur.terms.iter().map(|t| t.cand).collect();
+    let mut out = Vec::new();
+    for fam in candidate_list(&have, &periods.grid, opt.max_harmonic) {
+        let mut scored: Vec<(f64, select::Screened)> = fam
+            .into_iter()
+            .filter_map(|c| screen(setup, ident, keep, cur, &q, c))
+            .map(|s| {
+                let k = s.term.rank() as f64 + grid_penalty(&s.term.cand);
+                let bic = n_eq * (cur.fit.rss / (cur.fit.rss - s.drss).max(1e-300)).ln()
+                    - k * n_eq.ln();
+                (bic, s)
+            })
+            .filter(|(bic, _)| *bic >= opt.min_bic_gain)
+            .collect();
+        scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+        // Grid neighbours of the best (nearby periods) are the same effect: keep one per kind.
+        let mut kinds: Vec<String> = Vec::new();
+        for (_, s) in scored {
+            let kind = match s.term.cand {
+                Candidate::CyclicDrift { .. } => "cyclic".to_string(),
+                c => format!("{c:?}"),
+            };
+            if kinds.contains(&kind) {
+                continue;
+            }
+            kinds.push(kind);
+            out.push(refine(ctx, cur, &q, s.term));
+            if kinds.len() == 2 {
+                break;
+            }
+        }
+    }
+    out
 }
 
 fn forward_select(
@@ -274,65 +332,51 @@ fn forward_select(
     let sigma2_val = ctx.val_noise_var();
     let mut cur = start;
     let mut steps = Vec::new();
-    let grid_penalty = |c: &Candidate| match c {
-        Candidate::LinearDrift => 0.0,
-        Candidate::CyclicDrift { .. } if periods.from_record.is_some() => 0.0,
-        _ => 1.0,
-    };
     while steps.len() < opt.max_effects {
-        let q = model_basis(setup, ident, &cur, keep);
-        let have: Vec<Candidate> = cur.terms.iter().map(|t| t.cand).collect();
-        let mut best: Vec<(f64, select::Screened)> = Vec::new();
-        for fam in candidate_list(&have, &periods.grid, opt.max_harmonic) {
-            let top = fam
-                .into_iter()
-                .filter_map(|c| screen(setup, ident, keep, &cur, &q, c))
-                .map(|s| {
-                    let k = s.term.rank() as f64 + grid_penalty(&s.term.cand);
-                    let bic = n_eq * (cur.fit.rss / (cur.fit.rss - s.drss).max(1e-300)).ln() - k * n_eq.ln();
-                    (bic, s)
-                })
-                .max_by(|a, b| a.0.total_cmp(&b.0));
-            if let Some(t) = top {
-                best.push(t);
-            }
-        }
-        best.sort_by(|a, b| b.0.total_cmp(&a.0));
         let vb = validate(setup, ctx.validation, ctx.val_keep, &cur);
-        let mut accepted = None;
-        for (bic, s) in best {
-            if bic < opt.min_bic_gain {
-                break;
-            }
-            let term = refine(ctx, &cur, &q, s.term);
+        let mut tried: Vec<Tried> = Vec::new();
+        for term in shortlist(ctx, &cur, periods) {
             let mut terms = cur.terms.clone();
             terms.push(term);
             let Some(next) = fit_terms(setup, ident, keep, terms, &cur.p) else {
                 continue;
             };
+            let bic = n_eq * (cur.fit.rss / next.fit.rss).ln()
+                - (next.n_params() - cur.n_params()) as f64 * n_eq.ln();
             let va = validate(setup, ctx.validation, ctx.val_keep, &next);
-            let n_val = va.1 as f64;
-            let stat = (vb.0 - va.0) / sigma2_val - (va.2 as f64 - vb.2 as f64) * n_val.ln();
-            if stat > opt.min_validation_gain {
-                let bic_drop = n_eq * (cur.fit.rss / next.fit.rss).ln()
-                    - (next.n_params() - cur.n_params()) as f64 * n_eq.ln();
-                accepted = Some(Step {
-                    before: cur.clone(),
-                    after: next,
-                    bic_drop: bic_drop.max(bic),
-                    val_before: (vb.0, vb.1, vb.2),
-                    val_after: (va.0, va.1, va.2),
+            let stat =
+                (vb.0 - va.0) / sigma2_val - (va.2 as f64 - vb.2 as f64) * (va.1 as f64).ln();
+            if bic >= opt.min_bic_gain && stat >= opt.min_validation_gain {
+                tried.push(Tried {
+                    next,
+                    bic,
+                    val: (va.0, va.1, va.2),
+                    stat,
                 });
-                break;
             }
         }
-        match accepted {
-            Some(s) => {
-                cur = s.after.clone();
-                steps.push(s);
-            }
-            None => break,
-        }
+        // The reversed-A validation is what tells a drift from an error of the A axis: the
+        // choice weighs both runs' evidence.
+        tried.sort_by(|a, b| (b.bic + b.stat).total_cmp(&(a.bic + a.stat)));
+        let Some(best) = tried.first() else {
+            break;
+        };
+        let top = best.bic + best.stat;
+        let rivals = tried[1..]
+            .iter()
+            .filter(|t| top - (t.bic + t.stat) < opt.min_bic_gain)
+            .filter_map(|t| t.next.terms.last().map(|x| x.cand))
+            .filter(|c| Some(c.effect()) != best.next.terms.last().map(|x| x.cand.effect()))
+            .collect();
+        steps.push(Step {
+            before: cur.clone(),
+            after: best.next.clone(),
+            bic_drop: best.bic,
+            val_before: (vb.0, vb.1, vb.2),
+            val_after: best.val,
+            rivals,
+        });
+        cur = best.next.clone();
     }
     Ok((cur, steps))
 }

@@ -367,6 +367,15 @@ fn effect_finding(ctx: &Context, base: &Identification, s: &Step, periods: &Peri
         let list: Vec<String> = named.iter().take(4).map(|(n, v)| format!("{n} {v:+.1} σ")).collect();
         format!("modelling it moves {}", list.join(", "))
     };
+    let rivals = if s.rivals.is_empty() {
+        String::new()
+    } else {
+        let r: Vec<String> = s.rivals.iter().map(short_name).collect();
+        format!(
+            ". The data explain it almost as well by {} (evidence within the BIC threshold): they cannot tell these apart; a sensor-frame cube calibration, a runout test of the rotary axes or a drift record at one fixed pose does",
+            r.join(" or ")
+        )
+    };
     CapballFinding {
         effect: term.map(|c| c.effect()).unwrap_or("?").into(),
         params,
@@ -375,7 +384,7 @@ fn effect_finding(ctx: &Context, base: &Identification, s: &Step, periods: &Peri
         heldout_rms_before_um: rms(s.val_before.0, s.val_before.1),
         heldout_rms_after_um: rms(s.val_after.0, s.val_after.1),
         cause: format!(
-            "{what}. The 14 parameters take up {:.0} % of its signal on the identification run; {shift_text}",
+            "{what}. The 14 parameters take up {:.0} % of its signal on the identification run; {shift_text}{rivals}",
             100.0 * absorbed
         ),
         absorbed_fraction: absorbed,
@@ -384,6 +393,17 @@ fn effect_finding(ctx: &Context, base: &Identification, s: &Step, periods: &Peri
 }
 
 const CH: [&str; 3] = ["x", "y", "z"];
+
+fn short_name(c: &Candidate) -> String {
+    match c {
+        Candidate::SensorGain { channel } => format!("a gain error of channel {}", CH[*channel]),
+        Candidate::AxisError { axis, harmonic } => {
+            format!("an error motion of {} at {harmonic} per revolution", axis.name())
+        }
+        Candidate::LinearDrift => "a linear drift".into(),
+        Candidate::CyclicDrift { period_s } => format!("a cyclic drift ({:.1} min)", period_s / 60.0),
+    }
+}
 
 /// Amplitude of a (sin, cos) pair and its standard uncertainty.
 fn amp(b: &DVector<f64>, cov: &DMatrix<f64>, i: usize) -> (f64, f64) {

@@ -236,6 +236,31 @@ fn regenerate_with(d: Dataset, seed: u64) -> Dataset {
 }
 
 #[test]
+fn c_axial_once_per_rev_is_absorbed() {
+    // A 2 µm axial once-per-revolution motion of C: the same as a tilt of the C axis line, so
+    // the diagnosis must not name it, and must say the data cannot show it.
+    let mut d = generate(Class::None, 77, false);
+    d.truth.axis = Some(capball_gen::AxisMotion {
+        axis: 'C',
+        harmonic: 1,
+        amplitude_um: 2.0,
+        phase: 0.4,
+        direction: nalgebra::Vector3::z(),
+        axial: true,
+    });
+    let d = regenerate_with(d, 77);
+    let r = run_diag(&d);
+    assert!(r.findings.is_empty(), "{:?}", r.findings);
+    let a = r
+        .absorbed
+        .iter()
+        .find(|a| a.effect == "axis_error" && a.detail == "C harmonic 1")
+        .expect("C harmonic 1 listed as absorbed");
+    assert!(a.invisible >= 2, "{a:?}");
+    assert!(a.taken_by.iter().any(|p| p.starts_with("EA0C") || p.starts_with("EB0C")), "{a:?}");
+}
+
+#[test]
 fn small_sample_per_class() {
     let rows = sweep(2, 9000);
     print_table(&rows);

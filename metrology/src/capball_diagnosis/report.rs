@@ -108,6 +108,9 @@ pub(crate) struct Context<'a> {
     pub setup: &'a CapballSetup,
     pub ident: &'a CapballRun,
     pub validation: &'a [CapballRun],
+    /// All runs concatenated (one clock) and their kept rows.
+    pub joint: &'a CapballRun,
+    pub joint_keep: &'a [bool],
     pub keep: &'a [bool],
     pub val_keep: &'a [Vec<bool>],
     pub out_id: &'a [bool],
@@ -344,9 +347,11 @@ fn shift_sigma(base: &Identification, before: &DVector<f64>, after: &DVector<f64
 
 fn effect_finding(ctx: &Context, base: &Identification, s: &Step, periods: &Periods) -> CapballFinding {
     let term = s.after.terms.last().map(|t| t.cand);
-    let (b, cov) = s.after.coefs.last().cloned().unwrap_or_default();
-    let n_eq = ctx.keep.iter().filter(|k| **k).count();
-    let s2 = s.after.fit.rss / (n_eq.saturating_sub(s.after.n_params())).max(1) as f64;
+    // The effect's parameters come from all runs (one clock), the 14 parameters' shift from
+    // the identification run.
+    let (b, cov) = s.joint_after.coefs.last().cloned().unwrap_or_default();
+    let n_eq = ctx.joint_keep.iter().filter(|k| **k).count();
+    let s2 = s.joint_after.fit.rss / (n_eq.saturating_sub(s.joint_after.n_params())).max(1) as f64;
     let cov = cov * s2;
     let model = ctx.setup.stacked_jacobian(&ctx.ident.poses) * &s.after.p;
     let signal = term
@@ -451,10 +456,10 @@ fn describe(
             u.insert("period_s".into(), json!(up));
             p.insert("amplitude_um".into(), xyz(a.map(|v| v.0)));
             u.insert("amplitude_um".into(), xyz(a.map(|v| v.1)));
-            let span = span_s(ctx.ident);
+            let span = span_s(ctx.joint);
             let caveat = if period_s > 1.5 * span && periods.from_record.is_none() {
                 format!(
-                    " (the period is longer than the {:.1}-min run and poorly determined: a drift record over two periods fixes it)",
+                    " (the period is longer than the {:.1} min the runs cover and poorly determined: a drift record over two periods fixes it)",
                     span / 60.0
                 )
             } else {
@@ -509,16 +514,16 @@ fn span_s(run: &CapballRun) -> f64 {
 
 /// Standard uncertainty of a fitted period from the curvature of the RSS around it.
 fn period_u(ctx: &Context, s: &Step, period: f64) -> f64 {
-    let q = model_basis(ctx.setup, ctx.ident, &s.before, ctx.keep);
+    let q = model_basis(ctx.setup, ctx.joint, &s.joint_before, ctx.joint_keep);
     let drss = |p: f64| {
-        screen(ctx.setup, ctx.ident, ctx.keep, &s.before, &q, Candidate::CyclicDrift { period_s: p })
+        screen(ctx.setup, ctx.joint, ctx.joint_keep, &s.joint_before, &q, Candidate::CyclicDrift { period_s: p })
             .map(|x| x.drss)
             .unwrap_or(0.0)
     };
     let h = period * 2e-3;
     let curv = -(drss(period + h) + drss(period - h) - 2.0 * drss(period)) / (h * h);
-    let n_eq = ctx.keep.iter().filter(|k| **k).count();
-    let s2 = s.after.fit.rss / (n_eq.saturating_sub(s.after.n_params())).max(1) as f64;
+    let n_eq = ctx.joint_keep.iter().filter(|k| **k).count();
+    let s2 = s.joint_after.fit.rss / (n_eq.saturating_sub(s.joint_after.n_params())).max(1) as f64;
     if curv > 0.0 { (2.0 * s2 / curv).sqrt() } else { f64::NAN }
 }
 

@@ -220,7 +220,7 @@ pub(crate) fn candidate_list(have: &[Candidate], periods: &[f64], max_harmonic: 
     if !has(&|c| matches!(c, Candidate::LinearDrift)) {
         families.push(vec![Candidate::LinearDrift]);
     }
-    if !has(&|c| matches!(c, Candidate::CyclicDrift { .. })) {
+    if !periods.is_empty() && !has(&|c| matches!(c, Candidate::CyclicDrift { .. })) {
         families.push(
             periods
                 .iter()

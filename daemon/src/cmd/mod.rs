@@ -3,6 +3,7 @@
 pub mod analyze;
 pub mod demo;
 pub mod diagnose;
+pub mod diagnose_capball;
 pub mod identify;
 pub mod info;
 pub mod input;

@@ -28,7 +28,7 @@ mod report;
 mod select;
 
 pub use checks::{Profile, ResidualSummary};
-pub use model::{Candidate, CapballRun, RotaryAxis};
+pub use model::{Candidate, CapballRun, RotaryAxis, axis_harmonic_um};
 pub use report::{
     Absorption, CapballBaseline, CapballDiagnosis, CapballDiagnosisReport, CapballFinding,
     ParameterShift,

@@ -128,6 +128,16 @@ impl Candidate {
     }
 }
 
+/// The change of the volumetric error (µm, machine frame) of an axis harmonic given by its
+/// cosine and sine coefficients in the axis's housing frame: the forward form of
+/// [`Candidate::AxisError`] (what a simulator adds, `docs/datasets.md`, `axis_error`).
+pub fn axis_harmonic_um(axis: RotaryAxis, harmonic: u32, cos_um: [f64; 3], sin_um: [f64; 3], pose: &Pose) -> [f64; 3] {
+    let (theta, frame) = housing(axis, pose);
+    let arg = harmonic as f64 * theta;
+    let v = frame * (Vector3::from(cos_um) * arg.cos() + Vector3::from(sin_um) * arg.sin());
+    [v.x, v.y, v.z]
+}
+
 /// Angle (rad) of a rotary axis and the rotation of its housing frame into the machine frame.
 /// The A cradle turns by −A about x (a workpiece-side axis, `crate::kinematics` conventions).
 pub(crate) fn housing(axis: RotaryAxis, pose: &Pose) -> (f64, nalgebra::Matrix3<f64>) {

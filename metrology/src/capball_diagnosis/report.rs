@@ -455,6 +455,11 @@ fn describe(
             p.insert("period_s".into(), json!(period_s));
             u.insert("period_s".into(), json!(up));
             p.insert("amplitude_um".into(), xyz(a.map(|v| v.0)));
+            // b_sin·sin(ωt) + b_cos·cos(ωt) = a·sin(ωt + φ), φ = atan2(b_cos, b_sin).
+            p.insert(
+                "phase_rad".into(),
+                xyz(std::array::from_fn(|k| b[2 * k + 1].atan2(b[2 * k]))),
+            );
             u.insert("amplitude_um".into(), xyz(a.map(|v| v.1)));
             let span = span_s(ctx.joint);
             let caveat = if period_s > 1.5 * span && periods.from_record.is_none() {
@@ -496,6 +501,9 @@ fn describe(
             p.insert("amplitude_um".into(), json!(a));
             p.insert("radial_um".into(), json!(radial));
             p.insert("axial_um".into(), json!(axial));
+            // The coefficients in the housing frame, as the simulator's scenario takes them.
+            p.insert("cos_um".into(), xyz(std::array::from_fn(|d| b[2 * d])));
+            p.insert("sin_um".into(), xyz(std::array::from_fn(|d| b[2 * d + 1])));
             u.insert("amplitude_um".into(), json!(uu));
             format!(
                 "{dir} error motion of the {} axis at {harmonic} per revolution, {a:.2} µm, which the link-error model lacks (bearing runout or wobble); a runout test of the {} axis (ISO 230-7) confirms it",

@@ -30,11 +30,7 @@ fn simulate(m: &CapballModel, spec: &TrajectorySpec, t0: f64, seed: u64) -> Capb
             m.error_um(&c, t).map(|v| v + noise.sample(&mut rng))
         })
         .collect();
-    CapballRun {
-        poses,
-        time_s,
-        e_um,
-    }
+    CapballRun::new(poses, time_s, e_um)
 }
 
 /// RMS per channel of what the 14 parameters identified on `id` leave on `id` and on `val`.

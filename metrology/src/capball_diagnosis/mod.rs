@@ -83,14 +83,13 @@ pub fn runs_from_records(records: &[CapballRecord]) -> Result<(CapballRun, Vec<C
     let mut runs = Vec::new();
     for id in ids {
         let recs: Vec<&CapballRecord> = records.iter().filter(|r| r.run == id).collect();
-        runs.push(CapballRun {
-            poses: recs.iter().map(|r| r.pose).collect(),
-            time_s: recs
-                .iter()
+        runs.push(CapballRun::new(
+            recs.iter().map(|r| r.pose).collect(),
+            recs.iter()
                 .map(|r| r.time_s.unwrap_or(r.pose_index as f64))
                 .collect(),
-            e_um: recs.iter().map(|r| r.e_um).collect(),
-        });
+            recs.iter().map(|r| r.e_um).collect(),
+        ));
     }
     if runs.len() < 2 {
         return Err(CapballError::Dataset(
@@ -181,6 +180,9 @@ pub fn diagnose(
     for v in validation {
         check_run(v, "validation")?;
     }
+    // Own copies: their cached Jacobians belong to this setup.
+    let ident = &ident.fresh();
+    let validation: &[CapballRun] = &validation.iter().map(CapballRun::fresh).collect::<Vec<_>>();
     if validation.is_empty() {
         return Err(CapballError::Dataset(
             "no validation run: the diagnosis measures each effect's gain on a second run (A reversed)".into(),
@@ -206,7 +208,7 @@ pub fn diagnose(
     let val_keep: Vec<Vec<bool>> = out_val.iter().map(|o| row_mask(o)).collect();
     // All runs on one clock, for the evidence (information criterion) and the effect's
     // parameters: the reversed A of the validation run separates a drift from the A angle.
-    let mut joint = ident.clone();
+    let mut joint = ident.fresh();
     let mut joint_keep = keep.clone();
     for (v, k) in validation.iter().zip(&val_keep) {
         joint.poses.extend_from_slice(&v.poses);

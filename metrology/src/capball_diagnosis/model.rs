@@ -16,9 +16,28 @@ pub struct CapballRun {
     /// Seconds (any origin, but the same clock for every run of a dataset).
     pub time_s: Vec<f64>,
     pub e_um: Vec<[f64; 3]>,
+    /// The stacked identification Jacobian, computed once per diagnosis (the kinematics cost
+    /// far more than the least squares); filled only on the diagnosis's own copies.
+    jac: std::sync::OnceLock<DMatrix<f64>>,
 }
 
 impl CapballRun {
+    pub fn new(poses: Vec<Pose>, time_s: Vec<f64>, e_um: Vec<[f64; 3]>) -> Self {
+        CapballRun {
+            poses,
+            time_s,
+            e_um,
+            jac: std::sync::OnceLock::new(),
+        }
+    }
+    /// A copy without the cached Jacobian (the diagnosis fills it for its one setup).
+    pub(crate) fn fresh(&self) -> Self {
+        Self::new(self.poses.clone(), self.time_s.clone(), self.e_um.clone())
+    }
+    /// The stacked Jacobian of the poses for `setup`.
+    pub(crate) fn jac(&self, setup: &CapballSetup) -> &DMatrix<f64> {
+        self.jac.get_or_init(|| setup.stacked_jacobian(&self.poses))
+    }
     pub fn len(&self) -> usize {
         self.poses.len()
     }
@@ -218,10 +237,10 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, y: &DVector<f64>, keep: &[bool]) -> Option
 
 /// `[J | X₁ | X₂ …]` for a run.
 pub(crate) fn design(setup: &CapballSetup, run: &CapballRun, extra: &[DMatrix<f64>]) -> DMatrix<f64> {
-    let j = setup.stacked_jacobian(&run.poses);
+    let j = run.jac(setup);
     let k: usize = extra.iter().map(|x| x.ncols()).sum();
     let mut a = DMatrix::zeros(j.nrows(), N_PARAMS + k);
-    a.columns_mut(0, N_PARAMS).copy_from(&j);
+    a.columns_mut(0, N_PARAMS).copy_from(j);
     let mut c = N_PARAMS;
     for x in extra {
         a.columns_mut(c, x.ncols()).copy_from(x);

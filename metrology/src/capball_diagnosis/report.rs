@@ -125,7 +125,7 @@ impl Context<'_> {
         let p = DVector::from_column_slice(&self.ident_params());
         let mut acc = 0.0;
         for (run, keep) in self.validation.iter().zip(self.val_keep) {
-            let r = run.rhs() - self.setup.stacked_jacobian(&run.poses) * &p;
+            let r = run.rhs() - run.jac(self.setup) * &p;
             let kp: Vec<bool> = keep.chunks(3).map(|c| c[0]).collect();
             let s = checks::noise_sigma(&r, &kp);
             acc += s.iter().map(|v| v * v).sum::<f64>() / 3.0;
@@ -353,12 +353,12 @@ fn effect_finding(ctx: &Context, base: &Identification, s: &Step, periods: &Peri
     let n_eq = ctx.joint_keep.iter().filter(|k| **k).count();
     let s2 = s.joint_after.fit.rss / (n_eq.saturating_sub(s.joint_after.n_params())).max(1) as f64;
     let cov = cov * s2;
-    let model = ctx.setup.stacked_jacobian(&ctx.ident.poses) * &s.after.p;
+    let model = ctx.ident.jac(ctx.setup) * &s.after.p;
     let signal = term
         .map(|c| c.columns(ctx.ident, &model) * &b)
         .unwrap_or_else(|| DVector::zeros(0));
-    let j = ctx.setup.stacked_jacobian(&ctx.ident.poses);
-    let absorbed = absorbed_fraction(&j, &signal, ctx.keep);
+    let j = ctx.ident.jac(ctx.setup);
+    let absorbed = absorbed_fraction(j, &signal, ctx.keep);
     let shift = shift_sigma(base, &s.before.p, &s.after.p);
     let (params, params_u, what) = match term {
         Some(c) => describe(ctx, c, &b, &cov, s, periods),
@@ -578,11 +578,11 @@ fn unexplained(ctx: &Context, fin: &ModelFit, val: (f64, usize), vres: &[DVector
 
 /// Which candidate effects the 14 parameters take up on this identification trajectory.
 fn absorption_probes(ctx: &Context, start: &ModelFit, periods: &Periods) -> Vec<Absorption> {
-    let j = ctx.setup.stacked_jacobian(&ctx.ident.poses);
+    let j = ctx.ident.jac(ctx.setup);
     let mut jk = j.clone();
     zero_rows(&mut jk, ctx.keep);
     let q = jk.clone().qr().q();
-    let model = &j * &start.p;
+    let model = j * &start.p;
     let mut probes: Vec<(Candidate, String)> = vec![
         (Candidate::LinearDrift, "x, y, z".into()),
         (

@@ -20,7 +20,7 @@ impl Term {
     }
     /// The term's reduced columns for a run, given the current 14 parameters.
     pub fn columns(&self, setup: &CapballSetup, run: &CapballRun, p: &DVector<f64>) -> DMatrix<f64> {
-        let model = setup.stacked_jacobian(&run.poses) * p;
+        let model = run.jac(setup) * p;
         self.cand.columns(run, &model) * &self.basis
     }
 }
@@ -116,7 +116,7 @@ pub(crate) fn screen(
     q: &DMatrix<f64>,
     cand: Candidate,
 ) -> Option<Screened> {
-    let model = setup.stacked_jacobian(&run.poses) * &mf.p;
+    let model = run.jac(setup) * &mf.p;
     let mut x = cand.columns(run, &model);
     zero_rows(&mut x, keep);
     let xt = &x - q * (q.transpose() * &x);
@@ -168,8 +168,7 @@ pub(crate) fn validate(
     let (mut rss, mut neq, mut k_refit) = (0.0, 0, 0);
     let mut out = Vec::new();
     for (run, keep) in runs.iter().zip(keeps) {
-        let j = setup.stacked_jacobian(&run.poses);
-        let model = &j * &mf.p;
+        let model = run.jac(setup) * &mf.p;
         let mut pred = model.clone();
         let mut time_cols: Vec<DMatrix<f64>> = Vec::new();
         for (t, (b, _)) in mf.terms.iter().zip(&mf.coefs) {

@@ -273,7 +273,7 @@ fn run(
         let ch = rng.random_range(0..3);
         e_um[i][ch] += sym(rng, 3.0f64.max(8.0 * truth.noise_um), 10.0f64.max(9.0 * truth.noise_um));
     }
-    CapballRun { poses, time_s, e_um }
+    CapballRun::new(poses, time_s, e_um)
 }
 
 /// One dataset of a class: identification (A 0 → −90°) and validation (A −90 → 0°) runs of

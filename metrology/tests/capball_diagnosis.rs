@@ -24,7 +24,11 @@ fn generator_chain_matches_metrology() {
         let pose = pose_on_ball(a, c);
         // The generator's poses are metrology's poses.
         let m = setup.pose_for(a, c);
-        assert!((pose.x_mm - m.x_mm).abs() < 1e-9 && (pose.y_mm - m.y_mm).abs() < 1e-9 && (pose.z_mm - m.z_mm).abs() < 1e-9);
+        assert!(
+            (pose.x_mm - m.x_mm).abs() < 1e-9
+                && (pose.y_mm - m.y_mm).abs() < 1e-9
+                && (pose.z_mm - m.z_mm).abs() < 1e-9
+        );
         // Forward values agree with metrology's exact chain.
         let p: [f64; 14] = std::array::from_fn(|_| rng.random_range(-80.0..80.0));
         let e = CapballErrors::from_slice(&p);
@@ -40,10 +44,17 @@ fn generator_chain_matches_metrology() {
             let mut lo = [0.0; 14];
             hi[col] = 0.5;
             lo[col] = -0.5;
-            let (eh, el) = (exact_error_um(&hi, &pose, None), exact_error_um(&lo, &pose, None));
+            let (eh, el) = (
+                exact_error_um(&hi, &pose, None),
+                exact_error_um(&lo, &pose, None),
+            );
             for k in 0..3 {
                 let d = eh[k] - el[k];
-                assert!((d - j[(k, col)]).abs() < 1e-6, "column {col} row {k}: {d} vs {}", j[(k, col)]);
+                assert!(
+                    (d - j[(k, col)]).abs() < 1e-6,
+                    "column {col} row {k}: {d} vs {}",
+                    j[(k, col)]
+                );
             }
         }
     }
@@ -82,32 +93,53 @@ fn params_ok(d: &Dataset, r: &CapballDiagnosisReport, effect: &str) -> bool {
     let t = &d.truth;
     match effect {
         "cyclic_drift" => {
-            let Some((period, amps)) = t.cyclic else { return false };
+            let Some((period, amps)) = t.cyclic else {
+                return false;
+            };
             let p = num(&f.params["period_s"]);
             let up = num(&f.params_u["period_s"]);
             let ok_amp = ["x", "y", "z"].iter().enumerate().all(|(k, c)| {
-                within(num(&f.params["amplitude_um"][c]), amps[k].0, num(&f.params_u["amplitude_um"][c]))
+                within(
+                    num(&f.params["amplitude_um"][c]),
+                    amps[k].0,
+                    num(&f.params_u["amplitude_um"][c]),
+                )
             });
             within(p, period, up) && ok_amp
         }
         "linear_drift" => {
-            let Some(rate) = t.linear_um_per_h else { return false };
+            let Some(rate) = t.linear_um_per_h else {
+                return false;
+            };
             ["x", "y", "z"].iter().enumerate().all(|(k, c)| {
-                within(num(&f.params["rate_um_per_h"][c]), rate[k], num(&f.params_u["rate_um_per_h"][c]))
+                within(
+                    num(&f.params["rate_um_per_h"][c]),
+                    rate[k],
+                    num(&f.params_u["rate_um_per_h"][c]),
+                )
             })
         }
         "sensor_gain" => {
             let Some((ch, g)) = t.gain else { return false };
             f.params["channel"] == ["x", "y", "z"][ch]
-                && within(num(&f.params["gain_pct"]), 100.0 * g, num(&f.params_u["gain_pct"]))
+                && within(
+                    num(&f.params["gain_pct"]),
+                    100.0 * g,
+                    num(&f.params_u["gain_pct"]),
+                )
         }
         "axis_error" => {
             let Some(m) = t.axis else { return false };
-            let same = f.params["axis"] == m.axis.to_string() && num(&f.params["harmonic"]) == m.harmonic as f64;
+            let same = f.params["axis"] == m.axis.to_string()
+                && num(&f.params["harmonic"]) == m.harmonic as f64;
             if m.axis == 'C' && m.harmonic == 1 {
                 return same;
             }
-            same && within(num(&f.params["amplitude_um"]), m.amplitude_um, num(&f.params_u["amplitude_um"]))
+            same && within(
+                num(&f.params["amplitude_um"]),
+                m.amplitude_um,
+                num(&f.params_u["amplitude_um"]),
+            )
         }
         "outliers" => num(&f.params["count"]) >= t.outliers as f64,
         _ => false,
@@ -157,10 +189,29 @@ fn sweep(per_class: usize, seed0: u64) -> Vec<(Class, bool, Tally)> {
                 let r = run_diag(&d);
                 let before = (t.detected, t.params_ok, t.extra);
                 score(&d, &r, &mut t);
-                if std::env::var("CAPBALL_VERBOSE").is_ok() && (t.detected, t.params_ok + usize::from(d.truth.effects.is_empty()), t.extra) != (before.0 + 1, before.1 + 1, before.2) {
-                    println!("--- {} seed {} truth {:?}", class.name(), seed0 + 1000 * i as u64 + class as u64, d.truth);
+                if std::env::var("CAPBALL_VERBOSE").is_ok()
+                    && (
+                        t.detected,
+                        t.params_ok + usize::from(d.truth.effects.is_empty()),
+                        t.extra,
+                    ) != (before.0 + 1, before.1 + 1, before.2)
+                {
+                    println!(
+                        "--- {} seed {} truth {:?}",
+                        class.name(),
+                        seed0 + 1000 * i as u64 + class as u64,
+                        d.truth
+                    );
                     for f in &r.findings {
-                        println!("    {} {} sig {:.1} val {:.3}->{:.3} | {}", f.effect, serde_json::to_string(&f.params).unwrap_or_default(), f.significance, f.heldout_rms_before_um, f.heldout_rms_after_um, serde_json::to_string(&f.params_u).unwrap_or_default());
+                        println!(
+                            "    {} {} sig {:.1} val {:.3}->{:.3} | {}",
+                            f.effect,
+                            serde_json::to_string(&f.params).unwrap_or_default(),
+                            f.significance,
+                            f.heldout_rms_before_um,
+                            f.heldout_rms_after_um,
+                            serde_json::to_string(&f.params_u).unwrap_or_default()
+                        );
                     }
                 }
             }
@@ -171,7 +222,9 @@ fn sweep(per_class: usize, seed0: u64) -> Vec<(Class, bool, Tally)> {
 }
 
 fn print_table(rows: &[(Class, bool, Tally)]) {
-    println!("| class | drift record | datasets | named | params within 3u | other effects named |");
+    println!(
+        "| class | drift record | datasets | named | params within 3u | other effects named |"
+    );
     println!("|---|---|---|---|---|---|");
     for (c, rec, t) in rows {
         let pct = |k: usize| 100.0 * k as f64 / t.n.max(1) as f64;
@@ -209,9 +262,15 @@ fn paper_cooling_cycle_is_named_with_its_gain() {
     let _ = p;
     let d = regenerate_with(d, 42);
     let r = run_diag(&d);
-    let f = r.findings.iter().find(|f| f.effect == "cyclic_drift").expect("cyclic drift named");
+    let f = r
+        .findings
+        .iter()
+        .find(|f| f.effect == "cyclic_drift")
+        .expect("cyclic drift named");
     assert!(f.heldout_rms_after_um < f.heldout_rms_before_um);
-    assert!((num(&f.params["period_s"]) - 1500.0).abs() < 3.0 * num(&f.params_u["period_s"]).max(1.0));
+    assert!(
+        (num(&f.params["period_s"]) - 1500.0).abs() < 3.0 * num(&f.params_u["period_s"]).max(1.0)
+    );
     assert!(params_ok(&d, &r, "cyclic_drift"), "{:?}", f);
 }
 
@@ -223,13 +282,19 @@ fn regenerate_with(d: Dataset, seed: u64) -> Dataset {
     let mut out = d;
     for run in [&mut out.ident, &mut out.validation] {
         for i in 0..run.poses.len() {
-            run.e_um[i] = out.truth.reading(&run.poses[i], run.time_s[i]).map(|v| v + noise.sample(&mut rng));
+            run.e_um[i] = out
+                .truth
+                .reading(&run.poses[i], run.time_s[i])
+                .map(|v| v + noise.sample(&mut rng));
         }
     }
     if let Some(rec) = out.record.as_mut() {
         let p = pose_on_ball(0.0, 0.0);
         for i in 0..rec.time_s.len() {
-            rec.e_um[i] = out.truth.reading(&p, rec.time_s[i]).map(|v| v + noise.sample(&mut rng));
+            rec.e_um[i] = out
+                .truth
+                .reading(&p, rec.time_s[i])
+                .map(|v| v + noise.sample(&mut rng));
         }
     }
     out
@@ -257,7 +322,12 @@ fn c_axial_once_per_rev_is_absorbed() {
         .find(|a| a.effect == "axis_error" && a.detail == "C harmonic 1")
         .expect("C harmonic 1 listed as absorbed");
     assert!(a.invisible >= 2, "{a:?}");
-    assert!(a.taken_by.iter().any(|p| p.starts_with("EA0C") || p.starts_with("EB0C")), "{a:?}");
+    assert!(
+        a.taken_by
+            .iter()
+            .any(|p| p.starts_with("EA0C") || p.starts_with("EB0C")),
+        "{a:?}"
+    );
 }
 
 #[test]
@@ -272,9 +342,20 @@ fn small_sample_per_class() {
 #[test]
 #[ignore = "sweep: ≥ 100 datasets per class, run with --release -- --ignored --nocapture"]
 fn sweep_per_class() {
-    let n = std::env::var("CAPBALL_SWEEP_N").ok().and_then(|s| s.parse().ok()).unwrap_or(100);
+    let n = std::env::var("CAPBALL_SWEEP_N")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(100);
     let rows = sweep(n, 1);
     print_table(&rows);
-    let none = rows.iter().find(|r| r.0 == Class::None).map(|r| &r.2).expect("none row");
-    assert!(none.extra as f64 <= 0.02 * none.n as f64, "false alarms {}", none.extra);
+    let none = rows
+        .iter()
+        .find(|r| r.0 == Class::None)
+        .map(|r| &r.2)
+        .expect("none row");
+    assert!(
+        none.extra as f64 <= 0.02 * none.n as f64,
+        "false alarms {}",
+        none.extra
+    );
 }

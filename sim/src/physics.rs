@@ -122,7 +122,11 @@ impl CapballModel {
         }
         let p = metrology_pose(pose);
         for a in &self.axis_errors {
-            let axis = if a.axis == "A" { RotaryAxis::A } else { RotaryAxis::C };
+            let axis = if a.axis == "A" {
+                RotaryAxis::A
+            } else {
+                RotaryAxis::C
+            };
             let d = axis_harmonic_um(axis, a.harmonic, a.cos_um, a.sin_um, &p);
             for k in 0..3 {
                 out[k] += d[k];
@@ -672,7 +676,10 @@ mod tests {
             ..zero_model()
         };
         let e = m.error_um(&p, 375.0);
-        assert!((e[0] - 1.0).abs() < 1e-9 && (e[2] - 3.0).abs() < 1e-9, "{e:?}");
+        assert!(
+            (e[0] - 1.0).abs() < 1e-9 && (e[2] - 3.0).abs() < 1e-9,
+            "{e:?}"
+        );
         assert!(m.error_um(&p, 1500.0)[2].abs() < 1e-9);
         // Gain: +2 % on x scales the tool offset's x.
         let m = CapballModel {

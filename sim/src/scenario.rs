@@ -496,8 +496,9 @@ impl CapballModel {
     /// section takes them; times are those of the diagnosed dataset's clock.
     pub fn from_diagnosis(d: &metrology::capball_diagnosis::CapballDiagnosis) -> Self {
         use serde_json::Value;
-        let mut m =
-            Self::from_errors(&metrology::capball::CapballErrors::from_slice(&d.params_extended));
+        let mut m = Self::from_errors(&metrology::capball::CapballErrors::from_slice(
+            &d.params_extended,
+        ));
         let xyz = |v: &Value| ["x", "y", "z"].map(|k| v[k].as_f64().unwrap_or(0.0));
         for f in &d.report.findings {
             let p = |k: &str| f.params.get(k).cloned().unwrap_or(Value::Null);
@@ -791,11 +792,21 @@ impl Scenario {
             if !(c.period_s.is_finite() && c.period_s > 0.0) {
                 return bad("capball.truth.cyclic_drift.period_s must be > 0 (seconds)".into());
             }
-            if c.amplitude_um.iter().chain(&c.phase_rad).any(|v| !v.is_finite()) {
-                return bad("capball.truth.cyclic_drift: amplitude_um and phase_rad must be finite numbers".into());
+            if c.amplitude_um
+                .iter()
+                .chain(&c.phase_rad)
+                .any(|v| !v.is_finite())
+            {
+                return bad(
+                    "capball.truth.cyclic_drift: amplitude_um and phase_rad must be finite numbers"
+                        .into(),
+                );
             }
         }
-        if t.gain_pct.iter().any(|g| !(g.is_finite() && g.abs() < 50.0)) {
+        if t.gain_pct
+            .iter()
+            .any(|g| !(g.is_finite() && g.abs() < 50.0))
+        {
             return bad("capball.truth.gain_pct must be finite percentages below 50".into());
         }
         if !(t.pose_noise_um.is_finite() && t.pose_noise_um >= 0.0) {
@@ -808,7 +819,9 @@ impl Scenario {
                 ));
             }
             if h.cos_um.iter().chain(&h.sin_um).any(|v| !v.is_finite()) {
-                return bad(format!("capball.truth.axis_errors[{i}]: cos_um and sin_um must be finite"));
+                return bad(format!(
+                    "capball.truth.axis_errors[{i}]: cos_um and sin_um must be finite"
+                ));
             }
         }
         Ok(())

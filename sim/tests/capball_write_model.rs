@@ -61,9 +61,20 @@ fn extended_model_reproduces_the_residual_pattern() {
     let id = simulate(&truth, &spec, 0.0, 1);
     let val = simulate(&truth, &spec.reversed_a(), 360.0, 2);
     let setup = CapballSetup::paper_default();
-    let d = diagnose(&setup, &id, std::slice::from_ref(&val), None, &Options::default())
-        .expect("diagnosis");
-    let found: Vec<&str> = d.report.findings.iter().map(|f| f.effect.as_str()).collect();
+    let d = diagnose(
+        &setup,
+        &id,
+        std::slice::from_ref(&val),
+        None,
+        &Options::default(),
+    )
+    .expect("diagnosis");
+    let found: Vec<&str> = d
+        .report
+        .findings
+        .iter()
+        .map(|f| f.effect.as_str())
+        .collect();
     assert_eq!(found, ["cyclic_drift"], "{:?}", d.report.findings);
     let model = CapballModel::from_diagnosis(&d);
     let c = model.cyclic_drift.as_ref().expect("cyclic drift written");
@@ -81,8 +92,14 @@ fn extended_model_reproduces_the_residual_pattern() {
     println!("measured: identification {mi:.3?} validation {mv:.3?} µm");
     println!("extended model simulated: identification {si:.3?} validation {sv:.3?} µm");
     for k in 0..3 {
-        assert!((si[k] / mi[k] - 1.0).abs() < 0.25, "identification {k}: {si:?} vs {mi:?}");
-        assert!((sv[k] / mv[k] - 1.0).abs() < 0.25, "validation {k}: {sv:?} vs {mv:?}");
+        assert!(
+            (si[k] / mi[k] - 1.0).abs() < 0.25,
+            "identification {k}: {si:?} vs {mi:?}"
+        );
+        assert!(
+            (sv[k] / mv[k] - 1.0).abs() < 0.25,
+            "validation {k}: {sv:?} vs {mv:?}"
+        );
     }
     // The baseline model (14 parameters + white noise) does not: its validation residual is
     // the identification's.

@@ -31,9 +31,8 @@ pub fn is_capball_csv(path: &Path) -> bool {
 pub fn load(path: &Path) -> anyhow::Result<(Vec<CapballRecord>, Machine, Vec<String>)> {
     let mut notes = Vec::new();
     if metrolog_analysis::is_mcap(path) {
-        let cb = metrolog_analysis::capball_from_log(path).with_context(|| {
-            format!("reading the CapBall poses of {}", path.display())
-        })?;
+        let cb = metrolog_analysis::capball_from_log(path)
+            .with_context(|| format!("reading the CapBall poses of {}", path.display()))?;
         for (pose, status) in &cb.skipped {
             notes.push(format!("CapBall pose {pose} skipped ({status})"));
         }
@@ -66,8 +65,8 @@ pub fn diagnose_path(path: &Path, drift: Option<&Path>) -> anyhow::Result<Capbal
         .with_context(|| format!("{}: run 1", path.display()))?;
     let record: Option<DriftRecord> = match drift {
         Some(p) => {
-            let t = std::fs::read_to_string(p)
-                .with_context(|| format!("reading {}", p.display()))?;
+            let t =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
             Some(parse_drift_record(&t).with_context(|| format!("{}", p.display()))?)
         }
         None => None,
@@ -100,13 +99,22 @@ pub fn scenario_section(d: &CapballDiagnosis, source: &Path) -> anyhow::Result<S
         },
     })
     .context("serialising the CapBall model")?;
-    let found: Vec<&str> = d.report.findings.iter().map(|f| f.effect.as_str()).collect();
+    let found: Vec<&str> = d
+        .report
+        .findings
+        .iter()
+        .map(|f| f.effect.as_str())
+        .collect();
     Ok(format!(
         "# CapBall model extended by `metrolog diagnose {}`: the 14 parameters identified with\n\
          # the effects modelled, plus the effects found ({}). Times are the dataset's clock.\n\
          # Replace the scenario's [capball.truth] table with this one.\n{toml}",
         source.display(),
-        if found.is_empty() { "none".to_string() } else { found.join(", ") }
+        if found.is_empty() {
+            "none".to_string()
+        } else {
+            found.join(", ")
+        }
     ))
 }
 
@@ -133,7 +141,13 @@ pub fn render_text(d: &CapballDiagnosis) -> String {
                 None => format!("{n} = {}", compact(v)),
             })
             .collect();
-        let _ = writeln!(s, "\n{}. {} (significance {:.1})", k + 1, f.effect, f.significance);
+        let _ = writeln!(
+            s,
+            "\n{}. {} (significance {:.1})",
+            k + 1,
+            f.effect,
+            f.significance
+        );
         let _ = writeln!(s, "   {}", params.join(", "));
         let _ = writeln!(
             s,
@@ -146,16 +160,30 @@ pub fn render_text(d: &CapballDiagnosis) -> String {
         .parameters
         .iter()
         .filter(|p| p.shift_sigma.abs() >= 2.0)
-        .map(|p| format!("{} {:.2} → {:.2} ({:+.1} σ)", p.name, p.baseline, p.extended, p.shift_sigma))
+        .map(|p| {
+            format!(
+                "{} {:.2} → {:.2} ({:+.1} σ)",
+                p.name, p.baseline, p.extended, p.shift_sigma
+            )
+        })
         .collect();
     if !moved.is_empty() {
-        let _ = writeln!(s, "\nIdentified parameters once the effects are modelled: {}", moved.join("; "));
+        let _ = writeln!(
+            s,
+            "\nIdentified parameters once the effects are modelled: {}",
+            moved.join("; ")
+        );
     }
     for res in &r.residuals {
         let _ = writeln!(
             s,
             "Residual RMS ({}) x {:.3} y {:.3} z {:.3} µm; white noise x {:.3} y {:.3} z {:.3} µm",
-            res.run, res.rms_um[0], res.rms_um[1], res.rms_um[2], res.noise_um[0], res.noise_um[1],
+            res.run,
+            res.rms_um[0],
+            res.rms_um[1],
+            res.rms_um[2],
+            res.noise_um[0],
+            res.noise_um[1],
             res.noise_um[2]
         );
     }
@@ -173,7 +201,10 @@ fn compact(v: &serde_json::Value) -> String {
     match v {
         serde_json::Value::Number(n) => n.as_f64().map(|x| format!("{x:.4}")).unwrap_or_default(),
         serde_json::Value::Object(m) => {
-            let parts: Vec<String> = m.iter().map(|(k, v)| format!("{k} {}", compact(v))).collect();
+            let parts: Vec<String> = m
+                .iter()
+                .map(|(k, v)| format!("{k} {}", compact(v)))
+                .collect();
             format!("{{{}}}", parts.join(", "))
         }
         serde_json::Value::String(s) => s.clone(),

@@ -76,7 +76,9 @@ pub struct DriftRecord {
 
 /// The runs of a parsed dataset: run 1 identifies, the others validate. Without a `time_s`
 /// column the pose number stands in for the time (the caller notes it).
-pub fn runs_from_records(records: &[CapballRecord]) -> Result<(CapballRun, Vec<CapballRun>), CapballError> {
+pub fn runs_from_records(
+    records: &[CapballRecord],
+) -> Result<(CapballRun, Vec<CapballRun>), CapballError> {
     let mut ids: Vec<u32> = records.iter().map(|r| r.run).collect();
     ids.sort_unstable();
     ids.dedup();
@@ -191,10 +193,11 @@ pub fn diagnose(
     let base = setup.identify(&ident.poses, &ident.e_um)?;
     let p0 = DVector::from_column_slice(&base.params);
     let all_rows = vec![true; 3 * ident.len()];
-    let baseline = fit_terms(setup, ident, &all_rows, Vec::new(), &p0).ok_or(CapballError::Singular {
-        condition: base.condition_number,
-        worst: "?".into(),
-    })?;
+    let baseline =
+        fit_terms(setup, ident, &all_rows, Vec::new(), &p0).ok_or(CapballError::Singular {
+            condition: base.condition_number,
+            worst: "?".into(),
+        })?;
     // Outliers: judged on the baseline residuals of every run.
     let out_id = checks::outlier_poses(&baseline.fit.resid, ident.len(), opt.outlier_alpha);
     let keep = row_mask(&out_id);
@@ -234,14 +237,12 @@ pub fn diagnose(
         condition: base.condition_number,
         worst: "?".into(),
     })?;
-    let start_joint = fit_terms(setup, &joint, &joint_keep, Vec::new(), &p0).ok_or(
-        CapballError::Singular {
+    let start_joint =
+        fit_terms(setup, &joint, &joint_keep, Vec::new(), &p0).ok_or(CapballError::Singular {
             condition: base.condition_number,
             worst: "?".into(),
-        },
-    )?;
-    let (mut fin, mut steps) =
-        forward_select(&ctx, start.clone(), start_joint.clone(), &periods)?;
+        })?;
+    let (mut fin, mut steps) = forward_select(&ctx, start.clone(), start_joint.clone(), &periods)?;
     // A cyclic drift whose period the runs cannot bound also fits a steady drift plus
     // whatever else is unmodelled early in the selection: when a steady drift does at least as
     // well (BIC on all runs) with the other effects found, select again without the cyclic one.
@@ -252,7 +253,9 @@ pub fn diagnose(
         };
         (fin, steps) = forward_select(&ctx, start.clone(), start_joint, &no_cyclic)?;
     }
-    Ok(report::assemble(&ctx, &base, &baseline, &start, &fin, &steps, &periods))
+    Ok(report::assemble(
+        &ctx, &base, &baseline, &start, &fin, &steps, &periods,
+    ))
 }
 
 /// The periods tried for a cyclic drift: from a drift record when one is given (its best
@@ -273,7 +276,11 @@ fn drift_periods(joint: &CapballRun, drift: Option<&DriftRecord>) -> Periods {
         };
     }
     let t0 = joint.time_s.iter().copied().fold(f64::INFINITY, f64::min);
-    let t1 = joint.time_s.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let t1 = joint
+        .time_s
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
     Periods {
         grid: log_grid(60.0, (4.0 * (t1 - t0)).max(120.0), 48),
         from_record: None,
@@ -294,7 +301,9 @@ fn steadier_drift_fits(ctx: &report::Context, steps: &[Step]) -> bool {
     };
     let terms = &last.joint_after.terms;
     let has = |f: fn(&Candidate) -> bool| terms.iter().any(|t| f(&t.cand));
-    if !has(|c| matches!(c, Candidate::CyclicDrift { .. })) || has(|c| matches!(c, Candidate::LinearDrift)) {
+    if !has(|c| matches!(c, Candidate::CyclicDrift { .. }))
+        || has(|c| matches!(c, Candidate::LinearDrift))
+    {
         return false;
     }
     let others: Vec<select::Term> = terms
@@ -302,11 +311,24 @@ fn steadier_drift_fits(ctx: &report::Context, steps: &[Step]) -> bool {
         .filter(|t| !matches!(t.cand, Candidate::CyclicDrift { .. }))
         .cloned()
         .collect();
-    let Some(base) = fit_terms(ctx.setup, ctx.joint, ctx.joint_keep, others, &last.joint_after.p) else {
+    let Some(base) = fit_terms(
+        ctx.setup,
+        ctx.joint,
+        ctx.joint_keep,
+        others,
+        &last.joint_after.p,
+    ) else {
         return false;
     };
     let q = model_basis(ctx.setup, ctx.joint, &base, ctx.joint_keep);
-    let Some(lin) = screen(ctx.setup, ctx.joint, ctx.joint_keep, &base, &q, Candidate::LinearDrift) else {
+    let Some(lin) = screen(
+        ctx.setup,
+        ctx.joint,
+        ctx.joint_keep,
+        &base,
+        &q,
+        Candidate::LinearDrift,
+    ) else {
         return false;
     };
     let mut t = base.terms.clone();
@@ -366,8 +388,8 @@ fn shortlist(ctx: &report::Context, cur: &ModelFit, periods: &Periods) -> Vec<se
             .filter_map(|c| screen(setup, ident, keep, cur, &q, c))
             .map(|s| {
                 let k = s.term.rank() as f64 + grid_penalty(&s.term.cand);
-                let bic = n_eq * (cur.fit.rss / (cur.fit.rss - s.drss).max(1e-300)).ln()
-                    - k * n_eq.ln();
+                let bic =
+                    n_eq * (cur.fit.rss / (cur.fit.rss - s.drss).max(1e-300)).ln() - k * n_eq.ln();
                 (bic, s)
             })
             .filter(|(bic, _)| *bic >= opt.min_bic_gain)
@@ -466,7 +488,12 @@ fn forward_select(
 
 /// Refine a cyclic drift's period (golden-section search between the grid neighbours, on the
 /// screened RSS decrease); other candidates are returned as they are.
-fn refine(ctx: &report::Context, cur: &ModelFit, q: &nalgebra::DMatrix<f64>, term: select::Term) -> select::Term {
+fn refine(
+    ctx: &report::Context,
+    cur: &ModelFit,
+    q: &nalgebra::DMatrix<f64>,
+    term: select::Term,
+) -> select::Term {
     let Candidate::CyclicDrift { period_s } = term.cand else {
         return term;
     };
@@ -474,9 +501,16 @@ fn refine(ctx: &report::Context, cur: &ModelFit, q: &nalgebra::DMatrix<f64>, ter
         return term;
     }
     let f = |p: f64| {
-        screen(ctx.setup, ctx.joint, ctx.joint_keep, cur, q, Candidate::CyclicDrift { period_s: p })
-            .map(|s| s.drss)
-            .unwrap_or(f64::NEG_INFINITY)
+        screen(
+            ctx.setup,
+            ctx.joint,
+            ctx.joint_keep,
+            cur,
+            q,
+            Candidate::CyclicDrift { period_s: p },
+        )
+        .map(|s| s.drss)
+        .unwrap_or(f64::NEG_INFINITY)
     };
     let ratio = 1.1f64;
     let (mut a, mut b) = ((period_s / ratio).ln(), (period_s * ratio).ln());
@@ -499,9 +533,16 @@ fn refine(ctx: &report::Context, cur: &ModelFit, q: &nalgebra::DMatrix<f64>, ter
         }
     }
     let p = (0.5 * (a + b)).exp();
-    screen(ctx.setup, ctx.joint, ctx.joint_keep, cur, q, Candidate::CyclicDrift { period_s: p })
-        .map(|s| s.term)
-        .unwrap_or(term)
+    screen(
+        ctx.setup,
+        ctx.joint,
+        ctx.joint_keep,
+        cur,
+        q,
+        Candidate::CyclicDrift { period_s: p },
+    )
+    .map(|s| s.term)
+    .unwrap_or(term)
 }
 
 fn ctx_has_record(ctx: &report::Context) -> bool {

@@ -46,7 +46,10 @@ impl CapballRun {
     }
     /// Measured values stacked as the identification right-hand side.
     pub(crate) fn rhs(&self) -> DVector<f64> {
-        DVector::from_iterator(3 * self.len(), self.e_um.iter().flat_map(|e| e.iter().copied()))
+        DVector::from_iterator(
+            3 * self.len(),
+            self.e_um.iter().flat_map(|e| e.iter().copied()),
+        )
     }
 }
 
@@ -100,10 +103,7 @@ impl Candidate {
     /// and are fitted again on the validation run; the others describe the machine or the
     /// sensor and carry over unchanged.
     pub fn is_time_effect(&self) -> bool {
-        matches!(
-            self,
-            Candidate::LinearDrift | Candidate::CyclicDrift { .. }
-        )
+        matches!(self, Candidate::LinearDrift | Candidate::CyclicDrift { .. })
     }
 
     /// The columns of this effect for a run; `model_um` is the current model's value per row
@@ -150,7 +150,13 @@ impl Candidate {
 /// The change of the volumetric error (µm, machine frame) of an axis harmonic given by its
 /// cosine and sine coefficients in the axis's housing frame: the forward form of
 /// [`Candidate::AxisError`] (what a simulator adds, `docs/datasets.md`, `axis_error`).
-pub fn axis_harmonic_um(axis: RotaryAxis, harmonic: u32, cos_um: [f64; 3], sin_um: [f64; 3], pose: &Pose) -> [f64; 3] {
+pub fn axis_harmonic_um(
+    axis: RotaryAxis,
+    harmonic: u32,
+    cos_um: [f64; 3],
+    sin_um: [f64; 3],
+    pose: &Pose,
+) -> [f64; 3] {
     let (theta, frame) = housing(axis, pose);
     let arg = harmonic as f64 * theta;
     let v = frame * (Vector3::from(cos_um) * arg.cos() + Vector3::from(sin_um) * arg.sin());
@@ -191,9 +197,7 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, y: &DVector<f64>, keep: &[bool]) -> Option
         }
     }
     // Normalise the columns so that the rank test does not depend on their units.
-    let scale: Vec<f64> = (0..p)
-        .map(|c| aw.column(c).norm().max(1e-300))
-        .collect();
+    let scale: Vec<f64> = (0..p).map(|c| aw.column(c).norm().max(1e-300)).collect();
     for (c, s) in scale.iter().enumerate() {
         aw.column_mut(c).unscale_mut(*s);
     }
@@ -236,7 +240,11 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, y: &DVector<f64>, keep: &[bool]) -> Option
 }
 
 /// `[J | X₁ | X₂ …]` for a run.
-pub(crate) fn design(setup: &CapballSetup, run: &CapballRun, extra: &[DMatrix<f64>]) -> DMatrix<f64> {
+pub(crate) fn design(
+    setup: &CapballSetup,
+    run: &CapballRun,
+    extra: &[DMatrix<f64>],
+) -> DMatrix<f64> {
     let j = run.jac(setup);
     let k: usize = extra.iter().map(|x| x.ncols()).sum();
     let mut a = DMatrix::zeros(j.nrows(), N_PARAMS + k);

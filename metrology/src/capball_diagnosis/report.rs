@@ -141,10 +141,7 @@ impl Context<'_> {
 }
 
 fn to_triplets(r: &DVector<f64>) -> Vec<[f64; 3]> {
-    r.as_slice()
-        .chunks(3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect()
+    r.as_slice().chunks(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
 fn rms(rss: f64, n: usize) -> f64 {
@@ -203,7 +200,11 @@ pub(crate) fn record_period(rec: &DriftRecord) -> Option<(f64, f64)> {
     let (r0, rp, rm) = (rss_at(Some(p)), rss_at(Some(p + h)), rss_at(Some(p - h)));
     let curv = (rp + rm - 2.0 * r0) / (h * h);
     let s2 = r0 / (ne - 12.0);
-    let u = if curv > 0.0 { (2.0 * s2 / curv).sqrt() } else { f64::NAN };
+    let u = if curv > 0.0 {
+        (2.0 * s2 / curv).sqrt()
+    } else {
+        f64::NAN
+    };
     Some((p, u))
 }
 
@@ -217,7 +218,11 @@ pub(crate) fn assemble(
     periods: &Periods,
 ) -> CapballDiagnosis {
     let n_all = 3 * ctx.ident.len();
-    let val_all: Vec<Vec<bool>> = ctx.validation.iter().map(|v| vec![true; 3 * v.len()]).collect();
+    let val_all: Vec<Vec<bool>> = ctx
+        .validation
+        .iter()
+        .map(|v| vec![true; 3 * v.len()])
+        .collect();
     let (vrss0, vn0, _, _) = validate(ctx.setup, ctx.validation, &val_all, baseline);
     let mut findings = Vec::new();
     if let Some(f) = outlier_finding(ctx, baseline, start, (vrss0, vn0)) {
@@ -334,7 +339,11 @@ fn outlier_finding(
     })
 }
 
-fn shift_sigma(base: &Identification, before: &DVector<f64>, after: &DVector<f64>) -> BTreeMap<String, f64> {
+fn shift_sigma(
+    base: &Identification,
+    before: &DVector<f64>,
+    after: &DVector<f64>,
+) -> BTreeMap<String, f64> {
     (0..N_PARAMS)
         .map(|i| {
             (
@@ -345,7 +354,12 @@ fn shift_sigma(base: &Identification, before: &DVector<f64>, after: &DVector<f64
         .collect()
 }
 
-fn effect_finding(ctx: &Context, base: &Identification, s: &Step, periods: &Periods) -> CapballFinding {
+fn effect_finding(
+    ctx: &Context,
+    base: &Identification,
+    s: &Step,
+    periods: &Periods,
+) -> CapballFinding {
     let term = s.after.terms.last().map(|t| t.cand);
     // The effect's parameters come from all runs (one clock), the 14 parameters' shift from
     // the identification run.
@@ -364,12 +378,19 @@ fn effect_finding(ctx: &Context, base: &Identification, s: &Step, periods: &Peri
         Some(c) => describe(ctx, c, &b, &cov, s, periods),
         None => (BTreeMap::new(), BTreeMap::new(), String::new()),
     };
-    let mut named: Vec<(&String, &f64)> = shift.iter().filter(|(_, v)| v.abs() >= SHIFT_NAMED_SIGMA).collect();
+    let mut named: Vec<(&String, &f64)> = shift
+        .iter()
+        .filter(|(_, v)| v.abs() >= SHIFT_NAMED_SIGMA)
+        .collect();
     named.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
     let shift_text = if named.is_empty() {
         "no identified parameter moves by 2 σ or more once it is modelled".to_string()
     } else {
-        let list: Vec<String> = named.iter().take(4).map(|(n, v)| format!("{n} {v:+.1} σ")).collect();
+        let list: Vec<String> = named
+            .iter()
+            .take(4)
+            .map(|(n, v)| format!("{n} {v:+.1} σ"))
+            .collect();
         format!("modelling it moves {}", list.join(", "))
     };
     let rivals = if s.rivals.is_empty() {
@@ -403,10 +424,15 @@ fn short_name(c: &Candidate) -> String {
     match c {
         Candidate::SensorGain { channel } => format!("a gain error of channel {}", CH[*channel]),
         Candidate::AxisError { axis, harmonic } => {
-            format!("an error motion of {} at {harmonic} per revolution", axis.name())
+            format!(
+                "an error motion of {} at {harmonic} per revolution",
+                axis.name()
+            )
         }
         Candidate::LinearDrift => "a linear drift".into(),
-        Candidate::CyclicDrift { period_s } => format!("a cyclic drift ({:.1} min)", period_s / 60.0),
+        Candidate::CyclicDrift { period_s } => {
+            format!("a cyclic drift ({:.1} min)", period_s / 60.0)
+        }
     }
 }
 
@@ -417,7 +443,8 @@ fn amp(b: &DVector<f64>, cov: &DMatrix<f64>, i: usize) -> (f64, f64) {
     if a <= 0.0 {
         return (0.0, cov[(i, i)].max(0.0).sqrt());
     }
-    let var = (s * s * cov[(i, i)] + c * c * cov[(i + 1, i + 1)] + 2.0 * s * c * cov[(i, i + 1)]) / (a * a);
+    let var = (s * s * cov[(i, i)] + c * c * cov[(i + 1, i + 1)] + 2.0 * s * c * cov[(i, i + 1)])
+        / (a * a);
     (a, var.max(0.0).sqrt())
 }
 
@@ -440,7 +467,10 @@ fn describe(
     let text = match c {
         Candidate::LinearDrift => {
             p.insert("rate_um_per_h".into(), xyz([b[0], b[1], b[2]]));
-            u.insert("rate_um_per_h".into(), xyz(std::array::from_fn(|k| cov[(k, k)].max(0.0).sqrt())));
+            u.insert(
+                "rate_um_per_h".into(),
+                xyz(std::array::from_fn(|k| cov[(k, k)].max(0.0).sqrt())),
+            );
             format!(
                 "steady drift of the measuring loop, {:+.2}/{:+.2}/{:+.2} µm/h in x/y/z, the same at every pose: the spindle or the structure warming; a drift record at one fixed pose confirms it",
                 b[0], b[1], b[2]
@@ -481,7 +511,10 @@ fn describe(
         Candidate::SensorGain { channel } => {
             p.insert("channel".into(), json!(CH[channel]));
             p.insert("gain_pct".into(), json!(100.0 * b[0]));
-            u.insert("gain_pct".into(), json!(100.0 * cov[(0, 0)].max(0.0).sqrt()));
+            u.insert(
+                "gain_pct".into(),
+                json!(100.0 * cov[(0, 0)].max(0.0).sqrt()),
+            );
             format!(
                 "the {} capacitive channel reads {:+.2} % off: its gain in the sensor-frame transform is wrong; a new 125-point cube calibration (paper 001, eq. 8) confirms it",
                 CH[channel],
@@ -492,9 +525,17 @@ fn describe(
             let ax = if axis == RotaryAxis::C { 2 } else { 0 };
             let comp: [f64; 3] = std::array::from_fn(|d| amp(b, cov, 2 * d).0);
             let axial = comp[ax];
-            let radial = (0..3).filter(|&d| d != ax).map(|d| comp[d] * comp[d]).sum::<f64>().sqrt();
+            let radial = (0..3)
+                .filter(|&d| d != ax)
+                .map(|d| comp[d] * comp[d])
+                .sum::<f64>()
+                .sqrt();
             let uu = (0..6).map(|i| cov[(i, i)]).sum::<f64>().max(0.0).sqrt() / 6f64.sqrt();
-            let (dir, a) = if axial > radial { ("axial", axial) } else { ("radial", radial) };
+            let (dir, a) = if axial > radial {
+                ("axial", axial)
+            } else {
+                ("radial", radial)
+            };
             p.insert("axis".into(), json!(axis.name()));
             p.insert("harmonic".into(), json!(harmonic));
             p.insert("direction".into(), json!(dir));
@@ -524,20 +565,36 @@ fn span_s(run: &CapballRun) -> f64 {
 fn period_u(ctx: &Context, s: &Step, period: f64) -> f64 {
     let q = model_basis(ctx.setup, ctx.joint, &s.joint_before, ctx.joint_keep);
     let drss = |p: f64| {
-        screen(ctx.setup, ctx.joint, ctx.joint_keep, &s.joint_before, &q, Candidate::CyclicDrift { period_s: p })
-            .map(|x| x.drss)
-            .unwrap_or(0.0)
+        screen(
+            ctx.setup,
+            ctx.joint,
+            ctx.joint_keep,
+            &s.joint_before,
+            &q,
+            Candidate::CyclicDrift { period_s: p },
+        )
+        .map(|x| x.drss)
+        .unwrap_or(0.0)
     };
     let h = period * 2e-3;
     let curv = -(drss(period + h) + drss(period - h) - 2.0 * drss(period)) / (h * h);
     let n_eq = ctx.joint_keep.iter().filter(|k| **k).count();
     let s2 = s.joint_after.fit.rss / (n_eq.saturating_sub(s.joint_after.n_params())).max(1) as f64;
-    if curv > 0.0 { (2.0 * s2 / curv).sqrt() } else { f64::NAN }
+    if curv > 0.0 {
+        (2.0 * s2 / curv).sqrt()
+    } else {
+        f64::NAN
+    }
 }
 
 /// `unexplained`: the final model's residual exceeds the white-noise level by more than five
 /// standard deviations of that comparison, on the identification or a validation run.
-fn unexplained(ctx: &Context, fin: &ModelFit, val: (f64, usize), vres: &[DVector<f64>]) -> Option<CapballFinding> {
+fn unexplained(
+    ctx: &Context,
+    fin: &ModelFit,
+    val: (f64, usize),
+    vres: &[DVector<f64>],
+) -> Option<CapballFinding> {
     let kp: Vec<bool> = ctx.keep.chunks(3).map(|c| c[0]).collect();
     let sig = checks::noise_sigma(&fin.fit.resid, &kp);
     let s2 = sig.iter().map(|v| v * v).sum::<f64>() / 3.0;
@@ -548,7 +605,11 @@ fn unexplained(ctx: &Context, fin: &ModelFit, val: (f64, usize), vres: &[DVector
     let mut s2v = 0.0;
     for (r, k) in vres.iter().zip(ctx.val_keep) {
         let kp: Vec<bool> = k.chunks(3).map(|c| c[0]).collect();
-        s2v += checks::noise_sigma(r, &kp).iter().map(|v| v * v).sum::<f64>() / 3.0;
+        s2v += checks::noise_sigma(r, &kp)
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            / 3.0;
     }
     let s2v = s2v / vres.len().max(1) as f64;
     let var_v = val.0 / val.1.max(1) as f64;
@@ -586,12 +647,17 @@ fn absorption_probes(ctx: &Context, start: &ModelFit, periods: &Periods) -> Vec<
     let mut probes: Vec<(Candidate, String)> = vec![
         (Candidate::LinearDrift, "x, y, z".into()),
         (
-            Candidate::CyclicDrift { period_s: periods.grid.last().copied().unwrap_or(600.0) },
+            Candidate::CyclicDrift {
+                period_s: periods.grid.last().copied().unwrap_or(600.0),
+            },
             "longest period tried".into(),
         ),
     ];
     for ch in 0..3 {
-        probes.push((Candidate::SensorGain { channel: ch }, format!("channel {}", CH[ch])));
+        probes.push((
+            Candidate::SensorGain { channel: ch },
+            format!("channel {}", CH[ch]),
+        ));
     }
     for axis in [RotaryAxis::A, RotaryAxis::C] {
         for harmonic in 1..=ctx.opt.max_harmonic {
@@ -612,7 +678,11 @@ fn absorption_probes(ctx: &Context, start: &ModelFit, periods: &Periods) -> Vec<
         if invisible == 0 && energy < 0.5 {
             continue;
         }
-        let taken_by = if invisible > 0 { taken_by(&jk, &x, &basis, ctx.keep) } else { Vec::new() };
+        let taken_by = if invisible > 0 {
+            taken_by(&jk, &x, &basis, ctx.keep)
+        } else {
+            Vec::new()
+        };
         out.push(Absorption {
             effect: c.effect().into(),
             detail,
@@ -626,10 +696,19 @@ fn absorption_probes(ctx: &Context, start: &ModelFit, periods: &Periods) -> Vec<
 }
 
 /// Parameters that reproduce the combinations of `x` outside `basis` (the invisible ones).
-fn taken_by(j: &DMatrix<f64>, x: &DMatrix<f64>, basis: &DMatrix<f64>, keep: &[bool]) -> Vec<String> {
+fn taken_by(
+    j: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+    basis: &DMatrix<f64>,
+    keep: &[bool],
+) -> Vec<String> {
     let k = x.ncols();
     // Complement of the identifiable basis: project the unit vectors off it.
-    let bq = if basis.ncols() > 0 { basis.clone().qr().q() } else { DMatrix::zeros(k, 0) };
+    let bq = if basis.ncols() > 0 {
+        basis.clone().qr().q()
+    } else {
+        DMatrix::zeros(k, 0)
+    };
     let mut names: Vec<String> = Vec::new();
     for c in 0..k {
         let mut e = DVector::zeros(k);
@@ -640,7 +719,9 @@ fn taken_by(j: &DMatrix<f64>, x: &DMatrix<f64>, basis: &DMatrix<f64>, keep: &[bo
         }
         let sig = x * v;
         if let Some(f) = lstsq(j, &sig, keep) {
-            let w: Vec<f64> = (0..N_PARAMS).map(|i| (f.coef[i] * j.column(i).norm()).abs()).collect();
+            let w: Vec<f64> = (0..N_PARAMS)
+                .map(|i| (f.coef[i] * j.column(i).norm()).abs())
+                .collect();
             let tot: f64 = w.iter().sum();
             for i in 0..N_PARAMS {
                 if w[i] > 0.2 * tot && !names.contains(&PARAM_NAMES[i].to_string()) {

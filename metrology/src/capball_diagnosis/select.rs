@@ -19,7 +19,12 @@ impl Term {
         self.basis.ncols()
     }
     /// The term's reduced columns for a run, given the current 14 parameters.
-    pub fn columns(&self, setup: &CapballSetup, run: &CapballRun, p: &DVector<f64>) -> DMatrix<f64> {
+    pub fn columns(
+        &self,
+        setup: &CapballSetup,
+        run: &CapballRun,
+        p: &DVector<f64>,
+    ) -> DMatrix<f64> {
         let model = run.jac(setup) * p;
         self.cand.columns(run, &model) * &self.basis
     }
@@ -84,8 +89,17 @@ pub(crate) fn fit_terms(
 }
 
 /// Orthonormal basis of the current model's column space over the kept rows.
-pub(crate) fn model_basis(setup: &CapballSetup, run: &CapballRun, mf: &ModelFit, keep: &[bool]) -> DMatrix<f64> {
-    let cols: Vec<DMatrix<f64>> = mf.terms.iter().map(|t| t.columns(setup, run, &mf.p)).collect();
+pub(crate) fn model_basis(
+    setup: &CapballSetup,
+    run: &CapballRun,
+    mf: &ModelFit,
+    keep: &[bool],
+) -> DMatrix<f64> {
+    let cols: Vec<DMatrix<f64>> = mf
+        .terms
+        .iter()
+        .map(|t| t.columns(setup, run, &mf.p))
+        .collect();
     let mut a = design(setup, run, &cols);
     zero_rows(&mut a, keep);
     a.qr().q()
@@ -136,7 +150,8 @@ pub(crate) fn screen(
 /// negligible against the raw columns `x`: the combinations the data can tell from the model.
 pub(crate) fn identifiable_basis(x: &DMatrix<f64>, xt: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
     let k = x.ncols();
-    let scale: DVector<f64> = DVector::from_iterator(k, (0..k).map(|c| x.column(c).norm().max(1e-300)));
+    let scale: DVector<f64> =
+        DVector::from_iterator(k, (0..k).map(|c| x.column(c).norm().max(1e-300)));
     let mut xs = xt.clone();
     for c in 0..k {
         xs.column_mut(c).unscale_mut(scale[c]);
@@ -213,7 +228,11 @@ pub(crate) fn validate(
 }
 
 /// The candidates to screen against a model that already holds `have`.
-pub(crate) fn candidate_list(have: &[Candidate], periods: &[f64], max_harmonic: u32) -> Vec<Vec<Candidate>> {
+pub(crate) fn candidate_list(
+    have: &[Candidate],
+    periods: &[f64],
+    max_harmonic: u32,
+) -> Vec<Vec<Candidate>> {
     let has = |f: &dyn Fn(&Candidate) -> bool| have.iter().any(f);
     let mut families = Vec::new();
     if !has(&|c| matches!(c, Candidate::LinearDrift)) {
@@ -228,7 +247,11 @@ pub(crate) fn candidate_list(have: &[Candidate], periods: &[f64], max_harmonic: 
         );
     }
     if !has(&|c| matches!(c, Candidate::SensorGain { .. })) {
-        families.push((0..3).map(|channel| Candidate::SensorGain { channel }).collect());
+        families.push(
+            (0..3)
+                .map(|channel| Candidate::SensorGain { channel })
+                .collect(),
+        );
     }
     let mut axis = Vec::new();
     for a in [RotaryAxis::A, RotaryAxis::C] {

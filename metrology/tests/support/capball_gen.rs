@@ -53,7 +53,8 @@ pub struct AxisMotion {
 impl AxisMotion {
     fn at(&self, theta_deg: f64) -> Vector3<f64> {
         self.direction
-            * (self.amplitude_um * (self.harmonic as f64 * theta_deg.to_radians() + self.phase).cos())
+            * (self.amplitude_um
+                * (self.harmonic as f64 * theta_deg.to_radians() + self.phase).cos())
     }
 }
 
@@ -215,7 +216,12 @@ fn hide(rng: &mut ChaCha8Rng, truth: &mut Truth, effect: &'static str) {
     match effect {
         "cyclic_drift" => {
             let period = rng.random_range(4.0..25.0) * 60.0;
-            let a = std::array::from_fn(|_| (rng.random_range(0.5..3.0), rng.random_range(0.0..std::f64::consts::TAU)));
+            let a = std::array::from_fn(|_| {
+                (
+                    rng.random_range(0.5..3.0),
+                    rng.random_range(0.0..std::f64::consts::TAU),
+                )
+            });
             truth.cyclic = Some((period, a));
         }
         "linear_drift" => {
@@ -226,7 +232,11 @@ fn hide(rng: &mut ChaCha8Rng, truth: &mut Truth, effect: &'static str) {
         }
         "axis_error" => {
             let c_axis = rng.random::<f64>() < 0.7;
-            let harmonic = if c_axis { rng.random_range(1..=4) } else { rng.random_range(2..=4) };
+            let harmonic = if c_axis {
+                rng.random_range(1..=4)
+            } else {
+                rng.random_range(2..=4)
+            };
             // An axial once-per-revolution motion of C is a tilt of the C axis line (EA0C,
             // EB0C): the 14 parameters take it up, see `c_axial_once_per_rev_is_absorbed`.
             let axial = rng.random::<f64>() < 0.3 && !(c_axis && harmonic == 1);
@@ -271,7 +281,11 @@ fn run(
     for _ in 0..truth.outliers {
         let i = rng.random_range(0..poses.len());
         let ch = rng.random_range(0..3);
-        e_um[i][ch] += sym(rng, 3.0f64.max(8.0 * truth.noise_um), 10.0f64.max(9.0 * truth.noise_um));
+        e_um[i][ch] += sym(
+            rng,
+            3.0f64.max(8.0 * truth.noise_um),
+            10.0f64.max(9.0 * truth.noise_um),
+        );
     }
     CapballRun::new(poses, time_s, e_um)
 }
@@ -308,10 +322,22 @@ pub fn generate(class: Class, seed: u64, record: bool) -> Dataset {
     let n = rng.random_range(300..=807);
     let turns = (n as f64 / 807.0 * 6.0).max(3.0);
     let noise = Normal::new(0.0, truth.noise_um).expect("noise");
-    let ident = run(&truth, trajectory(n, 0.0, -90.0, turns), 0.0, &mut rng, &noise);
+    let ident = run(
+        &truth,
+        trajectory(n, 0.0, -90.0, turns),
+        0.0,
+        &mut rng,
+        &noise,
+    );
     let gap = rng.random_range(30.0..120.0);
     let t_end = *ident.time_s.last().expect("poses");
-    let validation = run(&truth, trajectory(n, -90.0, 0.0, turns), t_end + gap, &mut rng, &noise);
+    let validation = run(
+        &truth,
+        trajectory(n, -90.0, 0.0, turns),
+        t_end + gap,
+        &mut rng,
+        &noise,
+    );
     let record = record.then(|| {
         let p = pose_on_ball(0.0, 0.0);
         let time_s: Vec<f64> = (0..720).map(|i| -3600.0 + 5.0 * i as f64).collect();

@@ -116,8 +116,8 @@ impl CapballModel {
         let mut out = [0, 1, 2].map(|k| e[k] + self.drift_um_per_h[k] * h);
         if let Some(c) = &self.cyclic_drift {
             let w = std::f64::consts::TAU * t_s / c.period_s;
-            for k in 0..3 {
-                out[k] += c.amplitude_um[k] * (w + c.phase_rad[k]).sin();
+            for ((o, a), ph) in out.iter_mut().zip(c.amplitude_um).zip(c.phase_rad) {
+                *o += a * (w + ph).sin();
             }
         }
         let p = metrology_pose(pose);
@@ -128,8 +128,8 @@ impl CapballModel {
                 RotaryAxis::C
             };
             let d = axis_harmonic_um(axis, a.harmonic, a.cos_um, a.sin_um, &p);
-            for k in 0..3 {
-                out[k] += d[k];
+            for (o, dk) in out.iter_mut().zip(d) {
+                *o += dk;
             }
         }
         [0, 1, 2].map(|k| out[k] * (1.0 + self.gain_pct[k] / 100.0))

@@ -244,7 +244,7 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
         let own = pose_residuals(&setup, &id, poses, meas, &times);
         let warning = val
             .as_ref()
-            .and_then(|(v, _)| excess_warning(&id, v, validation_len(&validation)));
+            .and_then(|(v, _)| excess_warning(&id, v, validation_len(validation.as_deref())));
         if let Some(w) = &warning {
             eprintln!("run {run}: warning: {w}");
         }
@@ -329,9 +329,11 @@ fn validation_records(
     }
 }
 
-fn validation_len(v: &Option<Vec<(u32, Vec<Pose>, Vec<[f64; 3]>)>>) -> usize {
-    v.as_ref()
-        .map(|runs| runs.iter().map(|r| r.1.len()).sum())
+/// One run of a dataset: number, poses, measured values.
+type RunData = (u32, Vec<Pose>, Vec<[f64; 3]>);
+
+fn validation_len(v: Option<&[RunData]>) -> usize {
+    v.map(|runs| runs.iter().map(|r| r.1.len()).sum())
         .unwrap_or(0)
 }
 

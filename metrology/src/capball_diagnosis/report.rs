@@ -653,11 +653,8 @@ fn absorption_probes(ctx: &Context, start: &ModelFit, periods: &Periods) -> Vec<
             "longest period tried".into(),
         ),
     ];
-    for ch in 0..3 {
-        probes.push((
-            Candidate::SensorGain { channel: ch },
-            format!("channel {}", CH[ch]),
-        ));
+    for (channel, name) in CH.iter().enumerate() {
+        probes.push((Candidate::SensorGain { channel }, format!("channel {name}")));
     }
     for axis in [RotaryAxis::A, RotaryAxis::C] {
         for harmonic in 1..=ctx.opt.max_harmonic {

@@ -17,6 +17,8 @@ pub mod standards;
 
 // Machine error models and identification (papers 001, 003, 004).
 pub mod capball;
+// What the 14-parameter CapBall model gets wrong (docs/datasets.md, CapBall effects).
+pub mod capball_diagnosis;
 pub mod kinematics;
 pub mod parts;
 // Planning a positioning test: targets, cycle, part programs.

@@ -107,13 +107,32 @@ fn chain_error_um(errors: &metrology::capball::CapballErrors, pose: &Coords) -> 
 }
 
 impl CapballModel {
-    fn add_drift(&self, e: [f64; 3], t_s: f64) -> [f64; 3] {
+    /// The effects beyond the 14 parameters (`docs/datasets.md`, CapBall effects): drift of the
+    /// measuring loop (linear and cyclic, by time), axis harmonics (by angle), then the gain
+    /// of the reading. The per-visit scatter is the device's (it needs the visit).
+    fn add_drift(&self, e: [f64; 3], pose: &Coords, t_s: f64) -> [f64; 3] {
+        use metrology::capball_diagnosis::{RotaryAxis, axis_harmonic_um};
         let h = t_s / 3600.0;
-        [
-            e[0] + self.drift_um_per_h[0] * h,
-            e[1] + self.drift_um_per_h[1] * h,
-            e[2] + self.drift_um_per_h[2] * h,
-        ]
+        let mut out = [0, 1, 2].map(|k| e[k] + self.drift_um_per_h[k] * h);
+        if let Some(c) = &self.cyclic_drift {
+            let w = std::f64::consts::TAU * t_s / c.period_s;
+            for ((o, a), ph) in out.iter_mut().zip(c.amplitude_um).zip(c.phase_rad) {
+                *o += a * (w + ph).sin();
+            }
+        }
+        let p = metrology_pose(pose);
+        for a in &self.axis_errors {
+            let axis = if a.axis == "A" {
+                RotaryAxis::A
+            } else {
+                RotaryAxis::C
+            };
+            let d = axis_harmonic_um(axis, a.harmonic, a.cos_um, a.sin_um, &p);
+            for (o, dk) in out.iter_mut().zip(d) {
+                *o += dk;
+            }
+        }
+        [0, 1, 2].map(|k| out[k] * (1.0 + self.gain_pct[k] / 100.0))
     }
 }
 
@@ -128,7 +147,7 @@ impl CapballTruth for CapballModel {
     /// volumetric error as if a ball sat under the tool instead of going over range: the
     /// simulator's convention that every instrument streams valid values all program long.
     fn error_um(&self, pose: &Coords, t_s: f64) -> [f64; 3] {
-        self.add_drift(chain_error_um(&self.errors(), pose), t_s)
+        self.add_drift(chain_error_um(&self.errors(), pose), pose, t_s)
     }
 }
 
@@ -176,7 +195,7 @@ impl CapballTruth for CachedCapballModel {
                 e
             }
         };
-        self.model.add_drift(e, t_s)
+        self.model.add_drift(e, pose, t_s)
     }
 }
 
@@ -636,6 +655,52 @@ mod tests {
         let e = m.error_um(&p, 1800.0);
         assert!((e[0] - 2.0).abs() < 1e-6 && e[1].abs() < 1e-9, "{e:?}");
         assert!((e[2] - 0.5).abs() < 1e-9, "drift of half an hour: {e:?}");
+    }
+
+    #[test]
+    fn capball_effects_beyond_the_14_parameters() {
+        use crate::scenario::{CapballAxisHarmonic, CapballCyclicDrift};
+        let p = Coords {
+            a_deg: -30.0,
+            c_deg: 90.0,
+            ..Coords::default()
+        };
+        // A cooling cycle of 1500 s, 1/1/3 µm half peak-to-valley: at a quarter period the
+        // sine peaks; at a full period it is back to zero.
+        let m = CapballModel {
+            cyclic_drift: Some(CapballCyclicDrift {
+                period_s: 1500.0,
+                amplitude_um: [1.0, 1.0, 3.0],
+                phase_rad: [0.0; 3],
+            }),
+            ..zero_model()
+        };
+        let e = m.error_um(&p, 375.0);
+        assert!(
+            (e[0] - 1.0).abs() < 1e-9 && (e[2] - 3.0).abs() < 1e-9,
+            "{e:?}"
+        );
+        assert!(m.error_um(&p, 1500.0)[2].abs() < 1e-9);
+        // Gain: +2 % on x scales the tool offset's x.
+        let m = CapballModel {
+            tool_x_um: 10.0,
+            gain_pct: [2.0, 0.0, 0.0],
+            ..zero_model()
+        };
+        assert!((m.error_um(&p, 0.0)[0] - 10.2).abs() < 1e-9);
+        // C harmonic 2, cos along the cradle's x (= machine x, A turns about x): at C = 90°
+        // cos(180°) = −1.
+        let m = CapballModel {
+            axis_errors: vec![CapballAxisHarmonic {
+                axis: "C".into(),
+                harmonic: 2,
+                cos_um: [0.5, 0.0, 0.0],
+                sin_um: [0.0; 3],
+            }],
+            ..zero_model()
+        };
+        let e = m.error_um(&p, 0.0);
+        assert!((e[0] + 0.5).abs() < 1e-9 && e[1].abs() < 1e-9, "{e:?}");
     }
 
     #[test]

@@ -398,6 +398,47 @@ pub struct CapballModel {
     /// would on a real machine. Default 0.
     #[serde(default)]
     pub drift_um_per_h: [f64; 3],
+    /// Periodic drift of the measuring loop (paper 001: the spindle's cooling cycle), machine
+    /// frame, a function of (scaled) time. Not one of the 14 parameters. Default none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cyclic_drift: Option<CapballCyclicDrift>,
+    /// Gain error of the reading along machine x, y, z, percent (`docs/datasets.md`,
+    /// `sensor_gain`): the error the CapBall reports is `(1 + g/100)` times the true one.
+    #[serde(default)]
+    pub gain_pct: [f64; 3],
+    /// Motion errors of the A and C axes the link-error model lacks (harmonics of the angle).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub axis_errors: Vec<CapballAxisHarmonic>,
+    /// Scatter of the measuring loop from one pose visit to the next (what a dwell's steady
+    /// value does not average out: real CapBalls show 0.1–0.4 µm), µm, per machine direction.
+    /// Default 0.
+    #[serde(default)]
+    pub pose_noise_um: f64,
+}
+
+/// A periodic drift of the measuring loop: `amplitude_um[k] · sin(2π t / period_s +
+/// phase_rad[k])` in machine direction k (x, y, z), t in scaled seconds. `amplitude_um` is half
+/// the peak-to-valley (`docs/datasets.md`, `cyclic_drift`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CapballCyclicDrift {
+    pub period_s: f64,
+    pub amplitude_um: [f64; 3],
+    #[serde(default)]
+    pub phase_rad: [f64; 3],
+}
+
+/// A motion error of a rotary axis as harmonic `harmonic` of its angle θ, as the change of the
+/// volumetric error `cos_um · cos(kθ) + sin_um · sin(kθ)` in the axis's housing frame (for C
+/// the A cradle, for A the machine frame), µm (`docs/datasets.md`, `axis_error`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CapballAxisHarmonic {
+    /// `A` or `C`.
+    pub axis: String,
+    pub harmonic: u32,
+    pub cos_um: [f64; 3],
+    pub sin_um: [f64; 3],
 }
 
 impl CapballModel {
@@ -444,7 +485,79 @@ impl CapballModel {
             tool_x_um: s.tool_x_um,
             tool_y_um: s.tool_y_um,
             tool_z_um: s.tool_z_um,
+            ..Self::zero_effects()
+        }
+    }
+}
+
+impl CapballModel {
+    /// The model a CapBall diagnosis found (`metrolog diagnose --write-model`): the 14
+    /// parameters identified with the effects modelled, plus the effects as this scenario
+    /// section takes them; times are those of the diagnosed dataset's clock.
+    pub fn from_diagnosis(d: &metrology::capball_diagnosis::CapballDiagnosis) -> Self {
+        use serde_json::Value;
+        let mut m = Self::from_errors(&metrology::capball::CapballErrors::from_slice(
+            &d.params_extended,
+        ));
+        let xyz = |v: &Value| ["x", "y", "z"].map(|k| v[k].as_f64().unwrap_or(0.0));
+        for f in &d.report.findings {
+            let p = |k: &str| f.params.get(k).cloned().unwrap_or(Value::Null);
+            match f.effect.as_str() {
+                "linear_drift" => m.drift_um_per_h = xyz(&p("rate_um_per_h")),
+                "cyclic_drift" => {
+                    m.cyclic_drift = Some(CapballCyclicDrift {
+                        period_s: p("period_s").as_f64().unwrap_or(1.0),
+                        amplitude_um: xyz(&p("amplitude_um")),
+                        phase_rad: xyz(&p("phase_rad")),
+                    })
+                }
+                "sensor_gain" => {
+                    let ch = match p("channel").as_str() {
+                        Some("y") => 1,
+                        Some("z") => 2,
+                        _ => 0,
+                    };
+                    m.gain_pct[ch] = p("gain_pct").as_f64().unwrap_or(0.0);
+                }
+                "axis_error" => m.axis_errors.push(CapballAxisHarmonic {
+                    axis: p("axis").as_str().unwrap_or("C").to_string(),
+                    harmonic: p("harmonic").as_u64().unwrap_or(1) as u32,
+                    cos_um: xyz(&p("cos_um")),
+                    sin_um: xyz(&p("sin_um")),
+                }),
+                _ => {}
+            }
+        }
+        // The white noise the diagnosis measured on the identification run becomes the
+        // per-visit scatter.
+        if let Some(r) = d.report.residuals.first() {
+            m.pose_noise_um = (r.noise_um.iter().map(|v| v * v).sum::<f64>() / 3.0).sqrt();
+        }
+        m
+    }
+
+    /// All 14 parameters zero and no effects (a base for struct updates).
+    pub fn zero_effects() -> Self {
+        CapballModel {
+            ec0y_urad: 0.0,
+            eb0z_urad: 0.0,
+            ea0z_urad: 0.0,
+            eb0a_urad: 0.0,
+            ec0a_urad: 0.0,
+            ea0c_urad: 0.0,
+            eb0c_urad: 0.0,
+            ey0c_um: 0.0,
+            ball_x_um: 0.0,
+            ball_y_um: 0.0,
+            ball_z_um: 0.0,
+            tool_x_um: 0.0,
+            tool_y_um: 0.0,
+            tool_z_um: 0.0,
             drift_um_per_h: [0.0; 3],
+            cyclic_drift: None,
+            gain_pct: [0.0; 3],
+            axis_errors: Vec::new(),
+            pose_noise_um: 0.0,
         }
     }
 }
@@ -466,7 +579,7 @@ impl Default for CapballModel {
             tool_x_um: -1.5,
             tool_y_um: 2.5,
             tool_z_um: 4.0,
-            drift_um_per_h: [0.0; 3],
+            ..Self::zero_effects()
         }
     }
 }
@@ -671,6 +784,49 @@ impl Scenario {
         toml::to_string(self)
     }
 
+    /// The CapBall effects of `[capball.truth]`: finite, periods > 0, axes A or C.
+    fn validate_capball_effects(&self) -> Result<(), ScenarioError> {
+        let bad = |m: String| Err(ScenarioError::Invalid(m));
+        let t = &self.capball.truth;
+        if let Some(c) = &t.cyclic_drift {
+            if !(c.period_s.is_finite() && c.period_s > 0.0) {
+                return bad("capball.truth.cyclic_drift.period_s must be > 0 (seconds)".into());
+            }
+            if c.amplitude_um
+                .iter()
+                .chain(&c.phase_rad)
+                .any(|v| !v.is_finite())
+            {
+                return bad(
+                    "capball.truth.cyclic_drift: amplitude_um and phase_rad must be finite numbers"
+                        .into(),
+                );
+            }
+        }
+        if t.gain_pct
+            .iter()
+            .any(|g| !(g.is_finite() && g.abs() < 50.0))
+        {
+            return bad("capball.truth.gain_pct must be finite percentages below 50".into());
+        }
+        if !(t.pose_noise_um.is_finite() && t.pose_noise_um >= 0.0) {
+            return bad("capball.truth.pose_noise_um must be ≥ 0".into());
+        }
+        for (i, h) in t.axis_errors.iter().enumerate() {
+            if !matches!(h.axis.as_str(), "A" | "C") || h.harmonic == 0 {
+                return bad(format!(
+                    "capball.truth.axis_errors[{i}]: axis must be \"A\" or \"C\" and harmonic ≥ 1"
+                ));
+            }
+            if h.cos_um.iter().chain(&h.sin_um).any(|v| !v.is_finite()) {
+                return bad(format!(
+                    "capball.truth.axis_errors[{i}]: cos_um and sin_um must be finite"
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Check every value a device or the physics relies on.
     pub fn validate(&self) -> Result<(), ScenarioError> {
         let bad = |m: String| Err(ScenarioError::Invalid(m));
@@ -791,6 +947,7 @@ impl Scenario {
         {
             return bad("capball.truth.drift_um_per_h must be finite numbers".into());
         }
+        self.validate_capball_effects()?;
         if !finite_pos(self.psd.sum_pa) {
             return bad("psd.sum_pa must be > 0".into());
         }

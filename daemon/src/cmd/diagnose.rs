@@ -24,9 +24,18 @@ pub struct Args {
     /// Seeds averaged when checking that the extended model reproduces the run.
     #[arg(long, default_value_t = 8)]
     pub check_seeds: usize,
+    /// Read the input as CapBall data (automatic for a CSV whose header names `ex_um`).
+    #[arg(long)]
+    pub capball: bool,
+    /// CapBall: a drift record at one fixed pose (`time_s,ex_um,ey_um,ez_um`, datasets.md).
+    #[arg(long, value_name = "FILE")]
+    pub drift_record: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.capball || crate::cmd::diagnose_capball::is_capball_csv(&args.input) {
+        return crate::cmd::diagnose_capball::run(&args);
+    }
     let data = crate::cmd::input::load_positioning(&args.input)?;
     let mut d: Diagnosis = diagnose::diagnose(&data, &Options::default())
         .with_context(|| format!("diagnosing {}", args.input.display()))?;

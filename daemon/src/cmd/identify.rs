@@ -216,6 +216,7 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
         None => None,
     };
     let mut results = Vec::new();
+    let mut extra = Vec::new();
     for (run, poses, meas) in &runs {
         let setup = CapballSetup::with_ball_from_poses(machine.clone(), poses)
             .with_context(|| format!("run {run}"))?;
@@ -230,22 +231,45 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
                         acc.1.extend_from_slice(&x.2);
                         acc
                     });
-                Some(setup.validation_rms_um(&id, &vp, &vm)?)
+                let rms = setup.validation_rms_um(&id, &vp, &vm)?;
+                let times: Vec<Option<f64>> = validation_records(&a, &machine)?
+                    .iter()
+                    .map(|r| r.time_s)
+                    .collect();
+                let res = pose_residuals(&setup, &id, &vp, &vm, &times);
+                Some((rms, res))
             }
             None => None,
         };
-        results.push((*run, setup.ball_mm, id, val));
+        let times: Vec<Option<f64>> = recs
+            .iter()
+            .filter(|r| r.run == *run)
+            .map(|r| r.time_s)
+            .collect();
+        let own = pose_residuals(&setup, &id, poses, meas, &times);
+        let warning = val
+            .as_ref()
+            .and_then(|(v, _)| excess_warning(&id, v, validation_len(validation.as_deref())));
+        if let Some(w) = &warning {
+            eprintln!("run {run}: warning: {w}");
+        }
+        extra.push((own, val.as_ref().map(|x| x.1.clone()), warning));
+        results.push((*run, setup.ball_mm, id, val.map(|x| x.0)));
     }
     if a.json {
         let v: Vec<_> = results
             .iter()
-            .map(|(run, ball, id, val)| {
+            .zip(&extra)
+            .map(|((run, ball, id, val), (own, vres, warning))| {
                 serde_json::json!({
                     "run": run,
                     "ball_mm": [ball.x, ball.y, ball.z],
                     "parameter_names": PARAM_NAMES,
                     "identification": id,
                     "validation_rms_um": val,
+                    "residuals": own,
+                    "validation_residuals": vres,
+                    "warning": warning,
                 })
             })
             .collect();
@@ -259,6 +283,86 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
         print_identification(*run, ball, id, val.as_ref());
     }
     Ok(())
+}
+
+/// One pose's residual (measured − model), with its time and angles, for the JSON output.
+#[derive(Debug, Clone, serde::Serialize)]
+struct PoseResidual {
+    pose: usize,
+    time_s: Option<f64>,
+    a_deg: f64,
+    c_deg: f64,
+    ex_um: f64,
+    ey_um: f64,
+    ez_um: f64,
+}
+
+fn pose_residuals(
+    setup: &CapballSetup,
+    id: &Identification,
+    poses: &[Pose],
+    meas: &[[f64; 3]],
+    times: &[Option<f64>],
+) -> Vec<PoseResidual> {
+    let p = nalgebra::DVector::from_column_slice(&id.params);
+    poses
+        .iter()
+        .zip(meas)
+        .enumerate()
+        .map(|(i, (pose, m))| {
+            let model = setup.jacobian(pose) * &p;
+            PoseResidual {
+                pose: i + 1,
+                time_s: times.get(i).copied().flatten(),
+                a_deg: pose.a_deg,
+                c_deg: pose.c_deg,
+                ex_um: m[0] - model[0],
+                ey_um: m[1] - model[1],
+                ez_um: m[2] - model[2],
+            }
+        })
+        .collect()
+}
+
+fn validation_records(
+    a: &CapballArgs,
+    machine: &Machine,
+) -> anyhow::Result<Vec<capball::CapballRecord>> {
+    match &a.validate {
+        Some(p) => load_capball(p, machine),
+        None => Ok(Vec::new()),
+    }
+}
+
+/// One run of a dataset: number, poses, measured values.
+type RunData = (u32, Vec<Pose>, Vec<[f64; 3]>);
+
+fn validation_len(v: Option<&[RunData]>) -> usize {
+    v.map(|runs| runs.iter().map(|r| r.1.len()).sum())
+        .unwrap_or(0)
+}
+
+/// A warning when the validation residual exceeds what white noise of the identification's
+/// level explains: the ratio of mean squares beyond 5 standard deviations of its spread
+/// (`2/n_val + 2/dof`, equations counted per channel).
+fn excess_warning(id: &Identification, val_rms: &[f64; 3], n_val_poses: usize) -> Option<String> {
+    let s2 = id.residual_sigma_um.powi(2);
+    let n_val = 3 * n_val_poses;
+    if s2 <= 0.0 || n_val == 0 {
+        return None;
+    }
+    let v2 = val_rms.iter().map(|v| v * v).sum::<f64>() / 3.0;
+    let ratio = v2 / s2;
+    let bound = 1.0 + 5.0 * (2.0 / n_val as f64 + 2.0 / id.dof.max(1) as f64).sqrt();
+    (ratio > bound).then(|| {
+        format!(
+            "the validation residual RMS ({:.3} µm) is {:.2}× the identification's ({:.3} µm); white noise explains at most {:.2}×: the 14-parameter model misses something that differs between the runs (a drift of the measuring loop, a sensor gain, an axis error). Run `metrolog diagnose` on a dataset holding both runs (run 1 identification, run 2 validation)",
+            v2.sqrt(),
+            ratio.sqrt(),
+            s2.sqrt(),
+            bound.sqrt()
+        )
+    })
 }
 
 fn print_identification(

@@ -4,6 +4,7 @@ pub mod analyze;
 pub mod compensate;
 pub mod demo;
 pub mod diagnose;
+pub mod diagnose_capball;
 pub mod identify;
 pub mod identify_mc;
 pub mod info;

@@ -28,6 +28,9 @@ pub(crate) struct Cb3 {
     rate_hz: u32,
     stream: Option<Cadence>,
     seq: u64,
+    /// Seed of the per-visit scatter, and the last visit's draw (pose index, µm).
+    seed: u64,
+    visit_scatter: Option<(usize, [f64; 3])>,
 }
 
 impl Cb3 {
@@ -41,6 +44,8 @@ impl Cb3 {
             rate_hz: POWER_UP_RATE_HZ as u32,
             stream: None,
             seq: 0,
+            seed: sc.seed,
+            visit_scatter: None,
         }
     }
 
@@ -54,13 +59,41 @@ impl Cb3 {
             .push((line.to_string(), reply));
     }
 
+    /// The measuring loop's scatter at one pose visit (`capball.truth.pose_noise_um`): drawn
+    /// once per visit from the scenario seed and the pose index, so it holds through the dwell
+    /// and the steady value keeps it, as on a real CapBall.
+    fn scatter(&mut self, at_pose: usize) -> [f64; 3] {
+        use rand::SeedableRng;
+        if let Some((i, v)) = self.visit_scatter
+            && i == at_pose
+        {
+            return v;
+        }
+        let sd = self.cfg.truth.pose_noise_um.max(0.0);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+            self.seed ^ (at_pose as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        );
+        let n = Normal::new(0.0, sd).unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero std"));
+        let v = [0, 1, 2].map(|_| n.sample(&mut rng));
+        self.visit_scatter = Some((at_pose, v));
+        v
+    }
+
     /// ADC codes and over-range flags for the true error at `at`.
-    fn codes(&self, ctx: &mut Ctx, at: Instant) -> ([i32; 3], u8) {
+    fn codes(&mut self, ctx: &mut Ctx, at: Instant) -> ([i32; 3], u8) {
         let w = &ctx.shared.world;
         let sp = ctx.program_s(at);
         let ph = w.phase(sp);
         let t = ctx.slow_t(at);
         let mut e = w.capball_error_um(ph, t);
+        if let crate::physics::Phase::Standing { at: pose, .. } = ph
+            && self.cfg.truth.pose_noise_um > 0.0
+        {
+            let s = self.scatter(pose);
+            for (ei, si) in e.iter_mut().zip(s) {
+                *ei += si;
+            }
+        }
         let ring = w.ringing_um(ph) * self.cfg.ringing_gain;
         for (ei, r) in e.iter_mut().zip(RING_DIR) {
             *ei += ring * r;

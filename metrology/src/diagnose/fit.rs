@@ -1,0 +1,259 @@
+//! Least-squares machinery of the diagnosis: the observations, the baseline's per-target,
+//! per-direction constants profiled out of every fit (Frisch–Waugh–Lovell), and held-out
+//! prediction errors on cycles dealt into folds (`docs/datasets.md`, "Diagnosis report").
+
+#![allow(clippy::needless_range_loop)]
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::positioning_data::{PositioningData, dir_slot};
+
+pub(super) struct Obs {
+    pub(super) y: Vec<f64>,
+    pub(super) t: Vec<f64>,
+    pub(super) x_mm: Vec<f64>,
+    pub(super) temp_c: Option<Vec<f64>>,
+    pub(super) group: Vec<usize>,
+    pub(super) n_groups: usize,
+    pub(super) n_targets: usize,
+    pub(super) target: Vec<usize>,
+    pub(super) fold: Vec<usize>,
+    pub(super) n_folds: usize,
+    pub(super) duration_s: f64,
+    pub(super) dt_s: f64,
+}
+
+impl Obs {
+    pub(super) fn new(data: &PositioningData, max_folds: usize) -> Self {
+        let r = &data.readings;
+        let t0 = r.iter().map(|r| r.time_s).fold(f64::INFINITY, f64::min);
+        let t1 = r.iter().map(|r| r.time_s).fold(f64::NEG_INFINITY, f64::max);
+        let mut ts: Vec<f64> = r.iter().map(|r| r.time_s).collect();
+        ts.sort_by(f64::total_cmp);
+        let mut gaps: Vec<f64> = ts
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .filter(|g| *g > 0.0)
+            .collect();
+        gaps.sort_by(f64::total_cmp);
+        let dt_s = gaps.get(gaps.len() / 2).copied().unwrap_or(1.0);
+        let n_folds = data.n_cycles().clamp(2, max_folds.max(2));
+        let temp_c = r
+            .iter()
+            .all(|r| r.material_c.is_some())
+            .then(|| r.iter().map(|r| r.material_c.unwrap_or(0.0)).collect());
+        Obs {
+            y: r.iter().map(|r| r.deviation_um).collect(),
+            t: r.iter().map(|r| r.time_s).collect(),
+            x_mm: r.iter().map(|r| r.target_mm).collect(),
+            temp_c,
+            group: r
+                .iter()
+                .map(|r| 2 * (r.index - 1) + dir_slot(r.direction))
+                .collect(),
+            n_groups: 2 * data.n_targets(),
+            n_targets: data.n_targets(),
+            target: r.iter().map(|r| r.index - 1).collect(),
+            fold: r.iter().map(|r| (r.cycle - 1) % n_folds).collect(),
+            n_folds,
+            duration_s: (t1 - t0).max(1.0),
+            dt_s,
+        }
+    }
+    pub(super) fn len(&self) -> usize {
+        self.y.len()
+    }
+}
+
+/// Least squares of y on group constants plus fixed columns, over rows with weight > 0.
+pub(super) struct Projector {
+    pub(super) w: Vec<f64>,
+    pub(super) gsum: Vec<f64>,
+    pub(super) zc: Vec<Vec<f64>>,
+    pub(super) ginv: DMatrix<f64>,
+}
+
+impl Projector {
+    pub(super) fn new(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> Self {
+        let mut gsum = vec![0.0; obs.n_groups];
+        for (j, &g) in obs.group.iter().enumerate() {
+            gsum[g] += w[j];
+        }
+        let mut p = Projector {
+            w: w.to_vec(),
+            gsum,
+            zc: Vec::new(),
+            ginv: DMatrix::zeros(0, 0),
+        };
+        let zc: Vec<Vec<f64>> = cols.iter().map(|c| p.center(obs, c)).collect();
+        let k = zc.len();
+        let mut g = DMatrix::zeros(k, k);
+        for a in 0..k {
+            for b in a..k {
+                let v = dotw(&zc[a], &zc[b], w);
+                g[(a, b)] = v;
+                g[(b, a)] = v;
+            }
+        }
+        p.ginv = if k == 0 {
+            DMatrix::zeros(0, 0)
+        } else {
+            g.clone()
+                .try_inverse()
+                .or_else(|| g.pseudo_inverse(1e-12).ok())
+                .unwrap_or_else(|| DMatrix::zeros(k, k))
+        };
+        p.zc = zc;
+        p
+    }
+
+    pub(super) fn group_means(&self, obs: &Obs, v: &[f64]) -> Vec<f64> {
+        let mut s = vec![0.0; obs.n_groups];
+        for (j, &g) in obs.group.iter().enumerate() {
+            s[g] += self.w[j] * v[j];
+        }
+        s.iter()
+            .zip(&self.gsum)
+            .map(|(s, n)| if *n > 0.0 { s / n } else { 0.0 })
+            .collect()
+    }
+
+    pub(super) fn center(&self, obs: &Obs, v: &[f64]) -> Vec<f64> {
+        let m = self.group_means(obs, v);
+        v.iter().zip(&obs.group).map(|(v, &g)| v - m[g]).collect()
+    }
+
+    /// Coefficients of the fixed columns for `v` (already centred).
+    pub(super) fn coef(&self, vc: &[f64]) -> DVector<f64> {
+        let b = DVector::from_iterator(self.zc.len(), self.zc.iter().map(|z| dotw(z, vc, &self.w)));
+        &self.ginv * b
+    }
+
+    pub(super) fn residualize(&self, obs: &Obs, v: &[f64]) -> Vec<f64> {
+        let mut vc = self.center(obs, v);
+        let c = self.coef(&vc);
+        for (k, z) in self.zc.iter().enumerate() {
+            for (a, b) in vc.iter_mut().zip(z) {
+                *a -= c[k] * b;
+            }
+        }
+        vc
+    }
+}
+
+pub(super) fn dotw(a: &[f64], b: &[f64], w: &[f64]) -> f64 {
+    a.iter().zip(b).zip(w).map(|((a, b), w)| a * b * w).sum()
+}
+
+/// A fitted mean model: group intercepts and column coefficients; predicts any row.
+pub(super) struct MeanFit {
+    pub(super) alpha: Vec<f64>,
+    pub(super) has_group: Vec<bool>,
+    pub(super) beta: DVector<f64>,
+    pub(super) cov_unscaled: DMatrix<f64>,
+}
+
+pub(super) fn fit_mean(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> MeanFit {
+    let p = Projector::new(obs, w, cols);
+    let yc = p.center(obs, &obs.y);
+    let beta = p.coef(&yc);
+    let gy = p.group_means(obs, &obs.y);
+    let mut alpha = gy;
+    for (k, c) in cols.iter().enumerate() {
+        let gc = p.group_means(obs, c);
+        for (a, g) in alpha.iter_mut().zip(gc) {
+            *a -= beta[k] * g;
+        }
+    }
+    MeanFit {
+        alpha,
+        has_group: p.gsum.iter().map(|s| *s > 0.0).collect(),
+        beta,
+        cov_unscaled: p.ginv,
+    }
+}
+
+impl MeanFit {
+    pub(super) fn predict(&self, obs: &Obs, cols: &[Vec<f64>], j: usize) -> Option<f64> {
+        let g = obs.group[j];
+        if !self.has_group[g] {
+            return None;
+        }
+        Some(
+            self.alpha[g]
+                + cols
+                    .iter()
+                    .enumerate()
+                    .map(|(k, c)| self.beta[k] * c[j])
+                    .sum::<f64>(),
+        )
+    }
+}
+
+/// Held-out residuals: each fold predicted from a fit on the others (non-linear parameters
+/// kept). Returns `(residual, row)` for rows with `eval[j]`.
+pub(super) fn heldout_residuals(
+    obs: &Obs,
+    w: &[f64],
+    cols: &[Vec<f64>],
+    eval: &[bool],
+) -> Vec<(f64, usize)> {
+    let mut out = Vec::new();
+    for f in 0..obs.n_folds {
+        let wt: Vec<f64> = w
+            .iter()
+            .zip(&obs.fold)
+            .map(|(w, &k)| if k == f { 0.0 } else { *w })
+            .collect();
+        let fit = fit_mean(obs, &wt, cols);
+        for j in 0..obs.len() {
+            if obs.fold[j] == f
+                && eval[j]
+                && let Some(p) = fit.predict(obs, cols, j)
+            {
+                out.push((obs.y[j] - p, j));
+            }
+        }
+    }
+    out
+}
+
+pub(super) fn rms(v: impl Iterator<Item = f64>) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    for x in v {
+        s += x * x;
+        n += 1;
+    }
+    if n == 0 { 0.0 } else { (s / n as f64).sqrt() }
+}
+
+pub(super) fn heldout_rms(obs: &Obs, w: &[f64], cols: &[Vec<f64>], eval: &[bool]) -> f64 {
+    rms(heldout_residuals(obs, w, cols, eval)
+        .into_iter()
+        .map(|r| r.0))
+}
+
+pub(super) fn in_sample_residuals(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> (MeanFit, Vec<f64>) {
+    let fit = fit_mean(obs, w, cols);
+    let r = (0..obs.len())
+        .map(|j| obs.y[j] - fit.predict(obs, cols, j).unwrap_or(obs.y[j]))
+        .collect();
+    (fit, r)
+}
+
+/// The final joint fit of the selected mean effects, outliers settled.
+pub(super) struct FinalFit {
+    /// Outlier flags.
+    pub(super) out: Vec<bool>,
+    /// Weights of the fit (outliers left out).
+    pub(super) w: Vec<f64>,
+    /// Rows the held-out errors are evaluated on (not outliers).
+    pub(super) eval: Vec<bool>,
+    /// Columns of every selected effect, in selection order.
+    pub(super) cols: Vec<Vec<f64>>,
+    pub(super) fit: MeanFit,
+    /// In-sample residuals of every row.
+    pub(super) resid: Vec<f64>,
+    /// Residual variance of the non-outliers.
+    pub(super) sigma2: f64,
+}

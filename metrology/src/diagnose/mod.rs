@@ -1,0 +1,277 @@
+//! Diagnosis of a positioning run: what the simulation's baseline (a static systematic
+//! deviation per target and direction plus stationary noise, i.e. an [`AxisModel`] without
+//! effects) gets wrong, which effect explains it, and the extended model.
+//!
+//! Method (written down because the issue leaves it open):
+//! - Mean effects (`linear_drift`, `exponential_warmup`, `cyclic_drift`, `thermal_expansion`)
+//!   add a function of time (and position) to the per-(target, direction) constants. They are
+//!   fitted by least squares with the constants profiled out (Frisch–Waugh–Lovell: every
+//!   regressor is centred within its target/direction group), their non-linear parameter
+//!   (τ, period) by a grid search refined locally. Forward selection: at each step the
+//!   candidate with the lowest BIC is added if it lowers the BIC by more than
+//!   [`Options::min_bic_gain`] ("very strong" evidence on the Kass–Raftery scale; the grid
+//!   search is counted as a parameter) **and** lowers the prediction error on held-out cycles
+//!   (cycles dealt into up to five interleaved folds). Noise alone then yields no finding.
+//! - Outliers are readings beyond a Bonferroni bound (family-wise 0.5 %) of a robust scale
+//!   (MAD) of their target's residuals; they are left out of every fit.
+//! - `local_anomaly`: one target with its own variance, compared with a common variance by the
+//!   profile likelihood with the same BIC rule (index search and ratio counted as two
+//!   parameters). Its held-out gain is measured on the per-target scatter of held-out cycles
+//!   (predicted vs observed RMS residual per target), as it changes no predicted mean.
+//! - Without real times (no `time_s` column) row numbers stand in for seconds: the report says
+//!   so, and rates, periods and time constants are then per reading.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::axis_model::{AxisModel, Effect};
+use crate::positioning_data::PositioningData;
+
+mod family;
+mod fit;
+mod model;
+mod outliers;
+mod report;
+mod search;
+
+pub use model::{AxisTable, axis_model_from_toml, baseline_model, reproduction_check};
+
+use fit::{FinalFit, Obs, heldout_rms, in_sample_residuals, rms};
+use outliers::{flag_outliers, group_median_residuals, weights};
+use search::all_cols;
+
+/// Tuning of the diagnosis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    /// BIC decrease an effect needs to be reported.
+    pub min_bic_gain: f64,
+    /// Largest number of held-out folds (cycles are dealt into them).
+    pub max_folds: usize,
+    /// Family-wise false-alarm probability of the outlier test.
+    pub outlier_alpha: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            min_bic_gain: 10.0,
+            max_folds: 5,
+            outlier_alpha: 0.005,
+        }
+    }
+}
+
+/// What the baseline achieves.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Baseline {
+    /// Always `static`.
+    pub model: String,
+    /// RMS residual of the baseline fitted to all readings, µm.
+    pub rms_um: f64,
+    /// RMS prediction error on held-out cycles, µm.
+    pub heldout_rms_um: f64,
+}
+
+/// One effect found in the data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Finding {
+    /// Effect name (`docs/datasets.md`).
+    pub effect: String,
+    /// Fitted parameters.
+    pub params: BTreeMap<String, f64>,
+    /// Standard uncertainties of the parameters (same keys, where one exists).
+    pub params_u: BTreeMap<String, f64>,
+    /// Evidence: decrease of the BIC when the effect is added.
+    pub significance: f64,
+    pub heldout_rms_before_um: f64,
+    pub heldout_rms_after_um: f64,
+    /// The physical cause a metrologist would check.
+    pub cause: String,
+}
+
+/// How closely a model reproduces the measured per-target statistics when simulated over the
+/// same run (mean of several seeds).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Reproduction {
+    /// RMS over targets and directions of simulated − measured mean deviation x̄, µm.
+    pub mean_rms_um: f64,
+    /// RMS over targets and directions of simulated − measured `s`, µm.
+    pub s_rms_um: f64,
+    /// The same for the baseline model (no effects).
+    pub baseline_mean_rms_um: f64,
+    pub baseline_s_rms_um: f64,
+    /// Seeds averaged.
+    pub seeds: usize,
+}
+
+/// The diagnosis report (`docs/datasets.md`, "Diagnosis report").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisReport {
+    pub kind: String,
+    pub baseline: Baseline,
+    /// Most significant first; empty when the baseline explains the data.
+    pub findings: Vec<Finding>,
+    /// Path of the extended model when one was written.
+    pub extended_model: Option<String>,
+    /// Simulated vs measured, when checked.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reproduction: Option<Reproduction>,
+    /// Caveats (missing readings, no real times, ...).
+    pub notes: Vec<String>,
+}
+
+/// A diagnosis: the report and the extended model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Diagnosis {
+    pub report: DiagnosisReport,
+    /// Baseline fitted from the data plus the found effects.
+    pub model: AxisModel,
+    /// Per reading (order of `data.readings`): residual from the baseline, µm.
+    pub baseline_residuals_um: Vec<f64>,
+    /// Per reading: residual from the extended model's mean, µm.
+    pub residuals_um: Vec<f64>,
+    /// Per reading: flagged as an outlier.
+    pub outlier: Vec<bool>,
+}
+
+/// Why a dataset cannot be diagnosed.
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnoseError {
+    /// too few readings to diagnose: need at least 3 cycles of at least 2 targets
+    #[error("too few readings to diagnose: need at least 3 cycles of at least 2 targets")]
+    TooFewReadings,
+}
+
+/// Diagnoses a positioning run against the static baseline.
+pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
+    let m = data.n_targets();
+    if data.n_cycles() < 3 || m < 2 || data.readings.len() < 12 {
+        return Err(DiagnoseError::TooFewReadings);
+    }
+    let obs = Obs::new(data, opt.max_folds);
+    let n = obs.len();
+    let notes = input_notes(data);
+    let use_temp = obs.temp_c.is_some() && !data.material_compensation;
+
+    // Baseline on everything.
+    let ones = vec![1.0; n];
+    let (_, r0) = in_sample_residuals(&obs, &ones, &[]);
+    let baseline_rms = rms(r0.iter().copied());
+    let baseline_heldout = heldout_rms(&obs, &ones, &[], &vec![true; n]);
+
+    // Outliers: a first screen around the group medians, refined after each step.
+    let mut out = flag_outliers(&obs, &group_median_residuals(&obs), opt.outlier_alpha, m);
+    let steps = search::forward_select(&obs, opt, use_temp, &mut out);
+    let cols = all_cols(&steps.iter().map(|s| s.sel.clone()).collect::<Vec<_>>());
+    let fin = settle(&obs, opt, out, cols);
+
+    // Mean effects: parameters from the final joint fit.
+    let mut found = Vec::new();
+    let mut col0 = 0;
+    for st in &steps {
+        found.push(report::mean_finding(&obs, data, &fin, st, col0));
+        col0 += st.sel.cols.len();
+    }
+    let anomaly = report::local_anomaly(&obs, data, &fin, opt);
+    if let Some(a) = &anomaly {
+        found.push((a.finding.clone(), a.effect.clone()));
+    }
+    if let Some(o) = report::outlier_finding(&obs, &fin, anomaly.as_ref()) {
+        found.push(o);
+    }
+    // Most significant first (a stable sort keeps the order of ties).
+    found.sort_by(|a, b| b.0.significance.total_cmp(&a.0.significance));
+    let (findings, effects): (Vec<Finding>, Vec<Effect>) = found.into_iter().unzip();
+
+    let model = AxisModel {
+        axis: data.axis.clone().unwrap_or_else(|| "X".into()),
+        targets_mm: data
+            .targets_mm()
+            .iter()
+            .map(|x| if x.is_finite() { *x } else { 0.0 })
+            .collect(),
+        systematic_up_um: (0..m).map(|t| fin.fit.alpha[2 * t]).collect(),
+        systematic_down_um: (0..m).map(|t| fin.fit.alpha[2 * t + 1]).collect(),
+        // Noise of the ordinary targets (the anomalous one has its own factor).
+        noise_um: anomaly
+            .as_ref()
+            .map_or(fin.sigma2.sqrt(), |a| a.noise_others_um),
+        effects,
+    };
+    Ok(Diagnosis {
+        report: DiagnosisReport {
+            kind: "positioning".into(),
+            baseline: Baseline {
+                model: "static".into(),
+                rms_um: baseline_rms,
+                heldout_rms_um: baseline_heldout,
+            },
+            findings,
+            extended_model: None,
+            reproduction: None,
+            notes,
+        },
+        model,
+        baseline_residuals_um: r0,
+        residuals_um: fin.resid,
+        outlier: fin.out,
+    })
+}
+
+/// Caveats about the input: missing readings, no real times.
+fn input_notes(data: &PositioningData) -> Vec<String> {
+    let mut notes = Vec::new();
+    let missing = data.missing();
+    if !missing.is_empty() {
+        notes.push(format!(
+            "{} reading(s) missing (beam interruption?): {}; the diagnosis uses the others",
+            missing.len(),
+            missing
+                .iter()
+                .take(10)
+                .map(|(c, d, i)| format!(
+                    "cycle {c} {} target {i}",
+                    crate::positioning_data::dir_sign(*d)
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    if !data.has_times {
+        notes.push(
+            "the dataset has no time_s column: row order stands in for time (one reading = 1 s), \
+             so drift rates, periods and time constants are per reading, not real times"
+                .into(),
+        );
+    }
+    notes
+}
+
+/// Settles the outlier flags against the final mean model and fits it.
+fn settle(obs: &Obs, opt: &Options, mut out: Vec<bool>, cols: Vec<Vec<f64>>) -> FinalFit {
+    let n = obs.len();
+    let var_factor = vec![1.0; obs.n_targets];
+    for _ in 0..2 {
+        let (_, r) = in_sample_residuals(obs, &weights(obs, &out, &var_factor), &cols);
+        out = flag_outliers(obs, &r, opt.outlier_alpha, obs.n_targets);
+    }
+    let w = weights(obs, &out, &var_factor);
+    let eval: Vec<bool> = out.iter().map(|o| !o).collect();
+    let (fit, resid) = in_sample_residuals(obs, &w, &cols);
+    let n_eff = eval.iter().filter(|e| **e).count() as f64;
+    let dof = (n_eff - (obs.n_groups + cols.len()) as f64).max(1.0);
+    let rss: f64 = (0..n)
+        .filter(|&j| eval[j])
+        .map(|j| resid[j] * resid[j])
+        .sum();
+    FinalFit {
+        out,
+        w,
+        eval,
+        cols,
+        fit,
+        resid,
+        sigma2: rss / dof,
+    }
+}

@@ -29,6 +29,7 @@ fn messages(path: &Path) -> (Vec<(String, u64, Vec<u8>)>, metrolog_log::ReadSumm
             topic,
             log_ns,
             data,
+            ..
         } = item
         {
             v.push((topic.to_string(), log_ns, data.to_vec()));

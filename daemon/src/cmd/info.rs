@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde::Serialize;
 
-use metrolog_log::topics::{self, Decoded, PoseMsg, StatusMsg, TopicMessage};
+use metrolog_log::topics::{self, LogMessage, PoseMsg, StatusMsg, TopicMessage};
 use metrolog_log::{self as log, LogItem, RUN_METADATA, ReadSummary};
 
 #[derive(Debug, clap::Args)]
@@ -69,8 +69,10 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
     let mut attachments = Vec::new();
     let mut undecodable = 0;
     let read = log::read_log(path, |item| match item {
+        LogItem::Channel { .. } => {}
         LogItem::Message {
             topic,
+            encoding,
             log_ns,
             data,
         } => {
@@ -82,8 +84,8 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
             if topic != PoseMsg::TOPIC && topic != StatusMsg::TOPIC {
                 return;
             }
-            match topics::decode(topic, data) {
-                Ok(Some(Decoded::Pose(p))) => {
+            match topics::decode_message(topic, encoding, log_ns, data) {
+                Ok(Some(LogMessage::Pose(p))) => {
                     *poses
                         .entry(p.instrument.name().to_string())
                         .or_default()
@@ -91,7 +93,7 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
                         .or_default() += 1;
                     pose_ids.insert(p.pose);
                 }
-                Ok(Some(Decoded::Status(s))) => last_status = Some(s),
+                Ok(Some(LogMessage::Status(s))) => last_status = Some(s),
                 Ok(_) => {}
                 Err(_) => undecodable += 1,
             }

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use serde::Serialize;
 
-use metrolog_log::topics::{Decoded, PoseMsg, TopicMessage, decode};
+use metrolog_log::topics::{LogMessage, PoseMsg, TopicMessage, decode_message};
 
 use crate::acquire::detect::PoseEngine;
 use metrolog_log::{
@@ -111,32 +111,54 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
             match item {
                 LogItem::Message {
                     topic,
+                    encoding,
                     log_ns,
                     data,
                 } => {
                     last_ns = last_ns.max(log_ns);
-                    let new_poses = match decode(topic, data) {
-                        Ok(Some(Decoded::Pose(p))) => {
-                            logged.push((log_ns, p));
-                            return Ok(());
-                        }
-                        Ok(Some(Decoded::Trigger(t))) => engine.on_trigger(&t.to_trigger(log_ns)),
-                        // Raw samples (environment records feed no detector); other topics none.
-                        Ok(Some(msg)) => msg
-                            .to_sample(log_ns)
-                            .map(|s| engine.on_sample(&s))
-                            .unwrap_or_default(),
-                        Ok(None) => Vec::new(),
+                    let msg = match decode_message(topic, encoding, log_ns, data) {
+                        Ok(m) => m,
                         Err(e) => bail!("a {topic} message at {log_ns} ns does not decode: {e}"),
                     };
-                    if let Some(w) = writer.as_mut() {
-                        w.write_raw(topic, log_ns, data)?;
-                        for p in &new_poses {
-                            w.write_pose(log_ns, p)?;
+                    match msg {
+                        Some(LogMessage::Pose(p)) => logged.push((log_ns, p)),
+                        Some(LogMessage::Trigger(t)) => {
+                            let trig = t.to_trigger(log_ns);
+                            let new_poses = engine.on_trigger(&trig);
+                            if let Some(w) = writer.as_mut() {
+                                w.write_trigger(&trig)?;
+                                for p in &new_poses {
+                                    w.write_pose(log_ns, p)?;
+                                }
+                            }
+                            replayed.extend(new_poses.into_iter().map(|p| (log_ns, p)));
+                        }
+                        // Samples one by one, each at its host arrival time (a batch of a
+                        // format-2 log holds many; environment records feed no detector).
+                        Some(LogMessage::Samples(samples)) => {
+                            for s in &samples {
+                                last_ns = last_ns.max(s.host_ns);
+                                let new_poses = engine.on_sample(s);
+                                if let Some(w) = writer.as_mut() {
+                                    w.write_sample(s)?;
+                                    for p in &new_poses {
+                                        w.write_pose(s.host_ns, p)?;
+                                    }
+                                }
+                                replayed.extend(new_poses.into_iter().map(|p| (s.host_ns, p)));
+                            }
+                        }
+                        // /status, /event and unknown topics are copied as they are.
+                        Some(_) | None => {
+                            if let Some(w) = writer.as_mut()
+                                && encoding == "json"
+                            {
+                                w.write_raw(topic, log_ns, data)?;
+                            }
                         }
                     }
-                    replayed.extend(new_poses.into_iter().map(|p| (log_ns, p)));
                 }
+                LogItem::Channel { .. } => {}
                 LogItem::Attachment {
                     name,
                     media_type,

@@ -42,6 +42,7 @@
 
 pub mod raw;
 pub mod reader;
+pub mod recover;
 pub mod synthetic;
 pub mod topics;
 pub mod trajectory;

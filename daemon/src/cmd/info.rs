@@ -23,7 +23,10 @@ pub struct Args {
 /// Messages of one topic.
 #[derive(Debug, Clone, Default, Serialize, PartialEq)]
 pub struct TopicInfo {
+    /// MCAP messages (a raw batch of a format-2 log is one).
     pub messages: u64,
+    /// Raw samples (raw topics only).
+    pub samples: u64,
     pub first_ns: Option<u64>,
     pub last_ns: Option<u64>,
     /// Mean message rate between the first and the last message, Hz.
@@ -54,7 +57,7 @@ pub struct InfoReport {
     /// The last `/status` message.
     pub last_status: Option<StatusMsg>,
     pub attachments: Vec<AttachmentInfo>,
-    /// `/pose` and `/status` messages that did not decode as their topic's type.
+    /// Raw batches, `/pose` and `/status` messages that did not decode as their topic's type.
     pub undecodable: u64,
 }
 
@@ -68,7 +71,7 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
     let mut last_status = None;
     let mut attachments = Vec::new();
     let mut undecodable = 0;
-    let read = log::read_log(path, |item| match item {
+    let mut on_item = |item: LogItem<'_>| match item {
         LogItem::Channel { .. } => {}
         LogItem::Message {
             topic,
@@ -80,6 +83,17 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
             t.messages += 1;
             t.first_ns.get_or_insert(log_ns);
             t.last_ns = Some(log_ns);
+            if encoding == "protobuf" {
+                // A raw batch: count its samples (the length of one column).
+                match metrolog_log::raw::Batch::decode(topic, data) {
+                    Ok(Some(b)) => t.samples += b.len() as u64,
+                    _ => undecodable += 1,
+                }
+                return;
+            }
+            if metrolog_log::raw::RAW_TOPICS.iter().any(|(r, _)| *r == topic) {
+                t.samples += 1; // format 1: one JSON message per sample
+            }
             // Only the topics the report reads are decoded: an hour of raw samples is millions.
             if topic != PoseMsg::TOPIC && topic != StatusMsg::TOPIC {
                 return;
@@ -115,8 +129,18 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
                 instruments.push(map.clone());
             }
         }
-    })
+    };
+    let bar = super::progress::Progress::new("info");
+    let read = log::read_log_progress(
+        path,
+        |d, t| bar.update(d, t),
+        |item| {
+            on_item(item);
+            std::ops::ControlFlow::Continue(())
+        },
+    )
     .with_context(|| format!("cannot inspect {}", path.display()))?;
+    drop(bar);
     for t in tops.values_mut() {
         if let (Some(a), Some(b)) = (t.first_ns, t.last_ns)
             && b > a

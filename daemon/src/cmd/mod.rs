@@ -8,6 +8,8 @@ pub mod info;
 pub mod input;
 pub mod parts;
 pub mod plots;
+pub mod progress;
+pub mod recover;
 pub mod replay;
 pub mod run;
 pub mod sim;

@@ -15,7 +15,7 @@ use metrolog_log::topics::{LogMessage, PoseMsg, TopicMessage, decode_message};
 use crate::acquire::detect::PoseEngine;
 use metrolog_log::{
     DetectorSettings, LogItem, LogOptions, LogWriter, RUN_METADATA, ReadSummary, RunMetadata,
-    read_log, read_run_metadata,
+    read_log_progress, read_run_metadata,
 };
 
 #[derive(Debug, clap::Args)]
@@ -103,10 +103,8 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
     let mut replayed = Vec::new();
     let mut last_ns = 0u64;
     let mut first_error: Option<anyhow::Error> = None;
-    let read = read_log(path, |item| {
-        if first_error.is_some() {
-            return;
-        }
+    let bar = super::progress::Progress::new("replay");
+    let mut on_item = |item: LogItem<'_>| {
         let r: anyhow::Result<()> = (|| {
             match item {
                 LogItem::Message {
@@ -179,10 +177,16 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
             }
             Ok(())
         })();
-        if let Err(e) = r {
-            first_error = Some(e);
+        match r {
+            Ok(()) => std::ops::ControlFlow::Continue(()),
+            Err(e) => {
+                first_error = Some(e);
+                std::ops::ControlFlow::Break(())
+            }
         }
-    })?;
+    };
+    let read = read_log_progress(path, |d, t| bar.update(d, t), &mut on_item)?;
+    drop(bar);
     if let Some(e) = first_error {
         return Err(e);
     }

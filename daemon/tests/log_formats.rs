@@ -25,7 +25,12 @@ fn info_replay_and_analysis_read_both_formats() {
         assert_eq!(info.topics["/psd/sample"].samples, 1804, "{name}");
         assert_eq!(info.poses["capball"]["ok"], 3, "{name}");
         let r = replay(&data(name), &ReplayOptions::default()).unwrap();
-        assert!(r.reproduces_log(), "{name}: {} of {}", r.identical, r.logged.len());
+        assert!(
+            r.reproduces_log(),
+            "{name}: {} of {}",
+            r.identical,
+            r.logged.len()
+        );
         assert_eq!(r.logged.len(), 6);
         replayed.push(r.replayed);
         let c = LogContents::read(&data(name)).unwrap();
@@ -67,7 +72,11 @@ fn recover_command_repairs_a_truncated_log() {
         .arg(&out)
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let text = String::from_utf8_lossy(&st.stdout);
     assert!(text.contains("recovered"), "{text}");
     let info = inspect(&out).unwrap();

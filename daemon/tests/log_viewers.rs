@@ -114,7 +114,9 @@ fn every_channel_opens_in_the_viewers_and_decodes_to_what_was_written() {
         assert_eq!(h["valid"][0], s.valid, "{topic}");
         let f = |k: &str| first[k][0].as_f64().unwrap();
         match &s.values {
-            SampleValues::Position { position_um, .. } => assert_eq!(f("position_um"), *position_um),
+            SampleValues::Position { position_um, .. } => {
+                assert_eq!(f("position_um"), *position_um)
+            }
             SampleValues::Environment { air_c, .. } => assert_eq!(f("air_c"), *air_c),
             SampleValues::Capball { e_um, .. } => {
                 assert_eq!([f("ex_um"), f("ey_um"), f("ez_um")], *e_um)
@@ -140,6 +142,10 @@ fn the_check_rejects_a_format_1_log() {
     let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../log/tests/data/format1.mcap");
     let Some(r) = check(&log) else { return };
     let problems = |t: &str| r["topics"][t]["problems"].as_array().unwrap().len();
-    assert!(problems("/psd/sample") > 0, "{}", r["topics"]["/psd/sample"]);
+    assert!(
+        problems("/psd/sample") > 0,
+        "{}",
+        r["topics"]["/psd/sample"]
+    );
     assert!(problems("/pose") > 0, "{}", r["topics"]["/pose"]);
 }

@@ -485,12 +485,7 @@ fn message(name: &str, fields: Vec<FieldDescriptorProto>) -> DescriptorProto {
 fn batch(name: &str, columns: &[(&str, Type)]) -> DescriptorProto {
     let mut fields = vec![FieldDescriptorProto {
         label: Some(Label::Optional as i32),
-        ..field(
-            "header",
-            1,
-            Type::Message,
-            Some(".metrolog.BatchHeader"),
-        )
+        ..field("header", 1, Type::Message, Some(".metrolog.BatchHeader"))
     }];
     fields.extend(
         columns

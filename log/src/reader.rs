@@ -127,6 +127,9 @@ pub fn read_log_progress(
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
+            // Check a chunk's CRC before handing out any of its records: a torn chunk must
+            // not yield garbled messages before its CRC fails (log/tests/formats.rs).
+            .with_prevalidate_chunk_crcs(true)
             // A file cut at a record boundary ends cleanly (no footer); cut inside a record it
             // is an unexpected end. The footer is checked for separately.
             .with_skip_end_magic(true)
@@ -184,10 +187,8 @@ pub fn read_log_progress(
                 };
                 let flow = match rec {
                     Record::Schema { header, data } => {
-                        schemas.insert(
-                            header.id,
-                            (header.name, header.encoding, data.into_owned()),
-                        );
+                        schemas
+                            .insert(header.id, (header.name, header.encoding, data.into_owned()));
                         ControlFlow::Continue(())
                     }
                     Record::Channel(c) => {

@@ -682,9 +682,8 @@ fn inline(v: &mut serde_json::Value, defs: &serde_json::Value, depth: usize) {
         Value::Object(o) => {
             if let Some(Value::String(r)) = o.get("$ref").cloned()
                 && depth < 32
-                && let Some(Value::Object(def)) = r
-                    .strip_prefix("#/$defs/")
-                    .and_then(|name| defs.get(name))
+                && let Some(Value::Object(def)) =
+                    r.strip_prefix("#/$defs/").and_then(|name| defs.get(name))
             {
                 o.remove("$ref");
                 for (k, x) in def {

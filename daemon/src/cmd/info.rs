@@ -91,7 +91,10 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
                 }
                 return;
             }
-            if metrolog_log::raw::RAW_TOPICS.iter().any(|(r, _)| *r == topic) {
+            if metrolog_log::raw::RAW_TOPICS
+                .iter()
+                .any(|(r, _)| *r == topic)
+            {
                 t.samples += 1; // format 1: one JSON message per sample
             }
             // Only the topics the report reads are decoded: an hour of raw samples is millions.

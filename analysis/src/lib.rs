@@ -115,11 +115,12 @@ impl LogContents {
                 match decode_message(topic, encoding, log_ns, data) {
                     Ok(Some(LogMessage::Pose(msg))) => c.poses.push(LoggedPose { log_ns, msg }),
                     Ok(Some(LogMessage::Samples(samples))) => {
-                        c.environment
-                            .extend(samples.iter().filter_map(|s| match Decoded::from_sample(s) {
+                        c.environment.extend(samples.iter().filter_map(|s| {
+                            match Decoded::from_sample(s) {
                                 Decoded::Environment(e) => Some(e),
                                 _ => None,
-                            }))
+                            }
+                        }))
                     }
                     Ok(_) => {}
                     Err(_) => c.undecodable += 1,

@@ -327,6 +327,13 @@ impl LogWriter {
     /// Writes an already encoded JSON message of one of metrolog's JSON topics (after the
     /// open raw batches, which keeps the file in the order the messages came).
     pub fn write_raw(&mut self, topic: &str, log_ns: u64, data: &[u8]) -> Result<(), LogError> {
+        if raw::RAW_TOPICS.iter().any(|(t, _)| *t == topic) {
+            return Err(LogError::Write {
+                path: self.path.clone(),
+                reason: format!("{topic} holds protobuf batches, not JSON"),
+                hint: "write raw samples with write_sample",
+            });
+        }
         self.write_batches()?;
         self.write_message(topic, log_ns, data)?;
         self.flush_if_due()?;

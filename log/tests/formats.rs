@@ -178,10 +178,10 @@ fn regenerate_fixtures() {
     w.finish().unwrap();
     let full = std::fs::read(&dst).unwrap();
     std::fs::write(data("truncated.mcap"), &full[..full.len() * 6 / 10]).unwrap();
-    // The second chunk record (opcode 0x06) and 16 zeroed bytes in its middle.
+    // The fourth chunk record (opcode 0x06) and 16 zeroed bytes in its middle.
     let mut torn = full.clone();
     let chunks: Vec<usize> = chunk_offsets(&full);
-    let (a, b) = (chunks[1], chunks[2]);
+    let (a, b) = (chunks[3], chunks[4]);
     let mid = (a + b) / 2;
     torn[mid..mid + 16].fill(0);
     std::fs::write(data("torn-chunk.mcap"), torn).unwrap();

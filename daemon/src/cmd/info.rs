@@ -29,7 +29,8 @@ pub struct TopicInfo {
     pub samples: u64,
     pub first_ns: Option<u64>,
     pub last_ns: Option<u64>,
-    /// Mean message rate between the first and the last message, Hz.
+    /// Mean rate between the first and the last message, Hz: samples per second on the raw
+    /// topics, messages per second on the others.
     pub rate_hz: Option<f64>,
 }
 
@@ -86,7 +87,13 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
             if encoding == "protobuf" {
                 // A raw batch: count its samples (the length of one column).
                 match metrolog_log::raw::Batch::decode(topic, data) {
-                    Ok(Some(b)) => t.samples += b.len() as u64,
+                    Ok(Some(b)) => {
+                        t.samples += b.len() as u64;
+                        // The span ends at the last sample, not at the batch's log time.
+                        if let Some(last) = b.samples().ok().and_then(|s| s.last().cloned()) {
+                            t.last_ns = t.last_ns.max(Some(last.host_ns));
+                        }
+                    }
                     _ => undecodable += 1,
                 }
                 return;
@@ -149,7 +156,9 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
             && b > a
             && t.messages > 1
         {
-            t.rate_hz = Some((t.messages - 1) as f64 / ((b - a) as f64 * 1e-9));
+            // Raw topics: samples per second (a format-2 message is a batch of samples).
+            let n = if t.samples > 0 { t.samples } else { t.messages };
+            t.rate_hz = Some((n - 1) as f64 / ((b - a) as f64 * 1e-9));
         }
     }
     Ok(InfoReport {

@@ -596,7 +596,7 @@ mod tests {
             device_t_us: 1_000 + k * 50,
             host_ns: 1_795_305_600_123_456_789 + k * 50_000,
             fitted_ns: 1_795_305_600_123_000_001 + k * 50_001,
-            valid: k % 3 != 0,
+            valid: !k.is_multiple_of(3),
             values,
         }
     }

@@ -24,7 +24,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use drivers::Instrument;
-use metrolog_log::topics::{Decoded, EnvironmentMsg, PoseMsg, decode};
+use metrolog_log::topics::{Decoded, EnvironmentMsg, LogMessage, PoseMsg, decode_message};
 use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use metrolog_log::{
     CONFIG_ATTACHMENT, LogError, RUN_METADATA, ReadSummary, TRAJECTORY_ATTACHMENT, read_log,
@@ -106,15 +106,23 @@ impl LogContents {
         let summary = read_log(path, |item| match item {
             metrolog_log::LogItem::Message {
                 topic,
+                encoding,
                 log_ns,
                 data,
             } => {
                 if topic != "/pose" && topic != "/interferometer/environment" {
                     return;
                 }
-                match decode(topic, data) {
-                    Ok(Some(Decoded::Pose(msg))) => c.poses.push(LoggedPose { log_ns, msg }),
-                    Ok(Some(Decoded::Environment(e))) => c.environment.push(e),
+                match decode_message(topic, encoding, log_ns, data) {
+                    Ok(Some(LogMessage::Pose(msg))) => c.poses.push(LoggedPose { log_ns, msg }),
+                    Ok(Some(LogMessage::Samples(samples))) => {
+                        c.environment.extend(samples.iter().filter_map(|s| {
+                            match Decoded::from_sample(s) {
+                                Decoded::Environment(e) => Some(e),
+                                _ => None,
+                            }
+                        }))
+                    }
                     Ok(_) => {}
                     Err(_) => c.undecodable += 1,
                 }
@@ -122,6 +130,7 @@ impl LogContents {
             metrolog_log::LogItem::Attachment { name, data, .. } => {
                 c.attachments.insert(name.to_string(), data.to_vec());
             }
+            metrolog_log::LogItem::Channel { .. } => {}
             metrolog_log::LogItem::Metadata { name, map } => {
                 if name == RUN_METADATA {
                     c.run_metadata = map.clone();

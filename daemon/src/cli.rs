@@ -24,6 +24,8 @@ pub enum Command {
     Replay(cmd::replay::Args),
     /// Show what a log holds.
     Info(cmd::info::Args),
+    /// Rewrite the intact part of a torn or killed log into a valid, indexed file.
+    Recover(cmd::recover::Args),
     /// Evaluate a measurement (ISO 230-2 positioning accuracy, ...).
     #[command(subcommand)]
     Analyze(cmd::analyze::Command),
@@ -55,6 +57,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sim(a) => cmd::sim::run(a),
         Command::Replay(a) => cmd::replay::run(a),
         Command::Info(a) => cmd::info::run(a),
+        Command::Recover(a) => cmd::recover::run(a),
         Command::Analyze(c) => cmd::analyze::run(c),
         Command::Diagnose(a) => cmd::diagnose::run(a),
         Command::Volumetric(a) => cmd::volumetric::run(a),

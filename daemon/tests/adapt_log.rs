@@ -197,21 +197,18 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
     for k in 0..2 * (rows.len() + 2) {
         let t_s = k as f64 * 0.5;
         let t_ns = T0_NS + (t_s * 1e9) as u64;
-        w.write(
-            t_ns,
-            &EnvironmentMsg {
-                seq: k as u64,
-                device_t_us: 0,
-                fitted_ns: t_ns,
-                air_c: air_c_at(t_s),
-                air_pa: 101325.0,
-                rh_pct: 45.0,
-                material_c: vec![20.5, 20.7],
-                n_air: 1.00027,
-                valid: true,
-            },
-        )
-        .unwrap();
+        let env = metrolog_log::topics::Decoded::Environment(EnvironmentMsg {
+            seq: k as u64,
+            device_t_us: 0,
+            fitted_ns: t_ns,
+            air_c: air_c_at(t_s),
+            air_pa: 101325.0,
+            rh_pct: 45.0,
+            material_c: vec![20.5, 20.7],
+            n_air: 1.00027,
+            valid: true,
+        });
+        w.write_sample(&env.to_sample(t_ns).unwrap()).unwrap();
     }
     for (k, r) in rows.iter().enumerate() {
         let no = k as u32 + 1;

@@ -9,7 +9,6 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use metrolog::cmd::info::inspect;
 use metrolog::cmd::replay::{ReplayOptions, replay};
 use metrolog_log::synthetic::SyntheticRun;
-use metrolog_log::topics::PositionMsg;
 use metrolog_log::{LogError, LogItem, LogOptions, LogWriter, RunMetadata, read_log};
 
 fn short_run() -> SyntheticRun {
@@ -29,6 +28,7 @@ fn messages(path: &Path) -> (Vec<(String, u64, Vec<u8>)>, metrolog_log::ReadSumm
             topic,
             log_ns,
             data,
+            ..
         } = item
         {
             v.push((topic.to_string(), log_ns, data.to_vec()));
@@ -134,17 +134,21 @@ fn writer_child() {
         for _ in 0..10 {
             seq += 1;
             let t = now_ns();
-            let m = PositionMsg {
+            let m = drivers::Sample {
+                instrument: drivers::Instrument::Interferometer,
                 seq,
                 device_t_us: seq * 1000,
+                host_ns: t,
                 fitted_ns: t,
-                raw_nm: seq as i64,
-                position_um: seq as f64 * 1e-3,
-                sig: 90,
-                flags: 0,
                 valid: true,
+                values: drivers::SampleValues::Position {
+                    raw_nm: seq as i64,
+                    position_um: seq as f64 * 1e-3,
+                    sig: 90,
+                    flags: 0,
+                },
             };
-            if let Err(e) = w.write(t, &m) {
+            if let Err(e) = w.write_sample(&m) {
                 println!("WRITE ERROR: {e}");
                 return;
             }
@@ -181,7 +185,22 @@ fn killed_writer_loses_at_most_about_a_second() {
 
     let (msgs, s) = messages(&path);
     assert!(!s.clean_close);
-    assert!(msgs.len() > 1000, "only {} messages recovered", msgs.len());
+    // Raw samples come in batches of 10 ms: decode them.
+    let samples: Vec<drivers::Sample> = msgs
+        .iter()
+        .flat_map(|(topic, _, d)| {
+            metrolog_log::raw::Batch::decode(topic, d)
+                .unwrap()
+                .unwrap()
+                .samples()
+                .unwrap()
+        })
+        .collect();
+    assert!(
+        samples.len() > 1000,
+        "only {} samples recovered",
+        samples.len()
+    );
     let last = s.last_log_ns.unwrap();
     let lost_s = (killed_ns - last) as f64 * 1e-9;
     assert!(
@@ -189,8 +208,7 @@ fn killed_writer_loses_at_most_about_a_second() {
         "the last {lost_s:.2} s before the kill were lost"
     );
     // Sequence numbers are contiguous: nothing inside the prefix is missing.
-    for (i, (_, _, d)) in msgs.iter().enumerate() {
-        let m: PositionMsg = serde_json::from_slice(d).unwrap();
+    for (i, m) in samples.iter().enumerate() {
         assert_eq!(m.seq, i as u64 + 1);
     }
     let info = inspect(&path).unwrap();

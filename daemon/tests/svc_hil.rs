@@ -53,7 +53,7 @@ fn scenario() -> Scenario {
 
 fn python_ok() -> bool {
     match Command::new("python3")
-        .args(["-c", "import mcap, jsonschema"])
+        .args(["-c", "import mcap, jsonschema, google.protobuf"])
         .output()
     {
         Ok(o) if o.status.success() => true,

@@ -42,7 +42,9 @@
 
 #[doc(hidden)]
 pub mod fuzzcheck;
+pub mod raw;
 pub mod reader;
+pub mod recover;
 pub mod synthetic;
 pub mod topics;
 pub mod trajectory;
@@ -54,7 +56,9 @@ use std::path::PathBuf;
 use metrology::steady::SteadyConfig;
 use serde::{Deserialize, Serialize};
 
-pub use reader::{LogItem, ReadSummary, read_log, read_log_until, read_run_metadata};
+pub use reader::{
+    LogItem, ReadSummary, read_log, read_log_progress, read_log_until, read_run_metadata,
+};
 pub use writer::{LogOptions, LogWriter};
 
 /// Name of the metadata record describing the run.
@@ -65,6 +69,11 @@ pub const INSTRUMENT_METADATA: &str = "metrolog.instrument";
 pub const TRAJECTORY_ATTACHMENT: &str = "trajectory.csv";
 /// Name of the attachment holding the run's config file.
 pub const CONFIG_ATTACHMENT: &str = "metrolog.toml";
+/// Key of the log format version in the run metadata: absent in format 1 (one JSON message
+/// per raw sample), `2` since raw samples are protobuf batches (docs/log-format.md).
+pub const LOG_FORMAT_KEY: &str = "log_format";
+/// The format this crate writes.
+pub const LOG_FORMAT: u32 = 2;
 /// Key of the detector settings (JSON of [`DetectorSettings`]) in the run metadata.
 pub const DETECTOR_KEY: &str = "detector";
 
@@ -123,6 +132,7 @@ impl RunMetadata {
         m.insert("start_time_ns".into(), self.started_ns.to_string());
         m.insert("start_time".into(), rfc3339(self.started_ns));
         m.insert("metrolog_version".into(), env!("CARGO_PKG_VERSION").into());
+        m.insert(LOG_FORMAT_KEY.into(), LOG_FORMAT.to_string());
         m.insert(
             DETECTOR_KEY.into(),
             serde_json::to_string(&self.detector).unwrap_or_default(),
@@ -140,7 +150,7 @@ impl RunMetadata {
             match k.as_str() {
                 "machine" => r.machine = v.clone(),
                 "start_time_ns" => r.started_ns = v.parse().unwrap_or(0),
-                "start_time" | "metrolog_version" => {
+                "start_time" | "metrolog_version" | LOG_FORMAT_KEY => {
                     r.extra.insert(k.clone(), v.clone());
                 }
                 DETECTOR_KEY => {

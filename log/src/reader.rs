@@ -21,8 +21,19 @@ use super::LogError;
 pub enum LogItem<'a> {
     Message {
         topic: &'a str,
+        /// The channel's message encoding: `json` or `protobuf` (raw batches, format 2).
+        encoding: &'a str,
         log_ns: u64,
         data: &'a [u8],
+    },
+    /// A channel, when it is first declared (before its first message).
+    Channel {
+        id: u16,
+        topic: &'a str,
+        encoding: &'a str,
+        schema_name: &'a str,
+        schema_encoding: &'a str,
+        schema_data: &'a [u8],
     },
     Attachment {
         name: &'a str,
@@ -91,6 +102,16 @@ pub fn read_run_metadata(path: &Path) -> Result<Option<BTreeMap<String, String>>
 /// covers what was read).
 pub fn read_log_until(
     path: &Path,
+    on: impl FnMut(LogItem<'_>) -> ControlFlow<()>,
+) -> Result<ReadSummary, LogError> {
+    read_log_progress(path, |_, _| {}, on)
+}
+
+/// Like [`read_log_until`], telling `progress(bytes read, file bytes)` as it goes (for a
+/// progress bar: an 8-hour log is gigabytes).
+pub fn read_log_progress(
+    path: &Path,
+    mut progress: impl FnMut(u64, u64),
     mut on: impl FnMut(LogItem<'_>) -> ControlFlow<()>,
 ) -> Result<ReadSummary, LogError> {
     let open_err = |source| LogError::Open {
@@ -106,13 +127,17 @@ pub fn read_log_until(
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
+            // Check a chunk's CRC before handing out any of its records: a torn chunk must
+            // not yield garbled messages before its CRC fails (log/tests/formats.rs).
+            .with_prevalidate_chunk_crcs(true)
             // A file cut at a record boundary ends cleanly (no footer); cut inside a record it
             // is an unexpected end. The footer is checked for separately.
             .with_skip_end_magic(true)
             // A damaged record must not make the reader allocate without bound.
             .with_record_length_limit(1 << 30),
     );
-    let mut topics: BTreeMap<u16, String> = BTreeMap::new();
+    let mut schemas: BTreeMap<u16, (String, String, Vec<u8>)> = BTreeMap::new();
+    let mut topics: BTreeMap<u16, (String, String)> = BTreeMap::new();
     let mut saw_footer = false;
     loop {
         let ev = match reader.next_event() {
@@ -150,6 +175,7 @@ pub fn read_log_until(
                 };
                 reader.notify_read(got);
                 summary.bytes_read += got as u64;
+                progress(summary.bytes_read, file_bytes);
             }
             LinearReadEvent::Record { data, opcode } => {
                 let rec = match mcap::parse_record(opcode, data) {
@@ -160,12 +186,32 @@ pub fn read_log_until(
                     }
                 };
                 let flow = match rec {
-                    Record::Channel(c) => {
-                        topics.insert(c.id, c.topic.clone());
+                    Record::Schema { header, data } => {
+                        schemas
+                            .insert(header.id, (header.name, header.encoding, data.into_owned()));
                         ControlFlow::Continue(())
                     }
+                    Record::Channel(c) => {
+                        // The summary section repeats channels: announce each once.
+                        if topics.contains_key(&c.id) {
+                            continue;
+                        }
+                        topics.insert(c.id, (c.topic.clone(), c.message_encoding.clone()));
+                        let (name, enc, sdata) = schemas
+                            .get(&c.schema_id)
+                            .map(|(n, e, d)| (n.as_str(), e.as_str(), d.as_slice()))
+                            .unwrap_or(("", "", &[]));
+                        on(LogItem::Channel {
+                            id: c.id,
+                            topic: &c.topic,
+                            encoding: &c.message_encoding,
+                            schema_name: name,
+                            schema_encoding: enc,
+                            schema_data: sdata,
+                        })
+                    }
                     Record::Message { header, data } => {
-                        let Some(topic) = topics.get(&header.channel_id) else {
+                        let Some((topic, encoding)) = topics.get(&header.channel_id) else {
                             summary.error =
                                 Some(format!("message on unknown channel {}", header.channel_id));
                             break;
@@ -175,6 +221,7 @@ pub fn read_log_until(
                         summary.last_log_ns = Some(header.log_time);
                         on(LogItem::Message {
                             topic,
+                            encoding,
                             log_ns: header.log_time,
                             data: &data,
                         })

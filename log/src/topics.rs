@@ -1,9 +1,15 @@
-//! The messages of each MCAP topic: JSON-encoded, with a JSON schema generated from these
-//! types (`schemars`), so Foxglove/Lichtblick can plot every field and any reader can validate.
+//! The messages of each MCAP topic (docs/log-format.md).
 //!
-//! Every raw message carries the device's `seq` and `device_t_us` and the clock-fitted time
-//! `fitted_ns`; the MCAP log time is the host arrival time (`Sample::host_ns`), so a log holds
-//! everything replay needs to re-run the steady-value detection exactly.
+//! - `/pose`, `/status`, `/event`, `/cnc/trigger`: JSON, with a JSON schema generated from
+//!   these types (`schemars`) and rewritten by [`viewer_schema`] into the subset Foxglove and
+//!   Lichtblick load (no `$ref`, one scalar `type` per field, enums inline).
+//! - The raw sample topics: protobuf batches ([`crate::raw`]) in logs written since format 2;
+//!   one JSON message per sample ([`PositionMsg`], [`EnvironmentMsg`], [`CapballMsg`],
+//!   [`PsdMsg`], log time = host arrival time) in older logs, still read by [`decode_message`].
+//!
+//! Every raw sample carries the device's `seq` and `device_t_us`, the clock-fitted time and
+//! the host arrival time, so a log holds everything replay needs to re-run the steady-value
+//! detection exactly.
 
 use std::collections::BTreeMap;
 
@@ -189,12 +195,67 @@ pub struct PoseMsg {
     pub n: u64,
     /// Mean per channel, by channel name (`position_um`; `ex_um`, `ey_um`, `ez_um`; `x_um`,
     /// `y_um`); empty when no value.
+    #[schemars(schema_with = "channel_map")]
     pub mean: BTreeMap<String, f64>,
     /// Sample standard deviation per channel.
+    #[schemars(schema_with = "channel_map")]
     pub std: BTreeMap<String, f64>,
-    /// First and last averaged sample (or the dwell bounds), ns since the Unix epoch.
+    /// First and last averaged sample (or the dwell bounds), ns since the Unix epoch; in the
+    /// JSON `t_first`/`t_last` as `{sec, nsec}` (the Foxglove time convention: a JavaScript
+    /// viewer would round an integer of ns); format-1 logs wrote `t_first_ns`/`t_last_ns`.
+    #[serde(rename = "t_first", alias = "t_first_ns", with = "stamp")]
+    #[schemars(with = "Stamp")]
     pub t_first_ns: u64,
+    #[serde(rename = "t_last", alias = "t_last_ns", with = "stamp")]
+    #[schemars(with = "Stamp")]
     pub t_last_ns: u64,
+}
+
+/// A time in the Foxglove JSON convention: seconds and nanoseconds since the Unix epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+pub struct Stamp {
+    pub sec: u32,
+    pub nsec: u32,
+}
+
+/// ns since the epoch as a [`Stamp`]; read back from a `Stamp` or a plain integer of ns
+/// (format-1 logs).
+mod stamp {
+    use super::Stamp;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(ns: &u64, s: S) -> Result<S::Ok, S::Error> {
+        let st = Stamp {
+            sec: u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX),
+            nsec: (ns % 1_000_000_000) as u32,
+        };
+        serde::Serialize::serialize(&st, s)
+    }
+
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Either {
+        Ns(u64),
+        Stamp(Stamp),
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+        Ok(match Either::deserialize(d)? {
+            Either::Ns(ns) => ns,
+            Either::Stamp(st) => u64::from(st.sec) * 1_000_000_000 + u64::from(st.nsec),
+        })
+    }
+}
+
+/// Schema of a per-channel map of `/pose`: every channel name of every instrument, as an
+/// optional number (viewers list an object's fields from `properties`).
+fn channel_map(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    let props: serde_json::Map<String, serde_json::Value> = Instrument::POSE_VALUED
+        .iter()
+        .flat_map(|i| i.detector_channels())
+        .map(|c| (c.to_string(), serde_json::json!({"type": "number"})))
+        .collect();
+    schemars::json_schema!({"type": "object", "properties": props})
 }
 topic!(PoseMsg, "/pose", "metrolog.Pose");
 
@@ -236,7 +297,9 @@ pub struct CountersMsg {
     pub invalid: u64,
     pub device_errors: u64,
     pub answers: u64,
-    /// Fitted drift of the device clock against the host clock, ppm.
+    /// Fitted drift of the device clock against the host clock, ppm; absent until the fit
+    /// has enough points (never `null`: viewers want one scalar type per field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clock_drift_ppm: Option<f64>,
 }
 
@@ -267,6 +330,7 @@ impl From<&Counters> for CountersMsg {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct StatusMsg {
     /// Counters by instrument name (`interferometer`, `capball`, `psd`, `trigger`).
+    #[schemars(schema_with = "counters_map")]
     pub instruments: BTreeMap<String, CountersMsg>,
     /// Messages written to this log so far.
     pub log_messages: u64,
@@ -274,6 +338,17 @@ pub struct StatusMsg {
     pub poses: BTreeMap<String, u64>,
 }
 topic!(StatusMsg, "/status", "metrolog.Status");
+
+/// Schema of `/status` `instruments`: one optional [`CountersMsg`] per instrument name.
+fn counters_map(g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    let counters = g.subschema_for::<CountersMsg>();
+    let props: serde_json::Map<String, serde_json::Value> =
+        ["interferometer", "capball", "psd", "trigger"]
+            .iter()
+            .map(|n| (n.to_string(), counters.as_value().clone()))
+            .collect();
+    schemars::json_schema!({"type": "object", "properties": props})
+}
 
 /// What happened to a device connection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -477,19 +552,153 @@ pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Decoded>, serde_json::E
     }))
 }
 
-/// The topics metrolog writes, with their schema names and JSON schemas.
-pub fn all_topics() -> Vec<(&'static str, &'static str, schemars::Schema)> {
-    fn one<T: TopicMessage>() -> (&'static str, &'static str, schemars::Schema) {
-        (T::TOPIC, T::SCHEMA_NAME, schemars::schema_for!(T))
+/// The JSON topics metrolog writes, with their schema names and viewer-safe JSON schemas
+/// ([`viewer_schema`]). The raw sample topics are protobuf ([`crate::raw::RAW_TOPICS`]).
+pub fn json_topics() -> Vec<(&'static str, &'static str, serde_json::Value)> {
+    fn one<T: TopicMessage>() -> (&'static str, &'static str, serde_json::Value) {
+        (
+            T::TOPIC,
+            T::SCHEMA_NAME,
+            viewer_schema(&schemars::schema_for!(T)),
+        )
     }
     vec![
-        one::<PositionMsg>(),
-        one::<EnvironmentMsg>(),
-        one::<CapballMsg>(),
-        one::<PsdMsg>(),
         one::<TriggerMsg>(),
         one::<PoseMsg>(),
         one::<StatusMsg>(),
         one::<EventMsg>(),
     ]
+}
+
+/// A JSON schema rewritten into the subset the viewers load (Lichtblick's and Foxglove's
+/// `parseJsonSchema` accept an object root whose fields each have one scalar `type`, and
+/// follow no `$ref`): references to `$defs` are inlined, enums become
+/// `{"type": "string", "enum": [...]}`, and `null` is dropped from type lists (metrolog never
+/// writes `null` in these topics: an absent value is an absent field).
+pub fn viewer_schema(schema: &schemars::Schema) -> serde_json::Value {
+    let mut root = schema.as_value().clone();
+    let defs = root
+        .as_object_mut()
+        .and_then(|o| o.remove("$defs"))
+        .unwrap_or_default();
+    inline(&mut root, &defs, 0);
+    root
+}
+
+fn inline(v: &mut serde_json::Value, defs: &serde_json::Value, depth: usize) {
+    use serde_json::Value;
+    match v {
+        Value::Object(o) => {
+            if let Some(Value::String(r)) = o.get("$ref").cloned()
+                && depth < 32
+                && let Some(Value::Object(def)) =
+                    r.strip_prefix("#/$defs/").and_then(|name| defs.get(name))
+            {
+                o.remove("$ref");
+                for (k, x) in def {
+                    o.entry(k.clone()).or_insert_with(|| x.clone());
+                }
+                return inline(v, defs, depth + 1);
+            }
+            // `Option<T>`: `anyOf: [T, {"type": "null"}]` → T.
+            for key in ["anyOf", "oneOf"] {
+                if let Some(Value::Array(alts)) = o.get(key) {
+                    let not_null: Vec<Value> = alts
+                        .iter()
+                        .filter(|a| a.get("type") != Some(&Value::from("null")))
+                        .cloned()
+                        .collect();
+                    let strings: Option<Vec<Value>> = not_null
+                        .iter()
+                        .map(|a| {
+                            a.get("const").cloned().or_else(|| {
+                                a.get("enum")
+                                    .and_then(|e| e.as_array())
+                                    .filter(|e| e.len() == 1)
+                                    .map(|e| e[0].clone())
+                            })
+                        })
+                        .collect();
+                    if let Some(values) = strings.filter(|s| s.iter().all(Value::is_string)) {
+                        o.remove(key);
+                        o.insert("type".into(), "string".into());
+                        o.insert("enum".into(), Value::Array(values));
+                    } else if not_null.len() == 1 {
+                        o.remove(key);
+                        if let Value::Object(only) = &not_null[0] {
+                            for (k, x) in only {
+                                o.entry(k.clone()).or_insert_with(|| x.clone());
+                            }
+                        }
+                    }
+                }
+            }
+            // A map (`additionalProperties` only): viewers read `properties` of every object.
+            if o.get("type") == Some(&Value::from("object")) && !o.contains_key("properties") {
+                o.insert("properties".into(), Value::Object(Default::default()));
+            }
+            if let Some(Value::Array(types)) = o.get("type") {
+                let kept: Vec<Value> = types
+                    .iter()
+                    .filter(|t| *t != &Value::from("null"))
+                    .cloned()
+                    .collect();
+                if kept.len() == 1 {
+                    o.insert("type".into(), kept[0].clone());
+                }
+            }
+            for x in o.values_mut() {
+                inline(x, defs, depth + 1);
+            }
+        }
+        Value::Array(a) => a.iter_mut().for_each(|x| inline(x, defs, depth + 1)),
+        _ => {}
+    }
+}
+
+/// Why a message did not decode.
+#[derive(Debug, thiserror::Error)]
+pub enum DecodeError {
+    #[error("bad JSON: {0}")]
+    Json(#[from] serde_json::Error),
+    #[error("bad protobuf batch: {0}")]
+    Protobuf(String),
+}
+
+/// A message of one of metrolog's topics, decoded, whatever the log format.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LogMessage {
+    /// Raw samples (one from an old JSON log, a batch from a protobuf one), each with its host
+    /// arrival time.
+    Samples(Vec<Sample>),
+    Trigger(TriggerMsg),
+    Pose(PoseMsg),
+    Status(StatusMsg),
+    Event(EventMsg),
+}
+
+/// Decodes a message of one of metrolog's topics, JSON (old and current logs) or protobuf
+/// (raw batches); `log_ns` is the message's log time, the host time of an old JSON sample.
+/// `Ok(None)` for a topic it does not know.
+pub fn decode_message(
+    topic: &str,
+    encoding: &str,
+    log_ns: u64,
+    data: &[u8],
+) -> Result<Option<LogMessage>, DecodeError> {
+    if encoding == "protobuf" {
+        return match crate::raw::Batch::decode(topic, data).map_err(DecodeError::Protobuf)? {
+            Some(b) => Ok(Some(LogMessage::Samples(
+                b.samples().map_err(DecodeError::Protobuf)?,
+            ))),
+            None => Ok(None),
+        };
+    }
+    Ok(decode(topic, data)?.map(|d| match d {
+        Decoded::Trigger(t) => LogMessage::Trigger(t),
+        Decoded::Pose(p) => LogMessage::Pose(p),
+        Decoded::Status(s) => LogMessage::Status(s),
+        Decoded::Event(e) => LogMessage::Event(e),
+        raw => LogMessage::Samples(raw.to_sample(log_ns).into_iter().collect()),
+    }))
 }

@@ -4,6 +4,11 @@
 //! `LogOptions::flush_interval` (1 s) — checked on every write and by
 //! [`LogWriter::flush_if_due`], which the pipeline calls on a timer — so a power loss or
 //! SIGKILL costs at most about one second of data; a closed chunk is never rewritten.
+//!
+//! Raw samples are gathered per topic into protobuf batches ([`crate::raw`]) of at most
+//! `LogOptions::batch_interval` of host time. Before any other message is written the open
+//! batches are written, so the file keeps the order in which the pipeline saw samples,
+//! triggers and pose values per instrument (replay depends on it; docs/log-format.md).
 
 use std::collections::BTreeMap;
 use std::fs::{File, OpenOptions};
@@ -15,7 +20,8 @@ use drivers::{Sample, Trigger};
 use mcap::records::{MessageHeader, Metadata};
 use mcap::{Attachment, Compression, McapError, WriteOptions};
 
-use super::topics::{self, Decoded, PoseMsg, StatusMsg, TopicMessage, TriggerMsg};
+use super::raw::{self, Batch};
+use super::topics::{self, PoseMsg, StatusMsg, TopicMessage, TriggerMsg};
 use super::{LogError, RUN_METADATA, RunMetadata};
 
 /// Writer settings.
@@ -29,6 +35,10 @@ pub struct LogOptions {
     pub zstd_level: u32,
     /// `fsync` the file on every flush (off only in benchmarks of the encoder).
     pub fsync: bool,
+    /// Longest span of host arrival times in one raw batch.
+    pub batch_interval: Duration,
+    /// Most samples in one raw batch.
+    pub batch_max: usize,
 }
 
 impl Default for LogOptions {
@@ -38,6 +48,8 @@ impl Default for LogOptions {
             chunk_size: 4 << 20,
             zstd_level: 3,
             fsync: true,
+            batch_interval: Duration::from_millis(10),
+            batch_max: 1000,
         }
     }
 }
@@ -85,6 +97,11 @@ pub struct LogWriter {
     opts: LogOptions,
     /// The first write error: after it, every write returns it again.
     failed: Option<(String, &'static str)>,
+    /// Open raw batches, by `raw::RAW_TOPICS` index, with the host time of their first sample.
+    pending: [Option<(Batch, u64)>; 4],
+    /// Encoding buffer, reused.
+    buf: Vec<u8>,
+    samples: u64,
 }
 
 /// The error with its causes (the mcap crate's message alone hides the OS error).
@@ -152,7 +169,17 @@ impl LogWriter {
         };
         let mut mcap = wopts.create(sink).map_err(werr)?;
         let mut channels = BTreeMap::new();
-        for (topic, schema_name, schema) in topics::all_topics() {
+        let descriptors = raw::descriptor_set();
+        for (topic, schema_name) in raw::RAW_TOPICS {
+            let sid = mcap
+                .add_schema(schema_name, "protobuf", &descriptors)
+                .map_err(werr)?;
+            let cid = mcap
+                .add_channel(sid, topic, "protobuf", &BTreeMap::new())
+                .map_err(werr)?;
+            channels.insert(topic, cid);
+        }
+        for (topic, schema_name, schema) in topics::json_topics() {
             let data = serde_json::to_vec(&schema).unwrap_or_default();
             let sid = mcap
                 .add_schema(schema_name, "jsonschema", &data)
@@ -176,6 +203,9 @@ impl LogWriter {
             last_flush: Instant::now(),
             opts,
             failed: None,
+            pending: Default::default(),
+            buf: Vec::with_capacity(64 << 10),
+            samples: 0,
         };
         w.flush()?;
         Ok(w)
@@ -232,9 +262,14 @@ impl LogWriter {
         &self.path
     }
 
-    /// Messages written so far.
+    /// Messages written so far (a raw batch is one message).
     pub fn messages(&self) -> u64 {
         self.messages
+    }
+
+    /// Raw samples written so far (including those in open batches).
+    pub fn samples(&self) -> u64 {
+        self.samples
     }
 
     fn fail(&mut self, e: McapError) -> LogError {
@@ -289,8 +324,23 @@ impl LogWriter {
         self.write_raw(T::TOPIC, log_ns, &data)
     }
 
-    /// Writes an already encoded message of one of metrolog's topics.
+    /// Writes an already encoded JSON message of one of metrolog's JSON topics (after the
+    /// open raw batches, which keeps the file in the order the messages came).
     pub fn write_raw(&mut self, topic: &str, log_ns: u64, data: &[u8]) -> Result<(), LogError> {
+        if raw::RAW_TOPICS.iter().any(|(t, _)| *t == topic) {
+            return Err(LogError::Write {
+                path: self.path.clone(),
+                reason: format!("{topic} holds protobuf batches, not JSON"),
+                hint: "write raw samples with write_sample",
+            });
+        }
+        self.write_batches()?;
+        self.write_message(topic, log_ns, data)?;
+        self.flush_if_due()?;
+        Ok(())
+    }
+
+    fn write_message(&mut self, topic: &str, log_ns: u64, data: &[u8]) -> Result<(), LogError> {
         let Some(&channel_id) = self.channels.get(topic) else {
             return Err(LogError::Write {
                 path: self.path.clone(),
@@ -310,20 +360,63 @@ impl LogWriter {
         }
         self.sequence = self.sequence.wrapping_add(1);
         self.messages += 1;
-        self.flush_if_due()?;
         Ok(())
     }
 
-    /// A raw sample on its topic, log time = `host_ns`.
+    /// A raw sample into the batch of its topic; the batch is written when it spans
+    /// `batch_interval` of host time or holds `batch_max` samples, before any other message,
+    /// and on every flush. Its log time is the host arrival time of its first sample.
     pub fn write_sample(&mut self, s: &Sample) -> Result<(), LogError> {
-        match Decoded::from_sample(s) {
-            Decoded::Position(m) => self.write(s.host_ns, &m),
-            Decoded::Environment(m) => self.write(s.host_ns, &m),
-            Decoded::Capball(m) => self.write(s.host_ns, &m),
-            Decoded::Psd(m) => self.write(s.host_ns, &m),
-            // `from_sample` makes only the four raw messages above.
-            _ => Ok(()),
+        let topic = raw::topic_of(s);
+        let i = raw::RAW_TOPICS
+            .iter()
+            .position(|(t, _)| *t == topic)
+            .unwrap_or(0);
+        let (batch, first_ns) = self.pending[i].get_or_insert_with(|| (Batch::for_sample(s), 0));
+        if batch.is_empty() {
+            *first_ns = s.host_ns;
         }
+        batch.push(s);
+        self.samples += 1;
+        let full = batch.len() >= self.opts.batch_max
+            || s.host_ns.saturating_sub(*first_ns) >= self.opts.batch_interval.as_nanos() as u64;
+        if full {
+            self.write_batch(i)?;
+            self.flush_if_due()?;
+        }
+        Ok(())
+    }
+
+    fn write_batch(&mut self, i: usize) -> Result<(), LogError> {
+        let Some((batch, first_ns)) = self.pending[i].as_mut() else {
+            return Ok(());
+        };
+        if batch.is_empty() {
+            return Ok(());
+        }
+        let (topic, log_ns) = (batch.topic(), *first_ns);
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clear();
+        batch.encode(&mut buf);
+        batch.clear();
+        let r = self.write_message(topic, log_ns, &buf);
+        self.buf = buf;
+        r
+    }
+
+    /// Writes every open raw batch, oldest first.
+    fn write_batches(&mut self) -> Result<(), LogError> {
+        let mut open: Vec<(u64, usize)> = (0..self.pending.len())
+            .filter_map(|i| match &self.pending[i] {
+                Some((b, t)) if !b.is_empty() => Some((*t, i)),
+                _ => None,
+            })
+            .collect();
+        open.sort_unstable();
+        for (_, i) in open {
+            self.write_batch(i)?;
+        }
+        Ok(())
     }
 
     pub fn write_trigger(&mut self, t: &Trigger) -> Result<(), LogError> {
@@ -390,6 +483,7 @@ impl LogWriter {
 
     /// Closes the open chunk and writes it through to the disk.
     pub fn flush(&mut self) -> Result<(), LogError> {
+        self.write_batches()?;
         let r = self.writer()?.flush();
         self.last_flush = Instant::now();
         r.map_err(|e| self.fail(e))
@@ -413,6 +507,9 @@ impl LogWriter {
     fn close(&mut self) -> Result<(), LogError> {
         if self.failed.is_some() {
             return Err(self.failed_error());
+        }
+        if self.mcap.is_some() {
+            self.write_batches()?;
         }
         let Some(mut w) = self.mcap.take() else {
             return Ok(());

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde::Serialize;
 
-use metrolog_log::topics::{self, Decoded, PoseMsg, StatusMsg, TopicMessage};
+use metrolog_log::topics::{self, LogMessage, PoseMsg, StatusMsg, TopicMessage};
 use metrolog_log::{self as log, LogItem, RUN_METADATA, ReadSummary};
 
 #[derive(Debug, clap::Args)]
@@ -23,10 +23,14 @@ pub struct Args {
 /// Messages of one topic.
 #[derive(Debug, Clone, Default, Serialize, PartialEq)]
 pub struct TopicInfo {
+    /// MCAP messages (a raw batch of a format-2 log is one).
     pub messages: u64,
+    /// Raw samples (raw topics only).
+    pub samples: u64,
     pub first_ns: Option<u64>,
     pub last_ns: Option<u64>,
-    /// Mean message rate between the first and the last message, Hz.
+    /// Mean rate between the first and the last message, Hz: samples per second on the raw
+    /// topics, messages per second on the others.
     pub rate_hz: Option<f64>,
 }
 
@@ -54,7 +58,7 @@ pub struct InfoReport {
     /// The last `/status` message.
     pub last_status: Option<StatusMsg>,
     pub attachments: Vec<AttachmentInfo>,
-    /// `/pose` and `/status` messages that did not decode as their topic's type.
+    /// Raw batches, `/pose` and `/status` messages that did not decode as their topic's type.
     pub undecodable: u64,
 }
 
@@ -68,9 +72,11 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
     let mut last_status = None;
     let mut attachments = Vec::new();
     let mut undecodable = 0;
-    let read = log::read_log(path, |item| match item {
+    let mut on_item = |item: LogItem<'_>| match item {
+        LogItem::Channel { .. } => {}
         LogItem::Message {
             topic,
+            encoding,
             log_ns,
             data,
         } => {
@@ -78,12 +84,32 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
             t.messages += 1;
             t.first_ns.get_or_insert(log_ns);
             t.last_ns = Some(log_ns);
+            if encoding == "protobuf" {
+                // A raw batch: count its samples (the length of one column).
+                match metrolog_log::raw::Batch::decode(topic, data) {
+                    Ok(Some(b)) => {
+                        t.samples += b.len() as u64;
+                        // The span ends at the last sample, not at the batch's log time.
+                        if let Some(last) = b.samples().ok().and_then(|s| s.last().cloned()) {
+                            t.last_ns = t.last_ns.max(Some(last.host_ns));
+                        }
+                    }
+                    _ => undecodable += 1,
+                }
+                return;
+            }
+            if metrolog_log::raw::RAW_TOPICS
+                .iter()
+                .any(|(r, _)| *r == topic)
+            {
+                t.samples += 1; // format 1: one JSON message per sample
+            }
             // Only the topics the report reads are decoded: an hour of raw samples is millions.
             if topic != PoseMsg::TOPIC && topic != StatusMsg::TOPIC {
                 return;
             }
-            match topics::decode(topic, data) {
-                Ok(Some(Decoded::Pose(p))) => {
+            match topics::decode_message(topic, encoding, log_ns, data) {
+                Ok(Some(LogMessage::Pose(p))) => {
                     *poses
                         .entry(p.instrument.name().to_string())
                         .or_default()
@@ -91,7 +117,7 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
                         .or_default() += 1;
                     pose_ids.insert(p.pose);
                 }
-                Ok(Some(Decoded::Status(s))) => last_status = Some(s),
+                Ok(Some(LogMessage::Status(s))) => last_status = Some(s),
                 Ok(_) => {}
                 Err(_) => undecodable += 1,
             }
@@ -113,14 +139,26 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
                 instruments.push(map.clone());
             }
         }
-    })
+    };
+    let bar = super::progress::Progress::new("info");
+    let read = log::read_log_progress(
+        path,
+        |d, t| bar.update(d, t),
+        |item| {
+            on_item(item);
+            std::ops::ControlFlow::Continue(())
+        },
+    )
     .with_context(|| format!("cannot inspect {}", path.display()))?;
+    drop(bar);
     for t in tops.values_mut() {
         if let (Some(a), Some(b)) = (t.first_ns, t.last_ns)
             && b > a
             && t.messages > 1
         {
-            t.rate_hz = Some((t.messages - 1) as f64 / ((b - a) as f64 * 1e-9));
+            // Raw topics: samples per second (a format-2 message is a batch of samples).
+            let n = if t.samples > 0 { t.samples } else { t.messages };
+            t.rate_hz = Some((n - 1) as f64 / ((b - a) as f64 * 1e-9));
         }
     }
     Ok(InfoReport {

@@ -12,6 +12,8 @@ pub mod input;
 pub mod parts;
 pub mod plan;
 pub mod plots;
+pub mod progress;
+pub mod recover;
 pub mod replay;
 pub mod report;
 pub mod run;

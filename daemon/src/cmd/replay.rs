@@ -10,12 +10,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use serde::Serialize;
 
-use metrolog_log::topics::{Decoded, PoseMsg, TopicMessage, decode};
+use metrolog_log::topics::{LogMessage, PoseMsg, TopicMessage, decode_message};
 
 use crate::acquire::detect::PoseEngine;
 use metrolog_log::{
     DetectorSettings, LogItem, LogOptions, LogWriter, RUN_METADATA, ReadSummary, RunMetadata,
-    read_log, read_run_metadata,
+    read_log_progress, read_run_metadata,
 };
 
 #[derive(Debug, clap::Args)]
@@ -103,40 +103,60 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
     let mut replayed = Vec::new();
     let mut last_ns = 0u64;
     let mut first_error: Option<anyhow::Error> = None;
-    let read = read_log(path, |item| {
-        if first_error.is_some() {
-            return;
-        }
+    let bar = super::progress::Progress::new("replay");
+    let mut on_item = |item: LogItem<'_>| {
         let r: anyhow::Result<()> = (|| {
             match item {
                 LogItem::Message {
                     topic,
+                    encoding,
                     log_ns,
                     data,
                 } => {
                     last_ns = last_ns.max(log_ns);
-                    let new_poses = match decode(topic, data) {
-                        Ok(Some(Decoded::Pose(p))) => {
-                            logged.push((log_ns, p));
-                            return Ok(());
-                        }
-                        Ok(Some(Decoded::Trigger(t))) => engine.on_trigger(&t.to_trigger(log_ns)),
-                        // Raw samples (environment records feed no detector); other topics none.
-                        Ok(Some(msg)) => msg
-                            .to_sample(log_ns)
-                            .map(|s| engine.on_sample(&s))
-                            .unwrap_or_default(),
-                        Ok(None) => Vec::new(),
+                    let msg = match decode_message(topic, encoding, log_ns, data) {
+                        Ok(m) => m,
                         Err(e) => bail!("a {topic} message at {log_ns} ns does not decode: {e}"),
                     };
-                    if let Some(w) = writer.as_mut() {
-                        w.write_raw(topic, log_ns, data)?;
-                        for p in &new_poses {
-                            w.write_pose(log_ns, p)?;
+                    match msg {
+                        Some(LogMessage::Pose(p)) => logged.push((log_ns, p)),
+                        Some(LogMessage::Trigger(t)) => {
+                            let trig = t.to_trigger(log_ns);
+                            let new_poses = engine.on_trigger(&trig);
+                            if let Some(w) = writer.as_mut() {
+                                w.write_trigger(&trig)?;
+                                for p in &new_poses {
+                                    w.write_pose(log_ns, p)?;
+                                }
+                            }
+                            replayed.extend(new_poses.into_iter().map(|p| (log_ns, p)));
+                        }
+                        // Samples one by one, each at its host arrival time (a batch of a
+                        // format-2 log holds many; environment records feed no detector).
+                        Some(LogMessage::Samples(samples)) => {
+                            for s in &samples {
+                                last_ns = last_ns.max(s.host_ns);
+                                let new_poses = engine.on_sample(s);
+                                if let Some(w) = writer.as_mut() {
+                                    w.write_sample(s)?;
+                                    for p in &new_poses {
+                                        w.write_pose(s.host_ns, p)?;
+                                    }
+                                }
+                                replayed.extend(new_poses.into_iter().map(|p| (s.host_ns, p)));
+                            }
+                        }
+                        // /status, /event and unknown topics are copied as they are.
+                        Some(_) | None => {
+                            if let Some(w) = writer.as_mut()
+                                && encoding == "json"
+                            {
+                                w.write_raw(topic, log_ns, data)?;
+                            }
                         }
                     }
-                    replayed.extend(new_poses.into_iter().map(|p| (log_ns, p)));
                 }
+                LogItem::Channel { .. } => {}
                 LogItem::Attachment {
                     name,
                     media_type,
@@ -157,10 +177,16 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
             }
             Ok(())
         })();
-        if let Err(e) = r {
-            first_error = Some(e);
+        match r {
+            Ok(()) => std::ops::ControlFlow::Continue(()),
+            Err(e) => {
+                first_error = Some(e);
+                std::ops::ControlFlow::Break(())
+            }
         }
-    })?;
+    };
+    let read = read_log_progress(path, |d, t| bar.update(d, t), &mut on_item)?;
+    drop(bar);
     if let Some(e) = first_error {
         return Err(e);
     }

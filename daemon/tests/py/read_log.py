@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
-"""Independent reader of a metrolog MCAP log (the `mcap` and `jsonschema` pip packages).
+"""Independent reader of a metrolog MCAP log (the `mcap`, `jsonschema` and `protobuf` pip
+packages).
 
 Reads the file record by record (so the intact prefix of a log whose writer was killed is
-read too), validates every message against the JSON schema of its channel, and prints one JSON
-summary on stdout:
+read too), validates every JSON message against the JSON schema of its channel, decodes every
+protobuf batch of the raw topics with the FileDescriptorSet of its channel (counts are then
+samples, not messages; docs/log-format.md), and prints one JSON summary on stdout:
 
   complete      footer and closing magic present (the writer closed the file)
   read_error    why reading stopped early (a truncated file), or null
@@ -25,7 +27,22 @@ from mcap.records import Attachment, Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 
+def protobuf_samples(schema, data, classes):
+    """Samples in one raw batch, decoded with the channel's own FileDescriptorSet."""
+    cls = classes.get(schema.id)
+    if cls is None:
+        from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+        pool = descriptor_pool.DescriptorPool()
+        for fd in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+            pool.Add(fd)
+        cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+        classes[schema.id] = cls
+    return len(cls.FromString(data).header.seq)
+
+
 def main(path):
+    classes = {}
     schemas, channels, validators_by_schema = {}, {}, {}
     counts, errors, poses = {}, [], []
     attachments, metadata = [], {}
@@ -41,6 +58,10 @@ def main(path):
                 elif isinstance(rec, Message):
                     ch = channels[rec.channel_id]
                     schema = schemas[ch.schema_id]
+                    if schema.encoding == "protobuf" and ch.message_encoding == "protobuf":
+                        n = protobuf_samples(schema, rec.data, classes)
+                        counts[ch.topic] = counts.get(ch.topic, 0) + n
+                        continue
                     if schema.encoding != "jsonschema" or ch.message_encoding != "json":
                         errors.append(f"{ch.topic}: encoding {schema.encoding}/{ch.message_encoding}")
                         continue

@@ -1,0 +1,151 @@
+//! Every channel of a log opens in Foxglove and Lichtblick: the viewers' own MCAP reader
+//! (npm `@mcap/core`, zstd from `@mcap/support`) reads a demo-like log, its JSON schemas are
+//! checked against the rules the viewers' JSON-schema parser applies, and the raw protobuf
+//! batches are decoded with `protobufjs` from the FileDescriptorSet in the log
+//! (`tests/js/check_viewers.cjs`; docs/log-format.md). The decoded values are compared with
+//! the samples that were written.
+//!
+//! Needs node and the npm packages that `.ci/run` installs into `.ci/npm`
+//! (`METROLOG_NPM_DIR` overrides); without node the test says so and passes, without the
+//! packages it does the same outside CI and fails in CI.
+
+mod log_common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use drivers::{DriverEvent, SampleValues};
+use metrolog_log::synthetic::SyntheticRun;
+use serde_json::Value;
+
+fn npm_dir() -> PathBuf {
+    match std::env::var_os("METROLOG_NPM_DIR") {
+        Some(d) => PathBuf::from(d),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../.ci/npm"),
+    }
+}
+
+/// The node check's summary of `log`, or None (with the reason printed) when it cannot run.
+fn check(log: &Path) -> Option<Value> {
+    if Command::new("node").arg("--version").output().is_err() {
+        println!("SKIPPED the viewer check: node is not installed (apt-get install nodejs npm)");
+        return None;
+    }
+    let modules = npm_dir().join("node_modules");
+    if !modules.join("@mcap/core").exists() {
+        let msg = format!(
+            "the viewer check needs npm packages in {} (npm install --prefix {} @mcap/core@2 @mcap/support@1 protobufjs@7; .ci/run does)",
+            modules.display(),
+            npm_dir().display()
+        );
+        assert!(std::env::var_os("CI").is_none(), "{msg}");
+        println!("SKIPPED: {msg}");
+        return None;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/check_viewers.cjs");
+    let out = Command::new("node")
+        .arg(&script)
+        .arg(log)
+        .env("NODE_PATH", &modules)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "check_viewers.cjs failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Some(serde_json::from_slice(&out.stdout).unwrap())
+}
+
+#[test]
+fn every_channel_opens_in_the_viewers_and_decodes_to_what_was_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = SyntheticRun {
+        targets_mm: vec![0.0, 10.0, 20.0],
+        ..SyntheticRun::default()
+    };
+    let w = log_common::write_run(dir.path(), "demo.mcap", &run);
+    let Some(r) = check(&w.path) else { return };
+    assert_eq!(r["footer"], true);
+    let topics = r["topics"].as_object().unwrap();
+    let want = [
+        "/interferometer/position",
+        "/interferometer/environment",
+        "/capball/sample",
+        "/psd/sample",
+        "/cnc/trigger",
+        "/pose",
+        "/status",
+        "/event",
+    ];
+    for t in want {
+        let info = &topics[t];
+        assert_eq!(info["problems"], serde_json::json!([]), "{t}: {info}");
+        assert!(info["messages"].as_u64().unwrap() > 0, "{t}: no message");
+        assert!(!info["first"].is_null(), "{t}: nothing decoded");
+    }
+    assert_eq!(topics.len(), want.len(), "{:?}", topics.keys());
+
+    // Raw topics: the samples node decoded, per topic, and the first one's values.
+    let mut samples: BTreeMap<&str, Vec<&drivers::Sample>> = BTreeMap::new();
+    for e in &w.events {
+        if let DriverEvent::Sample(s) = e {
+            samples
+                .entry(metrolog_log::raw::topic_of(s))
+                .or_default()
+                .push(s);
+        }
+    }
+    for (topic, ss) in &samples {
+        let info = &topics[*topic];
+        assert_eq!(info["samples"], ss.len() as u64, "{topic}");
+        assert_eq!(info["message_encoding"], "protobuf");
+        let first = &info["first"];
+        let s = ss[0];
+        let h = &first["header"];
+        // 64-bit integers come as strings (longs: String), times as {seconds, nanos}.
+        assert_eq!(h["seq"][0], s.seq.to_string(), "{topic}");
+        assert_eq!(h["device_t_us"][0], s.device_t_us.to_string(), "{topic}");
+        let ft = &h["fitted_time"][0];
+        let ns = ft["seconds"].as_str().unwrap().parse::<u64>().unwrap() * 1_000_000_000
+            + ft["nanos"].as_u64().unwrap();
+        assert_eq!(ns, s.fitted_ns, "{topic}");
+        assert_eq!(h["valid"][0], s.valid, "{topic}");
+        let f = |k: &str| first[k][0].as_f64().unwrap();
+        match &s.values {
+            SampleValues::Position { position_um, .. } => {
+                assert_eq!(f("position_um"), *position_um)
+            }
+            SampleValues::Environment { air_c, .. } => assert_eq!(f("air_c"), *air_c),
+            SampleValues::Capball { e_um, .. } => {
+                assert_eq!([f("ex_um"), f("ey_um"), f("ez_um")], *e_um)
+            }
+            SampleValues::Psd { y_um, .. } => assert_eq!(f("y_um"), *y_um),
+        }
+    }
+    // JSON topics: the first /pose with its times as {sec, nsec}.
+    let p = &topics["/pose"]["first"];
+    let p0 = &w.poses[0];
+    assert_eq!(p["pose"], p0.pose);
+    let t = &p["t_first"];
+    assert_eq!(
+        t["sec"].as_u64().unwrap() * 1_000_000_000 + t["nsec"].as_u64().unwrap(),
+        p0.t_first_ns
+    );
+}
+
+/// The check itself can fail: a log of format 1 (JSON samples with `null` numbers and `$ref`
+/// enums) is rejected on the channels the viewers could not open.
+#[test]
+fn the_check_rejects_a_format_1_log() {
+    let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../log/tests/data/format1.mcap");
+    let Some(r) = check(&log) else { return };
+    let problems = |t: &str| r["topics"][t]["problems"].as_array().unwrap().len();
+    assert!(
+        problems("/psd/sample") > 0,
+        "{}",
+        r["topics"]["/psd/sample"]
+    );
+    assert!(problems("/pose") > 0, "{}", r["topics"]["/pose"]);
+}

@@ -455,11 +455,26 @@ pub fn standard_schedule(
 pub fn simulate(model: &AxisModel, schedule: &[ScheduledReading], seed: u64) -> PositioningData {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let outliers = model.outliers();
+    // Offsets per cycle from their own stream, so that models without them simulate as before.
+    let cycle_offsets: Vec<f64> = match model.cycle_offsets_std_um() {
+        Some(s) => {
+            let mut r2 = ChaCha8Rng::seed_from_u64(seed ^ 0x0ff5_e7c7_c1e5);
+            let n = schedule.iter().map(|s| s.cycle).max().unwrap_or(0);
+            (0..=n)
+                .map(|_| {
+                    let z: f64 = StandardNormal.sample(&mut r2);
+                    s * z
+                })
+                .collect()
+        }
+        None => Vec::new(),
+    };
     let readings = schedule
         .iter()
         .map(|s| {
             let i0 = s.index.saturating_sub(1);
             let mut dev = model.deterministic_um(i0, s.direction, s.time_s);
+            dev += cycle_offsets.get(s.cycle).copied().unwrap_or(0.0);
             let z: f64 = StandardNormal.sample(&mut rng);
             dev += model.noise_std_um(i0) * z;
             if let Some((rate, mag)) = outliers {

@@ -121,24 +121,23 @@ pub(super) struct Step {
     pub(super) alpha_temp: bool,
 }
 
-/// Forward selection of mean effects (module docs): at each step the candidate with the
-/// lowest BIC is added if it beats [`Options::min_bic_gain`] and lowers the held-out error.
-/// `out` holds the outlier flags and is refined after each step.
+/// Forward selection of mean effects (module docs): at each step the candidates are tried in
+/// order of their BIC; the first that beats [`Options::min_bic_gain`] once its evidence is
+/// discounted for correlated noise, is not absorbed by the baseline and lowers the held-out
+/// error is added. `out` holds the outlier flags and is refined after each step.
 pub(super) fn forward_select(
     obs: &Obs,
     opt: &Options,
     use_temp: bool,
     out: &mut Vec<bool>,
 ) -> Vec<Step> {
-    let n = obs.len();
-    let ln_n = (n as f64).ln();
     let m = obs.n_targets;
     let var_factor = vec![1.0; m];
+    let diag = obs.with_diagonal_folds();
     let mut selected: Vec<Selected> = Vec::new();
     let mut steps: Vec<Step> = Vec::new();
     loop {
         let w = weights(obs, out, &var_factor);
-        let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
         let cols = all_cols(&selected);
         let p = Projector::new(obs, &w, &cols);
         let y_perp = p.residualize(obs, &obs.y);
@@ -146,64 +145,141 @@ pub(super) fn forward_select(
         if rss0 <= 0.0 {
             break;
         }
-        let mut best: Option<(Family, Candidate, f64)> = None;
-        let mut fams = vec![Family::Linear, Family::Warmup, Family::Cyclic];
-        if obs.x_mm.iter().any(|x| (x - obs.x_mm[0]).abs() > 1e-9) {
-            fams.push(Family::Thermal);
-            if use_temp {
-                fams.push(Family::ThermalTemp);
-            }
-        }
-        let mut temp_rss = None;
-        for fam in fams {
-            if selected.iter().any(|s| s.family.slot() == fam.slot()) {
-                continue;
-            }
-            let Some(c) = search(obs, &p, &y_perp, fam) else {
+        let mut cands = candidates(obs, &p, &y_perp, rss0, use_temp, &selected);
+        cands.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let temp_rss = cands
+            .iter()
+            .find(|c| c.0 == Family::ThermalTemp)
+            .map(|c| c.1.rss);
+        let mut added = None;
+        for (fam, cand, _) in cands {
+            let new = Selected {
+                family: fam,
+                theta: cand.theta,
+                cols: fam.columns(obs, cand.theta),
+            };
+            let mut cols_after = cols.clone();
+            cols_after.extend(new.cols.iter().cloned());
+            let Some(significance) = discounted_gain(obs, &w, &cols_after, rss0, &cand, fam) else {
                 continue;
             };
-            if fam == Family::ThermalTemp {
-                temp_rss = Some(c.rss);
+            if significance < opt.min_bic_gain || absorbed_by_baseline(obs, &p, &new.cols) {
+                continue;
             }
-            let dbic = n_eff * (c.rss / rss0).ln() + fam.n_params() as f64 * ln_n;
-            if best.as_ref().is_none_or(|b| dbic < b.2) {
-                best = Some((fam, c, dbic));
+            let eval: Vec<bool> = out.iter().map(|o| !o).collect();
+            // An offset per cycle cannot be predicted for a cycle held out whole.
+            let ho = if fam == Family::CycleOffsets { &diag } else { obs };
+            if heldout_rms(ho, &w, &cols_after, &eval) >= heldout_rms(ho, &w, &cols, &eval) {
+                continue;
             }
-        }
-        let Some((fam, cand, dbic)) = best else { break };
-        if -dbic < opt.min_bic_gain {
+            let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
+            let s2 = cand.rss / (n_eff - (obs.n_groups + cols_after.len()) as f64).max(1.0);
+            let u_theta = theta_uncertainty(obs, &p, &y_perp, fam, &cand, s2);
+            // A temperature-driven scale change reported as such when the temperatures
+            // explain it at least as well as the time-constant form.
+            let alpha_temp =
+                fam == Family::Thermal && temp_rss.is_some_and(|t| t <= cand.rss * 1.05);
+            added = Some(Step {
+                sel: new,
+                significance,
+                u_theta,
+                before_cols: cols.clone(),
+                alpha_temp,
+            });
             break;
         }
-        let new = Selected {
-            family: fam,
-            theta: cand.theta,
-            cols: fam.columns(obs, cand.theta),
-        };
-        let mut cols_after = cols.clone();
-        cols_after.extend(new.cols.iter().cloned());
-        let eval: Vec<bool> = out.iter().map(|o| !o).collect();
-        let before = heldout_rms(obs, &w, &cols, &eval);
-        let after = heldout_rms(obs, &w, &cols_after, &eval);
-        if after >= before {
-            break;
-        }
-        let s2 = cand.rss / (n_eff - (obs.n_groups + cols_after.len()) as f64).max(1.0);
-        let u_theta = theta_uncertainty(obs, &p, &y_perp, fam, &cand, s2);
-        // A temperature-driven scale change reported as such when the temperatures explain
-        // it at least as well as the time-constant form.
-        let alpha_temp = fam == Family::Thermal && temp_rss.is_some_and(|t| t <= cand.rss * 1.05);
-        steps.push(Step {
-            sel: new.clone(),
-            significance: -dbic,
-            u_theta,
-            before_cols: cols,
-            alpha_temp,
-        });
-        selected.push(new);
+        let Some(step) = added else { break };
+        selected.push(step.sel.clone());
+        steps.push(step);
         // Re-flag outliers against the richer model.
-        let (_, r) =
-            in_sample_residuals(obs, &weights(obs, out, &var_factor), &all_cols(&selected));
+        let (_, r) = in_sample_residuals(obs, &weights(obs, out, &var_factor), &all_cols(&selected));
         *out = flag_outliers(obs, &r, opt.outlier_alpha, m);
     }
     steps
+}
+
+/// Every family not yet selected, searched, with its BIC change.
+fn candidates(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    rss0: f64,
+    use_temp: bool,
+    selected: &[Selected],
+) -> Vec<(Family, Candidate, f64)> {
+    let ln_n = (obs.len() as f64).ln();
+    let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
+    let mut fams = vec![
+        Family::Linear,
+        Family::Warmup,
+        Family::Cyclic,
+        Family::Step,
+        Family::ReversalDrift,
+        Family::CycleOffsets,
+    ];
+    if obs.x_mm.iter().any(|x| (x - obs.x_mm[0]).abs() > 1e-9) {
+        fams.push(Family::Thermal);
+        if use_temp {
+            fams.push(Family::ThermalTemp);
+        }
+    }
+    fams.into_iter()
+        .filter(|f| selected.iter().all(|s| s.family.slot() != f.slot()))
+        .filter_map(|fam| {
+            let c = search(obs, p, y_perp, fam)?;
+            let dbic = n_eff * (c.rss / rss0).ln() + fam.n_params(obs) as f64 * ln_n;
+            Some((fam, c, dbic))
+        })
+        .collect()
+}
+
+/// Lag-1 correlation of residuals in time order (rows with weight > 0).
+pub(super) fn lag1_correlation(obs: &Obs, w: &[f64], resid: &[f64]) -> f64 {
+    let r: Vec<f64> = obs
+        .time_order
+        .iter()
+        .filter(|&&j| w[j] > 0.0)
+        .map(|&j| resid[j])
+        .collect();
+    let ss: f64 = r.iter().map(|x| x * x).sum();
+    if r.len() < 3 || ss <= 0.0 {
+        return 0.0;
+    }
+    r.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / ss
+}
+
+/// The BIC gain of a candidate with its likelihood-ratio part discounted for correlated
+/// noise: with a lag-1 correlation ρ of what is left, consecutive readings carry about
+/// (1 − ρ)/(1 + ρ) of the information of independent ones (air turbulence, `docs/methods.md`).
+fn discounted_gain(
+    obs: &Obs,
+    w: &[f64],
+    cols_after: &[Vec<f64>],
+    rss0: f64,
+    cand: &Candidate,
+    fam: Family,
+) -> Option<f64> {
+    if cand.rss <= 0.0 {
+        return None;
+    }
+    let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
+    let (_, r) = in_sample_residuals(obs, w, cols_after);
+    let rho = lag1_correlation(obs, w, &r).clamp(0.0, 0.95);
+    let lr = n_eff * (rss0 / cand.rss).ln();
+    Some(lr * (1.0 - rho) / (1.0 + rho) - fam.n_params(obs) as f64 * (obs.len() as f64).ln())
+}
+
+/// An effect the per-target, per-direction constants mostly absorb: less than 30 % of its
+/// columns' variation is left once they are centred within their groups.
+fn absorbed_by_baseline(obs: &Obs, p: &Projector, cols: &[Vec<f64>]) -> bool {
+    let (mut kept, mut total) = (0.0, 0.0);
+    let wsum: f64 = p.w.iter().sum();
+    for c in cols {
+        let mean = dotw(c, &vec![1.0; c.len()], &p.w) / wsum.max(f64::MIN_POSITIVE);
+        let d: Vec<f64> = c.iter().map(|v| v - mean).collect();
+        total += dotw(&d, &d, &p.w);
+        let cc = p.center(obs, c);
+        kept += dotw(&cc, &cc, &p.w);
+    }
+    total > 0.0 && kept < 0.3 * total
 }

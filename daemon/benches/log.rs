@@ -12,8 +12,9 @@ use std::time::Instant;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use drivers::DriverEvent;
-use metrolog::log::synthetic::SyntheticRun;
-use metrolog::log::{DetectorSettings, LogOptions, LogWriter, Recorder, RunMetadata};
+use metrolog::acquire::recorder::Recorder;
+use metrolog_log::synthetic::SyntheticRun;
+use metrolog_log::{DetectorSettings, LogOptions, LogWriter, RunMetadata};
 use metrology::steady::{SteadyConfig, SteadyDetector, TriggerKind};
 
 fn event_ns(e: &DriverEvent, now: u64) -> u64 {

@@ -1,11 +1,7 @@
-//! The `metrolog` binary's library: configuration, acquisition pipeline, MCAP log, replay and
-//! the command-line commands (one module per command under [`cmd`]).
+//! The `metrolog` binary's library: the acquisition service ([`acquire`]) and the
+//! command-line commands ([`cmd`], one module per command). The log format is the crate
+//! `metrolog-log`, the analyses `metrolog-analysis`.
 
-pub mod analysis;
+pub mod acquire;
 pub mod cli;
 pub mod cmd;
-pub mod config;
-pub mod log;
-pub mod pipeline;
-pub mod plot;
-pub mod service;

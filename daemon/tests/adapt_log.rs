@@ -6,12 +6,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use metrolog::analysis::{self, PositioningOptions};
-use metrolog::log::topics::{EnvironmentMsg, PoseInstrument, PoseMsg, PoseStatusName};
-use metrolog::log::{LogOptions, LogWriter, RunMetadata};
+use metrolog_analysis::{self as analysis, PositioningOptions};
+use metrolog_log::topics::{EnvironmentMsg, PoseInstrument, PoseMsg};
+use metrolog_log::{LogOptions, LogWriter, RunMetadata};
 use metrology::axis_model::Direction;
 use metrology::capball::{CapballErrors, CapballSetup, TrajectorySpec};
 use metrology::kinematics::Pose;
+use metrology::steady::PoseStatus;
 
 const T0_NS: u64 = 1_795_305_600_000_000_000;
 const TARGETS_MM: [f64; 5] = [2.312, 101.871, 198.544, 302.197, 399.050];
@@ -122,7 +123,7 @@ fn value(inst: PoseInstrument, pose_no: u32, t_ns: u64, ch: &[(&str, f64)]) -> P
     PoseMsg {
         instrument: inst,
         pose: pose_no,
-        status: PoseStatusName::Ok,
+        status: PoseStatus::Ok,
         n: 150,
         mean: ch.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
         std: ch.iter().map(|(k, _)| (k.to_string(), 0.01)).collect(),
@@ -131,7 +132,7 @@ fn value(inst: PoseInstrument, pose_no: u32, t_ns: u64, ch: &[(&str, f64)]) -> P
     }
 }
 
-fn no_value(inst: PoseInstrument, pose_no: u32, t_ns: u64, st: PoseStatusName) -> PoseMsg {
+fn no_value(inst: PoseInstrument, pose_no: u32, t_ns: u64, st: PoseStatus) -> PoseMsg {
     PoseMsg {
         instrument: inst,
         pose: pose_no,
@@ -221,7 +222,7 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
                 PoseInstrument::Interferometer,
                 no,
                 t_ns,
-                PoseStatusName::BeamInvalid,
+                PoseStatus::BeamInvalid,
             ),
             Some((i, d, c)) => value(
                 PoseInstrument::Interferometer,
@@ -240,7 +241,7 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
                 PoseInstrument::Interferometer,
                 no,
                 t_ns,
-                PoseStatusName::NeverSteady,
+                PoseStatus::NeverSteady,
             ),
             None => value(
                 PoseInstrument::Interferometer,
@@ -258,12 +259,7 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
             [300.0, -200.0, 100.0]
         };
         let cb = if spec.capball_bad_pose == Some(no) {
-            no_value(
-                PoseInstrument::Capball,
-                no,
-                t_ns,
-                PoseStatusName::NeverSteady,
-            )
+            no_value(PoseInstrument::Capball, no, t_ns, PoseStatus::NeverSteady)
         } else {
             value(
                 PoseInstrument::Capball,

@@ -71,6 +71,7 @@ fn analyze_json_has_the_contract_keys_and_says_what_is_missing() {
 }
 
 #[test]
+#[cfg_attr(not(feature = "plot"), ignore = "draws charts: needs --features plot")]
 fn analyze_text_and_plots() {
     let dir = tempfile::tempdir().unwrap();
     let csv = write_run(
@@ -111,6 +112,7 @@ fn analyze_text_and_plots() {
 }
 
 #[test]
+#[cfg_attr(not(feature = "plot"), ignore = "draws charts: needs --features plot")]
 fn diagnose_finds_the_hidden_drift_and_writes_a_model_the_simulator_reads() {
     let dir = tempfile::tempdir().unwrap();
     let csv = write_run(
@@ -160,6 +162,7 @@ fn diagnose_finds_the_hidden_drift_and_writes_a_model_the_simulator_reads() {
 }
 
 #[test]
+#[cfg_attr(not(feature = "plot"), ignore = "draws charts: needs --features plot")]
 fn bad_input_gets_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.csv");

@@ -8,9 +8,9 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use metrolog::cmd::info::inspect;
 use metrolog::cmd::replay::{ReplayOptions, replay};
-use metrolog::log::synthetic::SyntheticRun;
-use metrolog::log::topics::PositionMsg;
-use metrolog::log::{LogError, LogItem, LogOptions, LogWriter, RunMetadata, read_log};
+use metrolog_log::synthetic::SyntheticRun;
+use metrolog_log::topics::PositionMsg;
+use metrolog_log::{LogError, LogItem, LogOptions, LogWriter, RunMetadata, read_log};
 
 fn short_run() -> SyntheticRun {
     SyntheticRun {
@@ -22,7 +22,7 @@ fn short_run() -> SyntheticRun {
 }
 
 /// (topic, log time, data) of every message, in file order.
-fn messages(path: &Path) -> (Vec<(String, u64, Vec<u8>)>, metrolog::log::ReadSummary) {
+fn messages(path: &Path) -> (Vec<(String, u64, Vec<u8>)>, metrolog_log::ReadSummary) {
     let mut v = Vec::new();
     let s = read_log(path, |item| {
         if let LogItem::Message {

@@ -6,7 +6,7 @@ mod log_common;
 use std::collections::BTreeMap;
 use std::process::Command;
 
-use metrolog::log::synthetic::SyntheticRun;
+use metrolog_log::synthetic::SyntheticRun;
 
 const SCRIPT: &str = r#"
 import json, sys

@@ -6,9 +6,10 @@ use std::collections::BTreeMap;
 
 use drivers::{DriverEvent, Instrument};
 use metrolog::cmd::replay::{ReplayOptions, replay};
-use metrolog::log::synthetic::SyntheticRun;
-use metrolog::log::topics::{Decoded, PoseInstrument, PoseStatusName, RawMsg, decode};
-use metrolog::log::{LogItem, RUN_METADATA, RunMetadata, read_log};
+use metrolog_log::synthetic::SyntheticRun;
+use metrolog_log::topics::{Decoded, PoseInstrument, decode};
+use metrolog_log::{LogItem, RUN_METADATA, RunMetadata, read_log};
+use metrology::steady::PoseStatus;
 
 #[test]
 fn every_topic_round_trips() {
@@ -30,10 +31,10 @@ fn every_topic_round_trips() {
             log_ns,
             data,
         } => match decode(topic, data).unwrap().unwrap() {
-            Decoded::Position(m) => samples.push(RawMsg::Position(m).to_sample(log_ns)),
-            Decoded::Environment(m) => samples.push(RawMsg::Environment(m).to_sample(log_ns)),
-            Decoded::Capball(m) => samples.push(RawMsg::Capball(m).to_sample(log_ns)),
-            Decoded::Psd(m) => samples.push(RawMsg::Psd(m).to_sample(log_ns)),
+            m @ (Decoded::Position(_)
+            | Decoded::Environment(_)
+            | Decoded::Capball(_)
+            | Decoded::Psd(_)) => samples.extend(m.to_sample(log_ns)),
             Decoded::Trigger(t) => triggers.push(t.to_trigger(log_ns)),
             Decoded::Pose(p) => poses.push(p),
             Decoded::Status(s) => statuses.push((log_ns, s)),
@@ -113,7 +114,7 @@ fn every_topic_round_trips() {
     assert_eq!(poses, w.poses);
     assert_eq!(poses.len(), 15);
     for p in &poses {
-        assert_eq!(p.status, PoseStatusName::Ok, "{p:?}");
+        assert_eq!(p.status, PoseStatus::Ok, "{p:?}");
         assert_eq!(p.n, 150);
         let k = p.pose as usize - 1;
         let tol = 4.0 * run.noise_um / 150f64.sqrt();
@@ -249,7 +250,7 @@ fn replay_reproduces_logged_poses_bit_for_bit() {
     assert!(
         out3.replayed
             .iter()
-            .all(|(_, p)| p.n == 100 && p.status == PoseStatusName::Ok)
+            .all(|(_, p)| p.n == 100 && p.status == PoseStatus::Ok)
     );
     assert!(!out3.reproduces_log());
 }
@@ -265,9 +266,9 @@ fn trigger_free_run_finds_the_plateaus() {
     // With trigger-driven settings nothing is measured (no triggers came).
     assert!(w.poses.is_empty(), "{:?}", w.poses);
     // Replay in plateau mode through the library: the interferometer finds the 5 stops.
-    let mut settings = metrolog::log::DetectorSettings::default();
+    let mut settings = metrolog_log::DetectorSettings::default();
     settings.interferometer.mode = metrology::steady::DetectorMode::Plateaus;
-    let mut engine = metrolog::log::PoseEngine::new(&settings).unwrap();
+    let mut engine = metrolog::acquire::detect::PoseEngine::new(&settings).unwrap();
     let mut found = Vec::new();
     for e in &w.events {
         if let DriverEvent::Sample(s) = e {
@@ -390,7 +391,7 @@ fn dark_psd_samples_round_trip_as_nan_and_replay_exactly() {
         .collect();
     assert_eq!(psd.len(), 2);
     assert!(
-        psd.iter().all(|p| p.status == PoseStatusName::BeamInvalid),
+        psd.iter().all(|p| p.status == PoseStatus::BeamInvalid),
         "{psd:?}"
     );
     let out = replay(&w.path, &ReplayOptions::default()).unwrap();
@@ -407,9 +408,12 @@ fn only_the_instruments_of_the_run_get_pose_values() {
     let mut meta = log_common::meta(&run);
     meta.detector.instruments = vec![PoseInstrument::Interferometer];
     let path = dir.path().join("li80.mcap");
-    let mut rec =
-        metrolog::log::Recorder::create(&path, &meta, metrolog::log::LogOptions::default())
-            .unwrap();
+    let mut rec = metrolog::acquire::recorder::Recorder::create(
+        &path,
+        &meta,
+        metrolog_log::LogOptions::default(),
+    )
+    .unwrap();
     let mut poses = Vec::new();
     for ev in run.events() {
         // Only the interferometer and the triggers are part of this run.
@@ -424,8 +428,7 @@ fn only_the_instruments_of_the_run_get_pose_values() {
     assert!(
         poses
             .iter()
-            .all(|p| p.instrument == PoseInstrument::Interferometer
-                && p.status == PoseStatusName::Ok)
+            .all(|p| p.instrument == PoseInstrument::Interferometer && p.status == PoseStatus::Ok)
     );
     let out = replay(&path, &ReplayOptions::default()).unwrap();
     assert!(out.reproduces_log());

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use metrolog::config::{Config, ConfigError, TriggerConfig};
+use metrolog::acquire::config::{Config, ConfigError, TriggerConfig};
 
 const GOOD: &str = r#"[run]
 machine = "mill-01"

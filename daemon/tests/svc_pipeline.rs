@@ -4,9 +4,13 @@
 use std::sync::{Arc, Mutex};
 
 use drivers::{DriverEvent, HostClock, Instrument, Sample, SampleValues, Trigger};
-use metrolog::log::topics::{PoseInstrument, PoseMsg, PoseStatusName};
-use metrolog::log::{DetectorSettings, PoseEngine};
-use metrolog::pipeline::{DetectOnly, EventSink, Pipeline, PipelineConfig, Status, StopReason};
+use metrolog::acquire::detect::PoseEngine;
+use metrolog::acquire::pipeline::{
+    DetectOnly, EventSink, Pipeline, PipelineConfig, Status, StopReason,
+};
+use metrolog_log::DetectorSettings;
+use metrolog_log::topics::{PoseInstrument, PoseMsg};
+use metrology::steady::PoseStatus;
 use protocol::can::TriggerEvent;
 
 #[derive(Default)]
@@ -169,7 +173,7 @@ fn steady_values_sit_on_the_programmed_plateaus() {
         assert_eq!(values.len(), 5, "{inst:?}: {values:?}");
         for (k, v) in values.iter().enumerate() {
             assert_eq!(v.pose, k as u32 + 1);
-            assert_eq!(v.status, PoseStatusName::Ok);
+            assert_eq!(v.status, PoseStatus::Ok);
             assert_eq!(v.n, 150);
             // Uniform ±0.05 µm: σ = 0.05/√3, mean of 150 within 5σ/√150 = 0.012 µm.
             let tol = 0.012;
@@ -200,7 +204,7 @@ fn steady_values_sit_on_the_programmed_plateaus() {
     assert_eq!(cb.len(), 5);
     assert!(
         cb.iter()
-            .all(|v| v.status == PoseStatusName::DeviceAway && v.n == 0)
+            .all(|v| v.status == PoseStatus::DeviceAway && v.n == 0)
     );
     assert_eq!(
         st.instruments[&Instrument::Interferometer].received,
@@ -229,7 +233,12 @@ fn run_ends_at_program_end_when_configured() {
         let (ptx, prx) = tokio::sync::watch::channel(Status::default());
         let cancel = tokio_util::sync::CancellationToken::new();
         let out = p
-            .run(rx, cancel, metrolog::service::Notifier::from_env(), ptx)
+            .run(
+                rx,
+                cancel,
+                metrolog::acquire::service::Notifier::from_env(),
+                ptx,
+            )
             .await
             .unwrap();
         assert_eq!(prx.borrow().poses_ok, 6);
@@ -262,7 +271,7 @@ fn a_dwell_without_samples_is_reported_not_invented() {
         .filter(|v| v.instrument == PoseInstrument::Interferometer)
         .collect();
     assert_eq!(li.len(), 1);
-    assert_eq!(li[0].status, PoseStatusName::DeviceAway);
+    assert_eq!(li[0].status, PoseStatus::DeviceAway);
     assert_eq!(li[0].n, 0);
     assert_eq!(out.status.poses_ok, 0);
 }

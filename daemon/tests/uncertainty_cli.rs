@@ -57,6 +57,7 @@ fn gum_only_text_shows_the_budget_table() {
 }
 
 #[test]
+#[cfg_attr(not(feature = "plot"), ignore = "draws charts: needs --features plot")]
 fn plot_is_written_as_svg() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("h2.svg");

@@ -873,49 +873,6 @@ pub fn split_run(records: &[CapballRecord], run: u32) -> (Vec<Pose>, Vec<[f64; 3
         .unzip()
 }
 
-/// Parse a trajectory CSV (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`, `docs/instruments.md`);
-/// rows must be numbered 1, 2, 3, … in order.
-pub fn parse_trajectory(text: &str) -> Result<Vec<Pose>, CapballError> {
-    let err = |m: String| CapballError::Dataset(format!("trajectory: {m}"));
-    let mut rdr = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .trim(csv::Trim::All)
-        .from_reader(text.as_bytes());
-    let h = rdr.headers().map_err(|e| err(e.to_string()))?.clone();
-    let col = |n: &str| h.iter().position(|x| x == n);
-    let need = |n: &str| col(n).ok_or_else(|| err(format!("missing column `{n}`")));
-    let (ip, ix, iy, iz) = (need("pose")?, need("x_mm")?, need("y_mm")?, need("z_mm")?);
-    let (ia, ic) = (col("a_deg"), col("c_deg"));
-    let mut out = Vec::new();
-    for (line, rec) in rdr.records().enumerate() {
-        let rec = rec.map_err(|e| err(e.to_string()))?;
-        let row = line + 2;
-        let num = |i: usize| -> Result<f64, CapballError> {
-            let s = rec.get(i).unwrap_or("");
-            s.parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| err(format!("row {row}: `{s}` is not a finite number")))
-        };
-        let idx = num(ip)?;
-        if idx != (out.len() + 1) as f64 {
-            return Err(err(format!(
-                "row {row}: pose {idx} out of order (expected {})",
-                out.len() + 1
-            )));
-        }
-        out.push(Pose {
-            x_mm: num(ix)?,
-            y_mm: num(iy)?,
-            z_mm: num(iz)?,
-            a_deg: ia.map(num).transpose()?.unwrap_or(0.0),
-            b_deg: 0.0,
-            c_deg: ic.map(num).transpose()?.unwrap_or(0.0),
-        });
-    }
-    Ok(out)
-}
-
 /// Join per-pose values (1-based pose index of the trajectory, `[ex, ey, ez]` µm, e.g. the
 /// steady values of a log's CapBall pose topic) with the trajectory's poses: the adapter from
 /// logged pose values to [`CapballSetup::identify`]. A pose index outside the trajectory is an
@@ -960,23 +917,6 @@ pub fn write_dataset(records: &[CapballRecord]) -> String {
             r.e_um[0],
             r.e_um[1],
             r.e_um[2]
-        ));
-    }
-    s
-}
-
-/// A trajectory as the CSV of `docs/instruments.md`: `pose,x_mm,y_mm,z_mm,a_deg,c_deg`.
-pub fn write_trajectory(poses: &[Pose]) -> String {
-    let mut s = String::from("pose,x_mm,y_mm,z_mm,a_deg,c_deg\n");
-    for (i, p) in poses.iter().enumerate() {
-        s.push_str(&format!(
-            "{},{:.6},{:.6},{:.6},{:.6},{:.6}\n",
-            i + 1,
-            p.x_mm,
-            p.y_mm,
-            p.z_mm,
-            p.a_deg,
-            p.c_deg
         ));
     }
     s

@@ -72,7 +72,8 @@ use std::collections::VecDeque;
 use serde::{Deserialize, Serialize};
 
 /// Why a pose could not be measured, or `Ok`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "schemars", derive(schemars::JsonSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum PoseStatus {
     Ok,
@@ -129,6 +130,7 @@ pub struct PoseValue {
 /// CNC trigger events as the detector sees them (the CAN frame's event byte, without the
 /// wire format: metrology depends on no I/O crate).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "schemars", derive(schemars::JsonSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum TriggerKind {
     MotionStart,

@@ -235,8 +235,6 @@ fn dataset_round_trip_and_unit_checks() {
     assert!(parse_dataset(&bad).unwrap_err().to_string().contains("µm"));
     let bad = text.replacen("1,2,", "1,x,", 1);
     assert!(parse_dataset(&bad).is_err());
-    let tr = write_trajectory(&poses);
-    assert!(tr.starts_with("pose,x_mm,y_mm,z_mm,a_deg,c_deg\n1,"));
 }
 
 #[test]
@@ -286,13 +284,11 @@ fn trajectory_csv_and_pose_value_join() {
         n_poses: 30,
         ..Default::default()
     });
-    let back = parse_trajectory(&write_trajectory(&poses)).unwrap();
-    assert_eq!(back.len(), 30);
-    assert!((back[12].c_deg - poses[12].c_deg).abs() < 1e-5);
+    // The trajectory CSV's own round trip is tested in metrolog-log (`trajectory`).
+    let back = poses.clone();
     let (p, m) = join_pose_values(&back, &[(3, [1.0, 2.0, 3.0]), (30, [0.0; 3])]).unwrap();
     assert_eq!(p[0], back[2]);
     assert_eq!(m[0], [1.0, 2.0, 3.0]);
     assert!(join_pose_values(&back, &[(31, [0.0; 3])]).is_err());
     assert!(join_pose_values(&back, &[(0, [0.0; 3])]).is_err());
-    assert!(parse_trajectory("pose,x_mm,y_mm,z_mm\n2,0,0,0\n").is_err());
 }

@@ -15,11 +15,12 @@ use sim::{PoseTruth, Scenario};
 use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 
+use crate::acquire::config::Config;
+use crate::acquire::pipeline::Status;
+use crate::acquire::service::Notifier;
 use crate::cmd::run::{Acquire, RunReport, acquire};
-use crate::config::Config;
-use crate::log::topics::{PoseInstrument, PoseMsg, PoseStatusName};
-use crate::pipeline::Status;
-use crate::service::Notifier;
+use metrolog_log::topics::{PoseInstrument, PoseMsg};
+use metrology::steady::PoseStatus;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -32,7 +33,7 @@ pub struct Args {
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(20);
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    crate::service::init_tracing_with_default("warn");
+    crate::acquire::service::init_tracing_with_default("warn");
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let out = std::fs::canonicalize(&args.out)
@@ -188,7 +189,7 @@ fn compare(
         if reversals.contains(&v.pose) {
             continue;
         }
-        if v.status != PoseStatusName::Ok {
+        if v.status != PoseStatus::Ok {
             c.other.push((v.pose, v.status.name()));
             continue;
         }
@@ -314,7 +315,7 @@ fn print_report(report: &RunReport, truth: &[PoseTruth], home_x_mm: f64, reversa
 /// the CapBall identification and the PSD segment's straightness.
 fn print_analysis(report: &RunReport) {
     println!("\nanalysis of {}:", report.log_path.display());
-    match crate::analysis::demo_report(&report.log_path) {
+    match metrolog_analysis::demo_report(&report.log_path) {
         Ok(text) => println!("{text}"),
         Err(e) => println!("  the analysis could not run: {e:#}"),
     }

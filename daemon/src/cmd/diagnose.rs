@@ -27,7 +27,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let data = crate::cmd::analyze::load_positioning(&args.input)?;
+    let data = crate::cmd::input::load_positioning(&args.input)?;
     let mut d: Diagnosis = diagnose::diagnose(&data, &Options::default())
         .with_context(|| format!("diagnosing {}", args.input.display()))?;
     d.report.reproduction = Some(diagnose::reproduction_check(
@@ -61,7 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         d.report.extended_model = Some(p.display().to_string());
     }
     if let Some(p) = &args.plot {
-        crate::plot::positioning::draw_diagnosis(p, &data, &d)
+        crate::cmd::plots::draw_diagnosis(p, &data, &d)
             .with_context(|| format!("drawing {}", p.display()))?;
     }
     let text = if args.json {
@@ -69,7 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         render_text(&d)
     };
-    crate::cmd::analyze::print_out(&text)
+    crate::cmd::input::print_out(&text)
 }
 
 /// The human-readable diagnosis.

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use metrolog_log::trajectory::{TrajectoryRow, write_trajectory};
 use metrology::capball::{self, CapballSetup, Identification, PARAM_NAMES, TrajectorySpec};
 use metrology::kinematics::{Machine, Pose};
 use metrology::psd_frame::{self, PsdLayout};
@@ -124,10 +125,10 @@ fn read(p: &Path) -> anyhow::Result<String> {
 }
 
 /// CapBall records from a CSV dataset or an MCAP log (the poses that hold the tool on the
-/// ball, see [`crate::analysis::capball`]).
+/// ball, see [`metrolog_analysis::capball`]).
 fn load_capball(p: &Path, machine: &Machine) -> anyhow::Result<Vec<capball::CapballRecord>> {
-    if crate::analysis::is_mcap(p) {
-        let cb = crate::analysis::capball::capball_from_log_with(p, machine)
+    if metrolog_analysis::is_mcap(p) {
+        let cb = metrolog_analysis::capball::capball_from_log_with(p, machine)
             .with_context(|| {
                 format!(
                     "reading the CapBall poses of {} (identify capball reads a run's MCAP log or a CSV dataset)",
@@ -179,9 +180,9 @@ fn split_runs(recs: &[capball::CapballRecord]) -> Vec<(u32, Vec<Pose>, Vec<[f64;
 
 fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     let mut machine = machine_from(&a.machine)?;
-    let recs = if crate::analysis::is_mcap(&a.data) && a.machine.is_none() {
+    let recs = if metrolog_analysis::is_mcap(&a.data) && a.machine.is_none() {
         // No machine given: the log's poses choose the kinematic convention.
-        let cb = crate::analysis::capball_from_log(&a.data)
+        let cb = metrolog_analysis::capball_from_log(&a.data)
             .with_context(|| {
                 format!(
                     "reading the CapBall poses of {} (identify capball reads a run's MCAP log or a CSV dataset)",
@@ -320,7 +321,11 @@ fn run_trajectory(a: TrajectoryArgs) -> anyhow::Result<()> {
         spec = spec.reversed_a();
     }
     let poses = setup.trajectory(&spec);
-    std::fs::write(&a.out, capball::write_trajectory(&poses))
+    let rows: Vec<TrajectoryRow> = (1..)
+        .zip(&poses)
+        .map(|(k, p)| TrajectoryRow::from_pose(k, p))
+        .collect();
+    std::fs::write(&a.out, write_trajectory(&rows))
         .with_context(|| format!("writing {}", a.out.display()))?;
     println!(
         "{} poses written to {}; identification Jacobian condition number {:.1}",

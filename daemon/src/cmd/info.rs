@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde::Serialize;
 
-use crate::log::topics::{self, Decoded, PoseMsg, StatusMsg, TopicMessage};
-use crate::log::{self, LogItem, RUN_METADATA, ReadSummary};
+use metrolog_log::topics::{self, Decoded, PoseMsg, StatusMsg, TopicMessage};
+use metrolog_log::{self as log, LogItem, RUN_METADATA, ReadSummary};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {

@@ -10,10 +10,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use serde::Serialize;
 
-use crate::log::topics::{Decoded, PoseMsg, RawMsg, TopicMessage, decode};
-use crate::log::{
-    DetectorSettings, LogItem, LogOptions, LogWriter, PoseEngine, RUN_METADATA, ReadSummary,
-    RunMetadata, read_log, read_run_metadata,
+use metrolog_log::topics::{Decoded, PoseMsg, TopicMessage, decode};
+
+use crate::acquire::detect::PoseEngine;
+use metrolog_log::{
+    DetectorSettings, LogItem, LogOptions, LogWriter, RUN_METADATA, ReadSummary, RunMetadata,
+    read_log, read_run_metadata,
 };
 
 #[derive(Debug, clap::Args)]
@@ -118,17 +120,13 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
                             logged.push((log_ns, p));
                             return Ok(());
                         }
-                        Ok(Some(Decoded::Position(m))) => {
-                            engine.on_sample(&RawMsg::Position(m).to_sample(log_ns))
-                        }
-                        Ok(Some(Decoded::Capball(m))) => {
-                            engine.on_sample(&RawMsg::Capball(m).to_sample(log_ns))
-                        }
-                        Ok(Some(Decoded::Psd(m))) => {
-                            engine.on_sample(&RawMsg::Psd(m).to_sample(log_ns))
-                        }
                         Ok(Some(Decoded::Trigger(t))) => engine.on_trigger(&t.to_trigger(log_ns)),
-                        Ok(_) => Vec::new(),
+                        // Raw samples (environment records feed no detector); other topics none.
+                        Ok(Some(msg)) => msg
+                            .to_sample(log_ns)
+                            .map(|s| engine.on_sample(&s))
+                            .unwrap_or_default(),
+                        Ok(None) => Vec::new(),
                         Err(e) => bail!("a {topic} message at {log_ns} ns does not decode: {e}"),
                     };
                     if let Some(w) = writer.as_mut() {

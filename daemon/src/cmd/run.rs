@@ -13,9 +13,9 @@ use drivers::{DriverEvent, HostClock};
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
-use crate::config::{Config, TriggerConfig};
-use crate::pipeline::{self, Outcome, Pipeline, PipelineConfig, Status, StopReason};
-use crate::service::{self, Notifier};
+use crate::acquire::config::{Config, TriggerConfig};
+use crate::acquire::pipeline::{self, Outcome, Pipeline, PipelineConfig, Status, StopReason};
+use crate::acquire::service::{self, Notifier};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -139,7 +139,7 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
-    let recorder = crate::pipeline::open_log(cfg, &clock)?;
+    let recorder = crate::acquire::pipeline::open_log(cfg, &clock)?;
     let log_path = recorder.path().to_path_buf();
     tracing::info!("logging to {}", log_path.display());
 

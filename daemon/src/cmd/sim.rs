@@ -136,7 +136,7 @@ can_id = {can_id:#x}
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    crate::service::init_tracing();
+    crate::acquire::service::init_tracing();
     let mut scenario = match &args.config {
         Some(p) => Scenario::load(p)?,
         None => Scenario::demo(),
@@ -172,7 +172,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             sim.scenario().program.start_delay_s
         );
         {
-        let signal = crate::service::shutdown_signal();
+        let signal = crate::acquire::service::shutdown_signal();
         tokio::pin!(signal);
         let done = sim.program_done();
         tokio::pin!(done);

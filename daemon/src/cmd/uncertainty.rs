@@ -82,7 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     if let (Some(path), Some(mc)) = (&args.plot, &report.monte_carlo) {
-        crate::plot::uncertainty::write(
+        crate::cmd::plots::draw_uncertainty(
             path,
             &report.title,
             &report.units,

@@ -4,9 +4,10 @@
 use std::path::{Path, PathBuf};
 
 use drivers::DriverEvent;
-use metrolog::log::synthetic::SyntheticRun;
-use metrolog::log::topics::PoseMsg;
-use metrolog::log::{DetectorSettings, LogOptions, LogWriter, Recorder, RunMetadata};
+use metrolog::acquire::recorder::Recorder;
+use metrolog_log::synthetic::SyntheticRun;
+use metrolog_log::topics::PoseMsg;
+use metrolog_log::{DetectorSettings, LogOptions, LogWriter, RunMetadata};
 
 pub const CONFIG_TOML: &str = "machine = \"test-mill\"\n[log]\ndir = \"/var/lib/metrolog\"\n";
 pub const TRAJECTORY_CSV: &str =

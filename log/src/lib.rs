@@ -7,24 +7,28 @@
 //!   way live and in replay; [`poses::Recorder`]: writer + engine + `/status`, fed
 //!   `DriverEvent`s — what the acquisition pipeline uses;
 //! - [`reader::read_log`]: reads a log record by record and stops at the first damaged byte,
-//!   so the intact prefix of a file whose writer was killed is read.
+//!   so the intact prefix of a file whose writer was killed is read;
+//! - [`trajectory`]: the pose table of a run (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`), stored in
+//!   the log as the [`TRAJECTORY_ATTACHMENT`]; the one parser of that format.
+//!
+//! The steady-value detection that produces `/pose` is not here: it runs in the acquisition
+//! service (`metrolog::acquire`), which hands its pose values to the writer.
 //!
 //! # Use
 //!
 //! ```no_run
-//! use metrolog::log::{LogOptions, Recorder, RunMetadata};
-//! # fn events() -> Vec<drivers::DriverEvent> { Vec::new() }
-//! # fn main() -> Result<(), metrolog::log::LogError> {
+//! use metrolog_log::{LogOptions, LogWriter, RunMetadata};
+//! # fn samples() -> Vec<drivers::Sample> { Vec::new() }
+//! # fn main() -> Result<(), metrolog_log::LogError> {
 //! let clock = drivers::HostClock::new();
 //! let meta = RunMetadata { machine: "mill-1".into(), started_ns: clock.now_ns(), ..Default::default() };
-//! let mut rec = Recorder::create_in_dir("/var/lib/metrolog".as_ref(), &meta, LogOptions::default())?;
-//! rec.writer().attach_file("/etc/metrolog/metrolog.toml".as_ref(), "application/toml", clock.now_ns())?;
-//! for ev in events() {
-//!     // Raw topics, /event, /pose (returned too), /status once a second, flush once a second.
-//!     let _poses = rec.record(&ev, clock.now_ns())?;
+//! let mut log = LogWriter::create_in_dir("/var/lib/metrolog".as_ref(), &meta, LogOptions::default())?;
+//! log.attach_file("/etc/metrolog/metrolog.toml".as_ref(), "application/toml", clock.now_ns())?;
+//! for s in samples() {
+//!     log.write_sample(&s)?; // raw topic of the sample's instrument, at its host arrival time
+//!     log.flush_if_due()?; // closes a chunk at least once a second
 //! }
-//! rec.tick(clock.now_ns())?; // also from a 1 s timer when no events come
-//! let (_path, _last_poses) = rec.finish(clock.now_ns())?;
+//! let _path = log.finish()?;
 //! # Ok(()) }
 //! ```
 //!
@@ -36,10 +40,10 @@
 //! it was closed cleanly is visible in the file itself — footer and end magic — and
 //! `metrolog info` reports it).
 
-pub mod poses;
 pub mod reader;
 pub mod synthetic;
 pub mod topics;
+pub mod trajectory;
 pub mod writer;
 
 use std::collections::BTreeMap;
@@ -48,7 +52,6 @@ use std::path::PathBuf;
 use metrology::steady::SteadyConfig;
 use serde::{Deserialize, Serialize};
 
-pub use poses::{PoseEngine, Recorder};
 pub use reader::{LogItem, ReadSummary, read_log, read_log_until, read_run_metadata};
 pub use writer::{LogOptions, LogWriter};
 
@@ -56,6 +59,10 @@ pub use writer::{LogOptions, LogWriter};
 pub const RUN_METADATA: &str = "metrolog.run";
 /// Name of the metadata records of connected instruments.
 pub const INSTRUMENT_METADATA: &str = "metrolog.instrument";
+/// Name of the attachment holding the run's trajectory CSV ([`trajectory`]).
+pub const TRAJECTORY_ATTACHMENT: &str = "trajectory.csv";
+/// Name of the attachment holding the run's config file.
+pub const CONFIG_ATTACHMENT: &str = "metrolog.toml";
 /// Key of the detector settings (JSON of [`DetectorSettings`]) in the run metadata.
 pub const DETECTOR_KEY: &str = "detector";
 

@@ -270,55 +270,12 @@ impl PoseInstrument {
     }
 }
 
-/// Status of a pose value: `ok` or why it could not be measured.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema,
-)]
-#[serde(rename_all = "snake_case")]
-pub enum PoseStatusName {
-    Ok,
-    NeverSteady,
-    BeamInvalid,
-    DeviceAway,
-    TriggerMissing,
-}
-
-impl From<PoseStatus> for PoseStatusName {
-    fn from(s: PoseStatus) -> Self {
-        match s {
-            PoseStatus::Ok => PoseStatusName::Ok,
-            PoseStatus::NeverSteady => PoseStatusName::NeverSteady,
-            PoseStatus::BeamInvalid => PoseStatusName::BeamInvalid,
-            PoseStatus::DeviceAway => PoseStatusName::DeviceAway,
-            PoseStatus::TriggerMissing => PoseStatusName::TriggerMissing,
-        }
-    }
-}
-
-impl PoseStatusName {
-    pub fn name(self) -> &'static str {
-        PoseStatus::from(self).name()
-    }
-}
-
-impl From<PoseStatusName> for PoseStatus {
-    fn from(s: PoseStatusName) -> Self {
-        match s {
-            PoseStatusName::Ok => PoseStatus::Ok,
-            PoseStatusName::NeverSteady => PoseStatus::NeverSteady,
-            PoseStatusName::BeamInvalid => PoseStatus::BeamInvalid,
-            PoseStatusName::DeviceAway => PoseStatus::DeviceAway,
-            PoseStatusName::TriggerMissing => PoseStatus::TriggerMissing,
-        }
-    }
-}
-
 /// `/pose`: the steady value of one instrument at one pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct PoseMsg {
     pub instrument: PoseInstrument,
     pub pose: u32,
-    pub status: PoseStatusName,
+    pub status: PoseStatus,
     /// Samples averaged (0 when no value).
     pub n: u64,
     /// Mean per channel, by channel name (`position_um`; `ex_um`, `ey_um`, `ez_um`; `x_um`,
@@ -345,7 +302,7 @@ impl PoseMsg {
         PoseMsg {
             instrument,
             pose: v.pose,
-            status: v.status.into(),
+            status: v.status,
             n: v.n as u64,
             mean: map(&v.mean),
             std: map(&v.std),
@@ -429,16 +386,9 @@ pub struct EventMsg {
 }
 topic!(EventMsg, "/event", "metrolog.Event");
 
-/// A raw sample as the message of its topic.
-pub enum RawMsg {
-    Position(PositionMsg),
-    Environment(EnvironmentMsg),
-    Capball(CapballMsg),
-    Psd(PsdMsg),
-}
-
-impl RawMsg {
-    pub fn from_sample(s: &Sample) -> RawMsg {
+impl Decoded {
+    /// The message of a sample's raw topic.
+    pub fn from_sample(s: &Sample) -> Decoded {
         let (seq, device_t_us, fitted_ns, valid) = (s.seq, s.device_t_us, s.fitted_ns, s.valid);
         match &s.values {
             SampleValues::Position {
@@ -446,7 +396,7 @@ impl RawMsg {
                 position_um,
                 sig,
                 flags,
-            } => RawMsg::Position(PositionMsg {
+            } => Decoded::Position(PositionMsg {
                 seq,
                 device_t_us,
                 fitted_ns,
@@ -462,7 +412,7 @@ impl RawMsg {
                 rh_pct,
                 material_c,
                 n_air,
-            } => RawMsg::Environment(EnvironmentMsg {
+            } => Decoded::Environment(EnvironmentMsg {
                 seq,
                 device_t_us,
                 fitted_ns,
@@ -478,7 +428,7 @@ impl RawMsg {
                 d_um,
                 e_um,
                 flags,
-            } => RawMsg::Capball(CapballMsg {
+            } => Decoded::Capball(CapballMsg {
                 seq,
                 device_t_us,
                 fitted_ns,
@@ -493,7 +443,7 @@ impl RawMsg {
                 y_um,
                 sum_pa,
                 head_c,
-            } => RawMsg::Psd(PsdMsg {
+            } => Decoded::Psd(PsdMsg {
                 seq,
                 device_t_us,
                 fitted_ns,
@@ -506,10 +456,11 @@ impl RawMsg {
         }
     }
 
-    /// The sample back, with `host_ns` = the message's log time.
-    pub fn to_sample(&self, host_ns: u64) -> Sample {
-        match self {
-            RawMsg::Position(m) => Sample {
+    /// The sample back, with `host_ns` = the message's log time; `None` for a message of
+    /// another topic than the four raw sample topics.
+    pub fn to_sample(&self, host_ns: u64) -> Option<Sample> {
+        Some(match self {
+            Decoded::Position(m) => Sample {
                 instrument: Instrument::Interferometer,
                 seq: m.seq,
                 device_t_us: m.device_t_us,
@@ -523,7 +474,7 @@ impl RawMsg {
                     flags: m.flags,
                 },
             },
-            RawMsg::Environment(m) => Sample {
+            Decoded::Environment(m) => Sample {
                 instrument: Instrument::Interferometer,
                 seq: m.seq,
                 device_t_us: m.device_t_us,
@@ -538,7 +489,7 @@ impl RawMsg {
                     n_air: m.n_air,
                 },
             },
-            RawMsg::Capball(m) => Sample {
+            Decoded::Capball(m) => Sample {
                 instrument: Instrument::Capball,
                 seq: m.seq,
                 device_t_us: m.device_t_us,
@@ -552,7 +503,7 @@ impl RawMsg {
                     flags: m.flags,
                 },
             },
-            RawMsg::Psd(m) => Sample {
+            Decoded::Psd(m) => Sample {
                 instrument: Instrument::Psd,
                 seq: m.seq,
                 device_t_us: m.device_t_us,
@@ -566,7 +517,8 @@ impl RawMsg {
                     head_c: m.head_c,
                 },
             },
-        }
+            _ => return None,
+        })
     }
 }
 

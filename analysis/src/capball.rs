@@ -13,7 +13,7 @@ use metrology::kinematics::{Machine, Pose};
 use nalgebra::Vector3;
 
 use super::{AnalysisError, LogContents, is_ok};
-use crate::log::topics::PoseInstrument;
+use metrolog_log::topics::PoseInstrument;
 
 /// The CapBall dataset of a log.
 #[derive(Debug, Clone)]

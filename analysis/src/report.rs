@@ -30,7 +30,7 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
             let _ = writeln!(s, "\nISO 230-2: not available: {e}");
         }
         Ok(data) => {
-            let an = crate::cmd::analyze::analyze_positioning(&data, None);
+            let an = crate::positioning_report::analyze_positioning(&data, None);
             let a = &an.iso230_2;
             let _ = writeln!(
                 s,

@@ -15,7 +15,7 @@ use drivers::{Sample, Trigger};
 use mcap::records::{MessageHeader, Metadata};
 use mcap::{Attachment, Compression, McapError, WriteOptions};
 
-use super::topics::{self, PoseMsg, RawMsg, StatusMsg, TopicMessage, TriggerMsg};
+use super::topics::{self, Decoded, PoseMsg, StatusMsg, TopicMessage, TriggerMsg};
 use super::{LogError, RUN_METADATA, RunMetadata};
 
 /// Writer settings.
@@ -316,11 +316,13 @@ impl LogWriter {
 
     /// A raw sample on its topic, log time = `host_ns`.
     pub fn write_sample(&mut self, s: &Sample) -> Result<(), LogError> {
-        match RawMsg::from_sample(s) {
-            RawMsg::Position(m) => self.write(s.host_ns, &m),
-            RawMsg::Environment(m) => self.write(s.host_ns, &m),
-            RawMsg::Capball(m) => self.write(s.host_ns, &m),
-            RawMsg::Psd(m) => self.write(s.host_ns, &m),
+        match Decoded::from_sample(s) {
+            Decoded::Position(m) => self.write(s.host_ns, &m),
+            Decoded::Environment(m) => self.write(s.host_ns, &m),
+            Decoded::Capball(m) => self.write(s.host_ns, &m),
+            Decoded::Psd(m) => self.write(s.host_ns, &m),
+            // `from_sample` makes only the four raw messages above.
+            _ => Ok(()),
         }
     }
 

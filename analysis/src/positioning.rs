@@ -38,8 +38,8 @@ use metrology::axis_model::Direction;
 use metrology::positioning_data::{PositioningData, Reading};
 
 use super::{AnalysisError, LogContents, is_ok};
-use crate::config::TrajectoryRow;
-use crate::log::topics::PoseInstrument;
+use metrolog_log::topics::PoseInstrument;
+use metrolog_log::trajectory::TrajectoryRow;
 
 /// Options of [`positioning_from_log`].
 #[derive(Debug, Clone, Default)]
@@ -293,8 +293,9 @@ pub fn positioning_from_contents(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::LoggedPose;
-    use crate::log::topics::{PoseMsg, PoseStatusName};
+    use crate::LoggedPose;
+    use metrolog_log::topics::PoseMsg;
+    use metrology::steady::PoseStatus;
 
     /// A log in memory: trajectory of x values (y = z = 0), interferometer value at each pose
     /// = `pos_um(pose)` (None: never steady), pose k measured at k seconds.
@@ -311,9 +312,9 @@ mod tests {
                     instrument: PoseInstrument::Interferometer,
                     pose: no,
                     status: if v.is_some() {
-                        PoseStatusName::Ok
+                        PoseStatus::Ok
                     } else {
-                        PoseStatusName::NeverSteady
+                        PoseStatus::NeverSteady
                     },
                     n: 10,
                     mean: v

@@ -20,9 +20,12 @@ use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
-use crate::log::topics::{PoseMsg, PoseStatusName};
-use crate::log::{DetectorSettings, PoseEngine};
-use crate::service::{Notifier, Watchdog};
+use metrolog_log::DetectorSettings;
+use metrolog_log::topics::PoseMsg;
+use metrology::steady::PoseStatus;
+
+use super::detect::PoseEngine;
+use crate::acquire::service::{Notifier, Watchdog};
 
 /// Capacity of the queue from the drivers to the pipeline: one second of every instrument at
 /// its highest rate (10 kHz + 20 kHz + 1 kHz) plus margin, so a log flush of up to a second
@@ -33,7 +36,7 @@ pub const QUEUE_CAPACITY: usize = 1 << 16;
 pub const STATUS_PERIOD: Duration = Duration::from_secs(1);
 
 /// Where the pipeline puts the driver events: the MCAP log with its pose engine in a run
-/// ([`crate::log::Recorder`]), the pose engine alone in benchmarks and tests ([`DetectOnly`]).
+/// ([`super::recorder::Recorder`]), the pose engine alone in benchmarks and tests ([`DetectOnly`]).
 pub trait EventSink: Send {
     /// Record one event; returns the pose values it completes.
     fn record(&mut self, ev: &DriverEvent, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>>;
@@ -49,14 +52,14 @@ pub trait EventSink: Send {
 /// event behind it (measured: pose records up to 0.5 s late at full rates), on its own thread
 /// it holds up nothing. A power cut loses at most about two seconds instead of one.
 pub struct LiveLog {
-    recorder: crate::log::Recorder,
+    recorder: super::recorder::Recorder,
     path: std::path::PathBuf,
     sync_stop: std::sync::mpsc::Sender<()>,
     sync_thread: Option<std::thread::JoinHandle<()>>,
 }
 
 impl LiveLog {
-    fn new(mut recorder: crate::log::Recorder) -> anyhow::Result<LiveLog> {
+    fn new(mut recorder: super::recorder::Recorder) -> anyhow::Result<LiveLog> {
         use anyhow::Context;
         let path = recorder.writer().path().to_path_buf();
         // fsync(2) works on a descriptor opened for reading: it flushes the file, not the fd.
@@ -350,7 +353,7 @@ impl Pipeline {
                 }
             }
             self.status.poses += 1;
-            if v.status == PoseStatusName::Ok {
+            if v.status == PoseStatus::Ok {
                 self.status.poses_ok += 1;
             }
             self.status.last_pose = self.status.last_pose.max(v.pose);
@@ -449,7 +452,7 @@ impl Pipeline {
         self.status(queue_len)
     }
 
-    /// The watchdog facts now (see [`crate::service`]).
+    /// The watchdog facts now (see [`crate::acquire::service`]).
     fn watchdog(&self, interval: Duration) -> Watchdog {
         Watchdog {
             since_loop_s: 0.0,
@@ -504,7 +507,7 @@ impl Pipeline {
                         } else {
                             tracing::warn!(
                                 "no samples for {:.0} s from connected instruments while a program runs; not petting the watchdog",
-                                crate::service::STALL_TIMEOUT_S
+                                crate::acquire::service::STALL_TIMEOUT_S
                             );
                         }
                     }
@@ -568,13 +571,13 @@ pub fn spawn(
 /// The detector settings of a config: the same window length for every instrument; poses
 /// delimited by the CNC's triggers when a `[trigger]` is configured, found as standstill
 /// plateaus in the signal otherwise.
-pub fn detector_settings(cfg: &crate::config::Config) -> DetectorSettings {
+pub fn detector_settings(cfg: &crate::acquire::config::Config) -> DetectorSettings {
     let mut s = DetectorSettings::default().with_samples(cfg.detector.samples);
     // Only the configured instruments get pose values: one left out of the run is not "away".
     s.instruments.retain(|i| match i {
-        crate::log::topics::PoseInstrument::Interferometer => cfg.interferometer.is_some(),
-        crate::log::topics::PoseInstrument::Capball => cfg.capball.is_some(),
-        crate::log::topics::PoseInstrument::Psd => cfg.psd.is_some(),
+        metrolog_log::topics::PoseInstrument::Interferometer => cfg.interferometer.is_some(),
+        metrolog_log::topics::PoseInstrument::Capball => cfg.capball.is_some(),
+        metrolog_log::topics::PoseInstrument::Psd => cfg.psd.is_some(),
     });
     if cfg.trigger.is_none() {
         for c in [&mut s.interferometer, &mut s.capball, &mut s.psd] {
@@ -586,7 +589,10 @@ pub fn detector_settings(cfg: &crate::config::Config) -> DetectorSettings {
 
 /// Open the run's MCAP log in `[run] output_dir` (created if missing) with the run metadata and
 /// the config, trajectory and CapBall transform attached, so the log replays on its own.
-pub fn open_log(cfg: &crate::config::Config, clock: &HostClock) -> anyhow::Result<LiveLog> {
+pub fn open_log(
+    cfg: &crate::acquire::config::Config,
+    clock: &HostClock,
+) -> anyhow::Result<LiveLog> {
     use anyhow::Context;
     let dir = &cfg.run.output_dir;
     std::fs::create_dir_all(dir)
@@ -610,33 +616,38 @@ pub fn open_log(cfg: &crate::config::Config, clock: &HostClock) -> anyhow::Resul
             .collect::<Vec<_>>()
             .join(","),
     );
-    let meta = crate::log::RunMetadata {
+    let meta = metrolog_log::RunMetadata {
         machine: cfg.run.machine.clone(),
         started_ns: now,
         detector: settings.clone(),
         instruments: BTreeMap::new(),
         extra,
     };
-    let mut writer = crate::log::LogWriter::create_in_dir(
+    let mut writer = metrolog_log::LogWriter::create_in_dir(
         dir,
         &meta,
-        crate::log::LogOptions {
+        metrolog_log::LogOptions {
             // Durability comes from the log-sync thread of [`LiveLog`].
             fsync: false,
-            ..crate::log::LogOptions::default()
+            ..metrolog_log::LogOptions::default()
         },
     )?;
     writer.attach(
-        "metrolog.toml",
+        metrolog_log::CONFIG_ATTACHMENT,
         "application/toml",
         cfg.text.as_bytes(),
         now,
     )?;
     if let Some(t) = &cfg.run.trajectory {
-        writer.attach("trajectory.csv", "text/csv", t.text.as_bytes(), now)?;
+        writer.attach(
+            metrolog_log::TRAJECTORY_ATTACHMENT,
+            "text/csv",
+            t.text.as_bytes(),
+            now,
+        )?;
     }
     if let Some((_, text)) = cfg.capball.as_ref().and_then(|c| c.transform_file.as_ref()) {
         writer.attach("capball-transform.csv", "text/csv", text.as_bytes(), now)?;
     }
-    LiveLog::new(crate::log::Recorder::new(writer, &settings)?)
+    LiveLog::new(super::recorder::Recorder::new(writer, &settings)?)
 }

@@ -15,8 +15,8 @@
 use std::path::Path;
 
 use super::{AnalysisError, LogContents, is_ok};
-use crate::config::TrajectoryRow;
-use crate::log::topics::PoseInstrument;
+use metrolog_log::topics::PoseInstrument;
+use metrolog_log::trajectory::TrajectoryRow;
 
 /// One PSD point of the segment.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]

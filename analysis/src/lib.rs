@@ -11,28 +11,27 @@
 //! [`PositioningData`]: metrology::positioning_data::PositioningData
 
 pub mod capball;
+#[cfg(feature = "plot")]
+pub mod plot;
 pub mod positioning;
+pub mod positioning_report;
 pub mod psd;
 pub mod report;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::config::{TrajectoryRow, parse_trajectory};
-use crate::log::topics::{
-    Decoded, EnvironmentMsg, PoseInstrument, PoseMsg, PoseStatusName, decode,
+use metrolog_log::topics::{Decoded, EnvironmentMsg, PoseInstrument, PoseMsg, decode};
+use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
+use metrolog_log::{
+    CONFIG_ATTACHMENT, LogError, RUN_METADATA, ReadSummary, TRAJECTORY_ATTACHMENT, read_log,
 };
-use crate::log::{LogError, RUN_METADATA, ReadSummary, read_log};
+use metrology::steady::PoseStatus;
 
 pub use capball::{CapballFromLog, capball_from_log};
 pub use positioning::{PositioningOptions, parse_pose_range, positioning_from_log};
 pub use psd::{PsdSegment, psd_from_log, psd_from_log_with};
 pub use report::demo_report;
-
-/// Name of the trajectory attachment (`pipeline::open_log`).
-pub const TRAJECTORY_ATTACHMENT: &str = "trajectory.csv";
-/// Name of the config attachment (`pipeline::open_log`).
-pub const CONFIG_ATTACHMENT: &str = "metrolog.toml";
 
 /// Why a log could not be turned into an analysis input. Each says what to fix.
 #[derive(Debug, thiserror::Error)]
@@ -102,7 +101,7 @@ impl LogContents {
             ..LogContents::default()
         };
         let summary = read_log(path, |item| match item {
-            crate::log::LogItem::Message {
+            metrolog_log::LogItem::Message {
                 topic,
                 log_ns,
                 data,
@@ -117,10 +116,10 @@ impl LogContents {
                     Err(_) => c.undecodable += 1,
                 }
             }
-            crate::log::LogItem::Attachment { name, data, .. } => {
+            metrolog_log::LogItem::Attachment { name, data, .. } => {
                 c.attachments.insert(name.to_string(), data.to_vec());
             }
-            crate::log::LogItem::Metadata { name, map } => {
+            metrolog_log::LogItem::Metadata { name, map } => {
                 if name == RUN_METADATA {
                     c.run_metadata = map.clone();
                 }
@@ -189,7 +188,7 @@ impl LogContents {
 
 /// Whether a pose value can be used.
 pub(crate) fn is_ok(p: &PoseMsg) -> bool {
-    p.status == PoseStatusName::Ok
+    p.status == PoseStatus::Ok
 }
 
 /// Whether a log path is an MCAP log (by extension).

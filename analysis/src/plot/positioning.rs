@@ -11,7 +11,7 @@ use metrology::positioning_data::PositioningData;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::cmd::analyze::PositioningAnalysis;
+use crate::positioning_report::PositioningAnalysis;
 
 const UP: RGBColor = RGBColor(31, 119, 180);
 const DOWN: RGBColor = RGBColor(214, 39, 40);

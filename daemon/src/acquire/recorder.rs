@@ -1,89 +1,16 @@
-//! From samples and triggers to `/pose` records — the same code live and in replay.
-//!
-//! [`PoseEngine`] holds one [`SteadyDetector`] per instrument. It is fed every sample and
-//! trigger in the order they are written to the log; replay reads the log in file order and
-//! feeds the very same calls, so it reproduces the logged pose values bit for bit (JSON
-//! numbers are written in shortest round-trip form, so every `f64` reads back exactly).
-//!
-//! Time axis: samples enter the detector at their clock-fitted time (`Sample::fitted_ns`, the
-//! device clock mapped onto the host axis), triggers at their host arrival time — the one
-//! axis all instruments and triggers share.
+//! The run's log fed with driver events, in one direction: each event is written to its raw
+//! topic, then handed to the [`PoseEngine`] (the detectors), and the pose values it completes
+//! are written to `/pose`; connections go to `/event`, counters to `/status` once a second.
 
 use std::collections::BTreeMap;
 
-use drivers::{Counters, DriverEvent, Instrument, Sample, SampleValues, Trigger};
-use metrology::steady::{SteadyDetector, TriggerKind};
+use drivers::{Counters, DriverEvent, Instrument};
+use metrolog_log::topics::{EventKind, EventMsg, PoseMsg, StatusMsg};
+use metrolog_log::{
+    DetectorSettings, INSTRUMENT_METADATA, LogError, LogOptions, LogWriter, RunMetadata,
+};
 
-use super::topics::{EventKind, EventMsg, PoseInstrument, PoseMsg, StatusMsg, TriggerEventName};
-use super::writer::LogWriter;
-use super::{DetectorSettings, INSTRUMENT_METADATA, LogError};
-
-/// The steady-value detectors of the interferometer, the CapBall and the PSD.
-#[derive(Debug, Clone)]
-pub struct PoseEngine {
-    detectors: Vec<(PoseInstrument, SteadyDetector)>,
-}
-
-impl PoseEngine {
-    pub fn new(settings: &DetectorSettings) -> Result<PoseEngine, LogError> {
-        let mk = |i: PoseInstrument, cfg: &metrology::steady::SteadyConfig| {
-            SteadyDetector::new(cfg.clone(), i.channels().len()).map(|d| (i, d))
-        };
-        let mut detectors = Vec::new();
-        for (inst, cfg) in [
-            (PoseInstrument::Interferometer, &settings.interferometer),
-            (PoseInstrument::Capball, &settings.capball),
-            (PoseInstrument::Psd, &settings.psd),
-        ] {
-            if settings.instruments.contains(&inst) {
-                detectors.push(mk(inst, cfg)?);
-            }
-        }
-        Ok(PoseEngine { detectors })
-    }
-
-    /// Feeds a sample to its instrument's detector (environment records are not).
-    pub fn on_sample(&mut self, s: &Sample) -> Vec<PoseMsg> {
-        let (inst, values, n): (PoseInstrument, [f64; 3], usize) = match &s.values {
-            SampleValues::Position { position_um, .. } => {
-                (PoseInstrument::Interferometer, [*position_um, 0.0, 0.0], 1)
-            }
-            SampleValues::Capball { e_um, .. } => (PoseInstrument::Capball, *e_um, 3),
-            SampleValues::Psd { x_um, y_um, .. } => (PoseInstrument::Psd, [*x_um, *y_um, 0.0], 2),
-            SampleValues::Environment { .. } => return Vec::new(),
-        };
-        let Some((_, det)) = self.detectors.iter_mut().find(|(i, _)| *i == inst) else {
-            return Vec::new();
-        };
-        det.push_sample(s.fitted_ns, &values[..n], s.valid)
-            .iter()
-            .map(|v| PoseMsg::from_value(inst, v))
-            .collect()
-    }
-
-    /// Feeds a trigger to every detector.
-    pub fn on_trigger(&mut self, t: &Trigger) -> Vec<PoseMsg> {
-        let kind: TriggerKind = TriggerEventName::from(t.event).into();
-        let mut out = Vec::new();
-        for (inst, det) in &mut self.detectors {
-            for v in det.push_trigger(kind, u32::from(t.pose), t.host_ns) {
-                out.push(PoseMsg::from_value(*inst, &v));
-            }
-        }
-        out
-    }
-
-    /// End of the run: closes open dwells.
-    pub fn finish(&mut self, t_ns: u64) -> Vec<PoseMsg> {
-        let mut out = Vec::new();
-        for (inst, det) in &mut self.detectors {
-            for v in det.finish(t_ns) {
-                out.push(PoseMsg::from_value(*inst, &v));
-            }
-        }
-        out
-    }
-}
+use super::detect::PoseEngine;
 
 /// The log of a run fed with driver events: raw topics, `/pose` from the [`PoseEngine`],
 /// `/event`, and `/status` once a second.
@@ -104,8 +31,8 @@ impl Recorder {
     /// `meta.detector` — the settings stored in the log, so replay uses the same.
     pub fn create_in_dir(
         dir: &std::path::Path,
-        meta: &super::RunMetadata,
-        opts: super::LogOptions,
+        meta: &RunMetadata,
+        opts: LogOptions,
     ) -> Result<Recorder, LogError> {
         let settings = meta.detector.clone();
         Recorder::new(LogWriter::create_in_dir(dir, meta, opts)?, &settings)
@@ -114,15 +41,15 @@ impl Recorder {
     /// Like [`Recorder::create_in_dir`], at an explicit path (which must not exist).
     pub fn create(
         path: &std::path::Path,
-        meta: &super::RunMetadata,
-        opts: super::LogOptions,
+        meta: &RunMetadata,
+        opts: LogOptions,
     ) -> Result<Recorder, LogError> {
         let settings = meta.detector.clone();
         Recorder::new(LogWriter::create(path, meta, opts)?, &settings)
     }
 
     /// Around an open writer; `settings` must be the `detector` of the writer's
-    /// [`RunMetadata`](super::RunMetadata), or replay will not reproduce the pose values.
+    /// [`RunMetadata`](RunMetadata), or replay will not reproduce the pose values.
     pub fn new(writer: LogWriter, settings: &DetectorSettings) -> Result<Recorder, LogError> {
         Ok(Recorder {
             writer,

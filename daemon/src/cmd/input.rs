@@ -1,0 +1,36 @@
+//! The inputs of the analysis commands, in one place: which file kinds a command accepts and
+//! how each is read (CSV datasets of `docs/datasets.md`, or an MCAP log through the adapters of
+//! `metrolog-analysis`), and where reports go.
+
+use std::path::Path;
+
+use anyhow::Context as _;
+use metrology::positioning_data::PositioningData;
+
+/// Reads a positioning run from a CSV dataset or an MCAP log (see
+/// [`metrolog_analysis::positioning`] for how the run is found in a log).
+pub fn load_positioning(path: &Path) -> anyhow::Result<PositioningData> {
+    load_positioning_with(path, &metrolog_analysis::PositioningOptions::default())
+}
+
+/// [`load_positioning`] with the options of the MCAP adapter (ignored for CSV).
+pub fn load_positioning_with(
+    path: &Path,
+    opts: &metrolog_analysis::PositioningOptions,
+) -> anyhow::Result<PositioningData> {
+    if metrolog_analysis::is_mcap(path) {
+        return metrolog_analysis::positioning_from_log(path, opts)
+            .with_context(|| format!("reading the positioning run of {}", path.display()));
+    }
+    PositioningData::from_csv_path(path).with_context(|| format!("reading {}", path.display()))
+}
+
+/// Writes a report to stdout; a closed pipe (`| head`) is not an error.
+pub fn print_out(text: &str) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}

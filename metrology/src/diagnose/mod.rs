@@ -179,7 +179,7 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
 
     // Outliers: a first screen around the group medians, refined after each step.
     let mut out = flag_outliers(&obs, &group_median_residuals(&obs), opt.outlier_alpha, m);
-    let steps = search::forward_select(&obs, opt, use_temp, &mut out);
+    let steps = search::forward_select(&obs, opt, use_temp, &mut out, &mut notes);
     let cols = all_cols(&steps.iter().map(|s| s.sel.clone()).collect::<Vec<_>>());
     let fin = settle(&obs, opt, out, cols);
 
@@ -295,6 +295,9 @@ fn input_notes(data: &PositioningData) -> Vec<String> {
                 .collect::<Vec<_>>()
                 .join(", ")
         ));
+    }
+    if let Some(n) = data.direction_target_note() {
+        notes.push(n);
     }
     if !data.has_times {
         notes.push(

@@ -130,6 +130,7 @@ pub(super) fn forward_select(
     opt: &Options,
     use_temp: bool,
     out: &mut Vec<bool>,
+    notes: &mut Vec<String>,
 ) -> Vec<Step> {
     let m = obs.n_targets;
     let var_factor = vec![1.0; m];
@@ -163,7 +164,20 @@ pub(super) fn forward_select(
             let Some(significance) = discounted_gain(obs, &w, &cols_after, rss0, &cand, fam) else {
                 continue;
             };
-            if significance < opt.min_bic_gain || absorbed_by_baseline(obs, &p, &new.cols) {
+            if significance < opt.min_bic_gain {
+                continue;
+            }
+            if absorbed_by_baseline(obs, &p, &new.cols) {
+                let note = format!(
+                    "{} would fit, but the per-target, per-direction baseline absorbs most of \
+                     it (each target is measured over a short part of the run, or the pattern \
+                     follows the run's own order of targets): the data cannot tell it from the \
+                     baseline, so it is not reported",
+                    fam.name()
+                );
+                if !notes.contains(&note) {
+                    notes.push(note);
+                }
                 continue;
             }
             let eval: Vec<bool> = out.iter().map(|o| !o).collect();

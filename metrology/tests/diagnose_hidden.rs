@@ -137,7 +137,8 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth) {
         "warmup+cyclic" => vec!["exponential_warmup", "cyclic_drift"],
         "step+linear" => vec!["step", "linear_drift"],
         "reversal+thermal" => vec!["reversal_drift", "thermal_expansion"],
-        c => vec![c.trim_start_matches("iso_min_").trim_end_matches("_no_times")],
+        "iso_min_warmup" | "iso_min_warmup_no_times" => vec!["exponential_warmup"],
+        c => vec![c.trim_start_matches("iso_min_")],
     };
     let sign = |rng: &mut ChaCha8Rng| if rng.random::<bool>() { 1.0 } else { -1.0 };
     let cycle_len = duration / n as f64;
@@ -209,7 +210,10 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth) {
             "cycle_offsets" => {
                 let sd = rng.random_range(2.0..5.0) * sigma;
                 let off: Vec<f64> = (0..n)
-                    .map(|_| sd * StandardNormal.sample(&mut rng) as f64)
+                    .map(|_| {
+                        let z: f64 = StandardNormal.sample(&mut rng);
+                        sd * z
+                    })
                     .collect();
                 for (d, s) in dev.iter_mut().zip(&slots) {
                     *d += off[s.cycle];
@@ -238,8 +242,8 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth) {
         truth.push(("local_anomaly", "std_ratio", r));
         (t, r)
     });
-    let rho = rng.random_range(0.5..0.7);
-    let nu = rng.random_range(3.0..5.0);
+    let rho: f64 = rng.random_range(0.5..0.7);
+    let nu: f64 = rng.random_range(3.0..5.0);
     let mut prev = 0.0;
     for (d, s) in dev.iter_mut().zip(&slots) {
         let z: f64 = StandardNormal.sample(&mut rng);
@@ -365,6 +369,7 @@ fn pct(a: usize, b: usize) -> String {
 #[test]
 #[ignore = "≥ 200 datasets per class; run with --release"]
 fn table_200_per_class() {
+    let only = std::env::var("CLASS").ok();
     let per: usize = std::env::var("PER_CLASS")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -374,6 +379,9 @@ fn table_200_per_class() {
     );
     println!("|---|---|---|---|---|");
     for (class, expect) in CLASSES {
+        if only.as_deref().is_some_and(|o| o != class) {
+            continue;
+        }
         let t = run_class(class, expect, per, 1);
         println!(
             "| {class} | {} | {} | {} | {} |",

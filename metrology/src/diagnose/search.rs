@@ -1,4 +1,7 @@
-//! Search of a candidate effect's non-linear parameter and its uncertainty.
+//! Search of a candidate effect's non-linear parameter and its uncertainty, and the forward
+//! selection of effects.
+
+#![allow(clippy::needless_range_loop)]
 
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -28,7 +31,11 @@ pub(super) fn candidate_rss(
     fam: Family,
     theta: f64,
 ) -> f64 {
-    let cols = fam.columns(obs, theta);
+    cols_rss(obs, p, y_perp, &fam.columns(obs, theta))
+}
+
+/// RSS of y on baseline + `p`'s columns + `cols`.
+fn cols_rss(obs: &Obs, p: &Projector, y_perp: &[f64], cols: &[Vec<f64>]) -> f64 {
     let cp: Vec<Vec<f64>> = cols.iter().map(|c| p.residualize(obs, c)).collect();
     let k = cp.len();
     let mut a = DMatrix::zeros(k, k);
@@ -42,12 +49,57 @@ pub(super) fn candidate_rss(
         }
     }
     let y2 = dotw(y_perp, y_perp, &p.w);
-    match a.clone().cholesky() {
+    match a.cholesky() {
         Some(ch) => {
             let x = ch.solve(&b);
             (y2 - b.dot(&x)).max(0.0)
         }
         None => y2,
+    }
+}
+
+/// Two effects can explain together what neither explains alone (a step and a drift look like
+/// offsets per cycle): when the best pair, each at the parameter of its own search, beats the
+/// best single candidate by more than `margin`, its better member is tried first (the other
+/// follows at the next step).
+fn prefer_pair(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    rss0: f64,
+    cands: &mut [(Family, Candidate, f64)],
+    margin: f64,
+) {
+    let Some(best_single) = cands.first().map(|c| c.2) else {
+        return;
+    };
+    let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
+    let ln_n = (obs.len() as f64).ln();
+    let mut best: Option<(usize, f64)> = None;
+    for a in 0..cands.len() {
+        for b in a + 1..cands.len() {
+            let (fa, fb) = (cands[a].0, cands[b].0);
+            if fa.slot() == fb.slot() {
+                continue;
+            }
+            let mut cols = fa.columns(obs, cands[a].1.theta);
+            cols.extend(fb.columns(obs, cands[b].1.theta));
+            let rss = cols_rss(obs, p, y_perp, &cols);
+            if rss <= 0.0 {
+                continue;
+            }
+            let dbic = n_eff * (rss / rss0).ln() + (fa.n_params(obs) + fb.n_params(obs)) as f64 * ln_n;
+            // `a` < `b` in BIC order: `a` is the better member.
+            if b > 0 && best.is_none_or(|x| dbic < x.1) {
+                best = Some((a, dbic));
+            }
+        }
+    }
+    if let Some((a, dbic)) = best
+        && a > 0
+        && dbic < best_single - margin
+    {
+        cands[..=a].rotate_right(1);
     }
 }
 
@@ -148,12 +200,14 @@ pub(super) fn forward_select(
         }
         let mut cands = candidates(obs, &p, &y_perp, rss0, use_temp, &selected);
         cands.sort_by(|a, b| a.2.total_cmp(&b.2));
+        prefer_pair(obs, &p, &y_perp, rss0, &mut cands, opt.min_bic_gain);
         let temp_rss = cands
             .iter()
             .find(|c| c.0 == Family::ThermalTemp)
             .map(|c| c.1.rss);
         let mut added = None;
         for (fam, cand, _) in cands {
+
             let new = Selected {
                 family: fam,
                 theta: cand.theta,
@@ -284,14 +338,23 @@ fn discounted_gain(
 }
 
 /// An effect the per-target, per-direction constants mostly absorb: less than 30 % of its
-/// columns' variation is left once they are centred within their groups.
+/// columns' variation within each direction is left once they are centred within their
+/// (target, direction) groups (the reference is per direction, so that an effect that differs
+/// by direction by definition, like `reversal_drift`, is measured on its variation in time).
 fn absorbed_by_baseline(obs: &Obs, p: &Projector, cols: &[Vec<f64>]) -> bool {
     let (mut kept, mut total) = (0.0, 0.0);
-    let wsum: f64 = p.w.iter().sum();
     for c in cols {
-        let mean = dotw(c, &vec![1.0; c.len()], &p.w) / wsum.max(f64::MIN_POSITIVE);
-        let d: Vec<f64> = c.iter().map(|v| v - mean).collect();
-        total += dotw(&d, &d, &p.w);
+        let (mut s, mut n) = ([0.0; 2], [0.0; 2]);
+        for j in 0..obs.len() {
+            let d = usize::from(obs.dir_half[j] < 0.0);
+            s[d] += p.w[j] * c[j];
+            n[d] += p.w[j];
+        }
+        for j in 0..obs.len() {
+            let d = usize::from(obs.dir_half[j] < 0.0);
+            let m = if n[d] > 0.0 { s[d] / n[d] } else { 0.0 };
+            total += p.w[j] * (c[j] - m).powi(2);
+        }
         let cc = p.center(obs, c);
         kept += dotw(&cc, &cc, &p.w);
     }

@@ -31,8 +31,10 @@ impl Family {
     pub(super) fn n_params(self, obs: &Obs) -> usize {
         match self {
             Family::Linear | Family::ThermalTemp | Family::ReversalDrift => 1,
-            Family::Warmup | Family::Thermal | Family::Step => 2,
-            Family::Cyclic => 3,
+            Family::Warmup | Family::Thermal => 2,
+            // A change point searched over every reading costs more than a smooth parameter
+            // (its likelihood ratio is a maximum over many nearly independent positions).
+            Family::Cyclic | Family::Step => 3,
             Family::CycleOffsets => obs.n_cycles.saturating_sub(1).max(1),
         }
     }

@@ -393,13 +393,20 @@ fn table_200_per_class() {
     }
 }
 
-/// CI: a small sample of every class must be mostly right (the table above measures it).
+/// CI: a small sample of every class (the table above measures the rates): no finding on
+/// noise-only runs (heavy tails: at most one), and every class with an effect named in at
+/// least half of its runs.
 #[test]
 fn every_class_small_sample() {
     let mut failures = Vec::new();
     for (class, expect) in CLASSES {
         let t = run_class(class, expect, 4, 99);
-        if t.detected < 3 {
+        let need = match (expect.is_empty(), class) {
+            (true, "heavy_tailed_noise") => 3,
+            (true, _) => 4,
+            (false, _) => 2,
+        };
+        if t.detected < need {
             failures.push(format!("{class}: {}/{}", t.detected, t.runs));
         }
     }

@@ -97,6 +97,9 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
                             f.cause
                         );
                     }
+                    if !r.conclusion.is_empty() {
+                        let _ = writeln!(s, "  conclusion: {}", r.conclusion);
+                    }
                 }
             }
         }

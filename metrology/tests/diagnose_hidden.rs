@@ -117,7 +117,11 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth) {
     } else {
         rng.random_range(10.0..40.0)
     };
-    let pause = if trap { rng.random_range(60.0..300.0) } else { 0.0 };
+    let pause = if trap {
+        rng.random_range(60.0..300.0)
+    } else {
+        0.0
+    };
     let slots = schedule(&mut rng, m, n, dt, pause);
     let duration = slots.last().map_or(1.0, |s| s.t);
     let x_mm: Vec<f64> = (0..m)

@@ -50,7 +50,12 @@ fn b02_x_reversal_at_every_target_and_a_mild_drift() {
         .unwrap_or(0.0);
     assert!(v < 0.0, "{:?}", f.params);
     // No temperatures were logged: no cause may claim a measured temperature.
-    assert!(d.report.findings.iter().all(|f| !f.cause.contains("measured material")));
+    assert!(
+        d.report
+            .findings
+            .iter()
+            .all(|f| !f.cause.contains("measured material"))
+    );
 }
 
 /// ESS target drive, Y: a textbook warm-up, per reading since the file has no times.
@@ -96,7 +101,10 @@ fn slit_sweep_is_evaluated_and_diagnose_says_what_it_cannot_show() {
     let e = diagnose(&data, &Options::default())
         .unwrap_err()
         .to_string();
-    assert!(e.contains("sweep") && e.contains("not the repeatability"), "{e}");
+    assert!(
+        e.contains("sweep") && e.contains("not the repeatability"),
+        "{e}"
+    );
 }
 
 /// BIFROST vacuum tank, rotary (degrees / millidegrees in the µm column): a constant reversal
@@ -140,7 +148,11 @@ fn direction_dependent_targets_are_evaluated_by_index() {
     let data = PositioningData::from_csv_str(&s).expect("accepted");
     let (i, d) = data.direction_target_offset().expect("offset seen");
     assert!((d - 0.2).abs() < 1e-9 && (1..=5).contains(&i));
-    assert!(data.direction_target_note().expect("note").contains("+0.2000 mm"));
+    assert!(
+        data.direction_target_note()
+            .expect("note")
+            .contains("+0.2000 mm")
+    );
     assert!((data.targets_mm()[0] - 15.1).abs() < 1e-9);
     let iso = iso230::evaluate(&data);
     assert!(iso.targets.iter().all(|t| t.b_um.is_some()));

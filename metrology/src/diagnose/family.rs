@@ -102,10 +102,9 @@ impl Family {
     pub(super) fn grid(self, obs: &Obs) -> Vec<f64> {
         let d = obs.duration_s;
         match self {
-            Family::Linear
-            | Family::ThermalTemp
-            | Family::ReversalDrift
-            | Family::CycleOffsets => vec![f64::NAN],
+            Family::Linear | Family::ThermalTemp | Family::ReversalDrift | Family::CycleOffsets => {
+                vec![f64::NAN]
+            }
             // The first shifted reading: any reading but the first and last two in time.
             Family::Step => {
                 let o = &obs.time_order;

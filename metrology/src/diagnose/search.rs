@@ -88,7 +88,8 @@ fn prefer_pair(
             if rss <= 0.0 {
                 continue;
             }
-            let dbic = n_eff * (rss / rss0).ln() + (fa.n_params(obs) + fb.n_params(obs)) as f64 * ln_n;
+            let dbic =
+                n_eff * (rss / rss0).ln() + (fa.n_params(obs) + fb.n_params(obs)) as f64 * ln_n;
             // `a` < `b` in BIC order: `a` is the better member.
             if b > 0 && best.is_none_or(|x| dbic < x.1) {
                 best = Some((a, dbic));
@@ -207,7 +208,6 @@ pub(super) fn forward_select(
             .map(|c| c.1.rss);
         let mut added = None;
         for (fam, cand, _) in cands {
-
             let new = Selected {
                 family: fam,
                 theta: cand.theta,
@@ -236,7 +236,11 @@ pub(super) fn forward_select(
             }
             let eval: Vec<bool> = out.iter().map(|o| !o).collect();
             // An offset per cycle cannot be predicted for a cycle held out whole.
-            let ho = if fam == Family::CycleOffsets { &diag } else { obs };
+            let ho = if fam == Family::CycleOffsets {
+                &diag
+            } else {
+                obs
+            };
             if heldout_rms(ho, &w, &cols_after, &eval) >= heldout_rms(ho, &w, &cols, &eval) {
                 continue;
             }
@@ -260,7 +264,8 @@ pub(super) fn forward_select(
         selected.push(step.sel.clone());
         steps.push(step);
         // Re-flag outliers against the richer model.
-        let (_, r) = in_sample_residuals(obs, &weights(obs, out, &var_factor), &all_cols(&selected));
+        let (_, r) =
+            in_sample_residuals(obs, &weights(obs, out, &var_factor), &all_cols(&selected));
         *out = flag_outliers(obs, &r, opt.outlier_alpha, m);
     }
     steps

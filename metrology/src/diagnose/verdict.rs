@@ -62,7 +62,10 @@ pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
     let expected = n as f64 * p_mid;
     // And the kurtosis of the readings inside the bound: 3 for normal noise, with a sampling
     // standard deviation of √(24/n).
-    let inside: Vec<f64> = (0..n).filter(|&j| fin.eval[j]).map(|j| fin.resid[j]).collect();
+    let inside: Vec<f64> = (0..n)
+        .filter(|&j| fin.eval[j])
+        .map(|j| fin.resid[j])
+        .collect();
     let m2 = inside.iter().map(|r| r * r).sum::<f64>() / inside.len().max(1) as f64;
     let m4 = inside.iter().map(|r| r.powi(4)).sum::<f64>() / inside.len().max(1) as f64;
     let kurtosis = if m2 > 0.0 { m4 / (m2 * m2) } else { 3.0 };

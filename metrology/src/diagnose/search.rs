@@ -206,6 +206,7 @@ pub(super) fn forward_select(
             .iter()
             .find(|c| c.0 == Family::ThermalTemp)
             .map(|c| c.1.rss);
+        let partners: Vec<(Family, f64)> = cands.iter().map(|c| (c.0, c.1.theta)).collect();
         let mut added = None;
         for (fam, cand, _) in cands {
             let new = Selected {
@@ -215,13 +216,29 @@ pub(super) fn forward_select(
             };
             let mut cols_after = cols.clone();
             cols_after.extend(new.cols.iter().cloned());
-            let Some(significance) = discounted_gain(obs, &w, &cols_after, rss0, &cand, fam) else {
+            // The residual correlation is read after this effect and, where another candidate
+            // explains what is left (two effects at once), after both: structure of a second
+            // effect is not correlated noise.
+            let partner: Option<Vec<Vec<f64>>> = partners
+                .iter()
+                .find(|(f, _)| f.slot() != fam.slot())
+                .map(|(f, th)| {
+                    let mut c = cols_after.clone();
+                    c.extend(f.columns(obs, *th));
+                    c
+                });
+            let Some(significance) =
+                discounted_gain(obs, &w, &cols_after, partner.as_deref(), rss0, &cand, fam)
+            else {
                 continue;
             };
             if significance < opt.min_bic_gain {
                 continue;
             }
-            if absorbed_by_baseline(obs, &p, &new.cols) {
+            // A scale change varies with position by definition: its spread over the targets
+            // is not a sign of the baseline absorbing it.
+            let by_position = matches!(fam, Family::Thermal | Family::ThermalTemp);
+            if !by_position && absorbed_by_baseline(obs, &p, &new.cols) {
                 let note = format!(
                     "{} would fit, but the per-target, per-direction baseline absorbs most of \
                      it (each target is measured over a short part of the run, or the pattern \
@@ -328,6 +345,7 @@ fn discounted_gain(
     obs: &Obs,
     w: &[f64],
     cols_after: &[Vec<f64>],
+    with_partner: Option<&[Vec<f64>]>,
     rss0: f64,
     cand: &Candidate,
     fam: Family,
@@ -337,7 +355,12 @@ fn discounted_gain(
     }
     let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
     let (_, r) = in_sample_residuals(obs, w, cols_after);
-    let rho = lag1_correlation(obs, w, &r).clamp(0.0, 0.95);
+    let mut rho = lag1_correlation(obs, w, &r);
+    if let Some(cols) = with_partner {
+        let (_, r2) = in_sample_residuals(obs, w, cols);
+        rho = rho.min(lag1_correlation(obs, w, &r2));
+    }
+    let rho = rho.clamp(0.0, 0.95);
     let lr = n_eff * (rss0 / cand.rss).ln();
     Some(lr * (1.0 - rho) / (1.0 + rho) - fam.n_params(obs) as f64 * (obs.len() as f64).ln())
 }

@@ -8,7 +8,10 @@ use metrology::positioning_data::{simulate, standard_schedule};
 
 fn demo_like(seed: u64) -> Vec<String> {
     let targets_mm = vec![2.312, 101.5, 200.7, 299.9, 399.05];
-    let up: Vec<f64> = targets_mm.iter().map(|x| 0.004 * x + (x * 0.05f64).sin()).collect();
+    let up: Vec<f64> = targets_mm
+        .iter()
+        .map(|x| 0.004 * x + (x * 0.05f64).sin())
+        .collect();
     let down: Vec<f64> = up.iter().map(|u| u - 2.0).collect();
     let model = AxisModel {
         axis: "X".into(),

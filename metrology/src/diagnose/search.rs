@@ -218,13 +218,14 @@ pub(super) fn forward_select(
             cols_after.extend(new.cols.iter().cloned());
             // The residual correlation is read after this effect and, where another candidate
             // explains what is left (two effects at once), after both: structure of a second
-            // effect is not correlated noise.
-            let partner: Option<Vec<Vec<f64>>> = partners
-                .iter()
-                .find(|(f, _)| f.slot() != fam.slot())
-                .map(|(f, th)| {
+            // effect is not correlated noise. The partner is the candidate that best explains
+            // the data together with this one (the lowest BIC of the pair), not the best one
+            // alone: a flexible effect (an offset per cycle) can rank high alone by absorbing
+            // part of two effects, yet leave the structure of either as "correlation".
+            let partner =
+                best_partner(obs, &p, &y_perp, rss0, fam, &new.cols, &partners).map(|pc| {
                     let mut c = cols_after.clone();
-                    c.extend(f.columns(obs, *th));
+                    c.extend(pc);
                     c
                 });
             let Some(significance) =
@@ -286,6 +287,44 @@ pub(super) fn forward_select(
         *out = flag_outliers(obs, &r, opt.outlier_alpha, m);
     }
     steps
+}
+
+/// Columns of the candidate of another slot, not absorbed by the baseline, that, fitted
+/// together with `fam`'s `cols`, gives the lowest BIC (each at the parameter of its own
+/// search).
+fn best_partner(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    rss0: f64,
+    fam: Family,
+    cols: &[Vec<f64>],
+    partners: &[(Family, f64)],
+) -> Option<Vec<Vec<f64>>> {
+    let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
+    let ln_n = (obs.len() as f64).ln();
+    partners
+        .iter()
+        .filter(|(f, _)| f.slot() != fam.slot())
+        .filter_map(|&(f, th)| {
+            let pc = f.columns(obs, th);
+            // Only an effect the data can report is credited with the structure it explains:
+            // one the baseline absorbs (tested as for the candidates) is no partner.
+            let by_position = matches!(f, Family::Thermal | Family::ThermalTemp);
+            if !by_position && absorbed_by_baseline(obs, p, &pc) {
+                return None;
+            }
+            let mut both = cols.to_vec();
+            both.extend(pc.iter().cloned());
+            let rss = cols_rss(obs, p, y_perp, &both);
+            (rss > 0.0).then(|| {
+                let dbic =
+                    n_eff * (rss / rss0).ln() + (fam.n_params(obs) + f.n_params(obs)) as f64 * ln_n;
+                (pc, dbic)
+            })
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|x| x.0)
 }
 
 /// Every family not yet selected, searched, with its BIC change.

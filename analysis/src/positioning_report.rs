@@ -106,6 +106,17 @@ pub fn analyze_positioning(
                 .into(),
         );
     }
+    if let Some(n) = data.direction_target_note() {
+        notes.push(n);
+    }
+    if data.n_cycles() < 2 {
+        notes.push(
+            "a single pass per direction: the repeatability values (s, R↑, R↓, R, A and the \
+             expanded uncertainties) need repeated approaches and are not given; the mean \
+             deviations, B, E and M are from single readings"
+                .into(),
+        );
+    }
     if data.n_cycles() < 5 {
         notes.push(format!(
             "ISO 230-2 asks for at least 5 cycles; this run has {}",

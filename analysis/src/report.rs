@@ -110,6 +110,9 @@ fn diagnosis_section(data: &PositioningData, s: &mut String) {
                     f.cause
                 );
             }
+            if !r.conclusion.is_empty() {
+                let _ = writeln!(s, "  conclusion: {}", r.conclusion);
+            }
         }
     }
 }

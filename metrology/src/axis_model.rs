@@ -49,6 +49,14 @@ pub enum Effect {
     LocalAnomaly { index: usize, std_ratio: f64 },
     /// Isolated readings off by about `magnitude_um`, with probability `rate` per reading.
     Outliers { rate: f64, magnitude_um: f64 },
+    /// Every reading from `time_s` on shifts by `size_um`.
+    Step { time_s: f64, size_um: f64 },
+    /// The reversal value B = x̄↑ − x̄↓ changes by `change_um` over `duration_s` from the start:
+    /// positive approaches shift by `+change·t/(2·duration)`, negative ones by the opposite.
+    ReversalDrift { change_um: f64, duration_s: f64 },
+    /// Each cycle is shifted by its own offset, drawn with standard deviation `std_um` when
+    /// simulated (the reference re-mounted between cycles).
+    CycleOffsets { std_um: f64 },
 }
 
 /// Direction of approach to a target.
@@ -87,7 +95,26 @@ impl AxisModel {
                 Effect::ThermalExpansion { scale_ppm, tau_s } => {
                     scale_ppm * 1e-6 * x_mm * 1e3 * (1.0 - (-t_s / tau_s).exp())
                 }
-                Effect::LocalAnomaly { .. } | Effect::Outliers { .. } => 0.0,
+                Effect::Step { time_s, size_um } => {
+                    if t_s >= time_s {
+                        size_um
+                    } else {
+                        0.0
+                    }
+                }
+                Effect::ReversalDrift {
+                    change_um,
+                    duration_s,
+                } => {
+                    let half = match dir {
+                        Direction::Up => 0.5,
+                        Direction::Down => -0.5,
+                    };
+                    half * change_um * t_s / duration_s.max(f64::MIN_POSITIVE)
+                }
+                Effect::LocalAnomaly { .. }
+                | Effect::Outliers { .. }
+                | Effect::CycleOffsets { .. } => 0.0,
             };
         }
         d
@@ -107,6 +134,14 @@ impl AxisModel {
             }
         }
         s
+    }
+
+    /// Standard deviation of the offsets between cycles, if the model has them.
+    pub fn cycle_offsets_std_um(&self) -> Option<f64> {
+        self.effects.iter().find_map(|e| match *e {
+            Effect::CycleOffsets { std_um } => Some(std_um),
+            _ => None,
+        })
     }
 
     /// Probability and size of an outlier per reading, if the model has outliers.

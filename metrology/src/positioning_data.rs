@@ -242,19 +242,28 @@ impl PositioningData {
     }
 
     /// Checks what the analysis relies on: readings exist, a target number always names the
-    /// same programmed position, and no reading is given twice.
+    /// same programmed position in one direction, and no reading is given twice. The two
+    /// directions may approach a target at slightly different positions (some controllers log
+    /// the backward pass shifted): up to a quarter of the smallest target spacing is accepted
+    /// and the run is evaluated by target index ([`Self::direction_target_offset`] says by how
+    /// much; `docs/datasets.md`, "Positioning dataset").
     pub fn validate(&self) -> Result<(), DatasetError> {
         if self.readings.is_empty() {
             return Err(DatasetError::Empty);
         }
-        let mut pos: BTreeMap<usize, f64> = BTreeMap::new();
+        let mut pos: BTreeMap<(usize, usize), f64> = BTreeMap::new();
         let mut seen = std::collections::HashSet::new();
         for r in &self.readings {
-            let p = *pos.entry(r.index).or_insert(r.target_mm);
+            let p = *pos
+                .entry((r.index, dir_slot(r.direction)))
+                .or_insert(r.target_mm);
             if (p - r.target_mm).abs() > 1e-3 {
                 return Err(DatasetError::Inconsistent(format!(
-                    "target {} is at {} mm in one row and {} mm in another",
-                    r.index, p, r.target_mm
+                    "target {} ({}) is at {} mm in one row and {} mm in another",
+                    r.index,
+                    dir_sign(r.direction),
+                    p,
+                    r.target_mm
                 )));
             }
             if !seen.insert((r.cycle, r.direction, r.index)) {
@@ -266,7 +275,46 @@ impl PositioningData {
                 )));
             }
         }
+        if let Some((index, d)) = self.direction_target_offset() {
+            let t = self.targets_mm();
+            let spacing = t
+                .windows(2)
+                .map(|w| (w[1] - w[0]).abs())
+                .filter(|s| s.is_finite() && *s > 0.0)
+                .fold(f64::INFINITY, f64::min);
+            if d.abs() > 0.25 * spacing {
+                return Err(DatasetError::Inconsistent(format!(
+                    "target {index} is approached {d:+} mm apart in the two directions, more \
+                     than a quarter of the smallest target spacing ({spacing} mm): are the \
+                     target numbers of the two directions the same targets?"
+                )));
+            }
+        }
         Ok(())
+    }
+
+    /// The largest difference between the positions at which the two directions approach the
+    /// same target number, `(index, negative − positive in mm)`, when it exceeds 1 µm.
+    pub fn direction_target_offset(&self) -> Option<(usize, f64)> {
+        let mut pos: BTreeMap<usize, [Option<f64>; 2]> = BTreeMap::new();
+        for r in &self.readings {
+            pos.entry(r.index).or_default()[dir_slot(r.direction)] = Some(r.target_mm);
+        }
+        pos.iter()
+            .filter_map(|(i, p)| Some((*i, p[1]? - p[0]?)))
+            .filter(|(_, d)| d.abs() > 1e-3)
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+    }
+
+    /// A sentence for reports when the directions approach the targets at different positions.
+    pub fn direction_target_note(&self) -> Option<String> {
+        self.direction_target_offset().map(|(i, d)| {
+            format!(
+                "the two directions approach the targets at different positions (largest \
+                 difference {d:+.4} mm, target {i}): evaluated by target index, each target at \
+                 the mean of its two positions"
+            )
+        })
     }
 
     /// Number of cycles (largest cycle number).
@@ -280,12 +328,19 @@ impl PositioningData {
     }
 
     /// Programmed targets by index (0-based position = index − 1), mm; NaN if never seen.
+    /// Where the two directions approach a target at different positions, their mean.
     pub fn targets_mm(&self) -> Vec<f64> {
-        let mut t = vec![f64::NAN; self.n_targets()];
+        let mut p = vec![[None::<f64>; 2]; self.n_targets()];
         for r in &self.readings {
-            t[r.index - 1] = r.target_mm;
+            p[r.index - 1][dir_slot(r.direction)] = Some(r.target_mm);
         }
-        t
+        p.iter()
+            .map(|p| match p {
+                [Some(a), Some(b)] => 0.5 * (a + b),
+                [Some(a), None] | [None, Some(a)] => *a,
+                [None, None] => f64::NAN,
+            })
+            .collect()
     }
 
     /// Readings as a grid `[direction][target][cycle]` (direction 0 = up), `None` where missing.
@@ -455,11 +510,26 @@ pub fn standard_schedule(
 pub fn simulate(model: &AxisModel, schedule: &[ScheduledReading], seed: u64) -> PositioningData {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let outliers = model.outliers();
+    // Offsets per cycle from their own stream, so that models without them simulate as before.
+    let cycle_offsets: Vec<f64> = match model.cycle_offsets_std_um() {
+        Some(s) => {
+            let mut r2 = ChaCha8Rng::seed_from_u64(seed ^ 0x0ff5_e7c7_c1e5);
+            let n = schedule.iter().map(|s| s.cycle).max().unwrap_or(0);
+            (0..=n)
+                .map(|_| {
+                    let z: f64 = StandardNormal.sample(&mut r2);
+                    s * z
+                })
+                .collect()
+        }
+        None => Vec::new(),
+    };
     let readings = schedule
         .iter()
         .map(|s| {
             let i0 = s.index.saturating_sub(1);
             let mut dev = model.deterministic_um(i0, s.direction, s.time_s);
+            dev += cycle_offsets.get(s.cycle).copied().unwrap_or(0.0);
             let z: f64 = StandardNormal.sample(&mut rng);
             dev += model.noise_std_um(i0) * z;
             if let Some((rate, mag)) = outliers {

@@ -122,6 +122,9 @@ pub fn render_text(d: &Diagnosis) -> String {
         );
         let _ = writeln!(s, "   cause: {}", f.cause);
     }
+    if !r.conclusion.is_empty() {
+        let _ = writeln!(s, "\nConclusion: {}", r.conclusion);
+    }
     if let Some(rep) = &r.reproduction {
         let _ = writeln!(
             s,

@@ -10,6 +10,9 @@ pub(super) enum Family {
     Cyclic,
     Thermal,
     ThermalTemp,
+    Step,
+    ReversalDrift,
+    CycleOffsets,
 }
 
 impl Family {
@@ -19,14 +22,20 @@ impl Family {
             Family::Warmup => "exponential_warmup",
             Family::Cyclic => "cyclic_drift",
             Family::Thermal | Family::ThermalTemp => "thermal_expansion",
+            Family::Step => "step",
+            Family::ReversalDrift => "reversal_drift",
+            Family::CycleOffsets => "cycle_offsets",
         }
     }
     /// Parameters counted by the BIC (grid-searched ones included).
-    pub(super) fn n_params(self) -> usize {
+    pub(super) fn n_params(self, obs: &Obs) -> usize {
         match self {
-            Family::Linear | Family::ThermalTemp => 1,
+            Family::Linear | Family::ThermalTemp | Family::ReversalDrift => 1,
             Family::Warmup | Family::Thermal => 2,
-            Family::Cyclic => 3,
+            // A change point searched over every reading costs more than a smooth parameter
+            // (its likelihood ratio is a maximum over many nearly independent positions).
+            Family::Cyclic | Family::Step => 3,
+            Family::CycleOffsets => obs.n_cycles.saturating_sub(1).max(1),
         }
     }
     pub(super) fn slot(self) -> usize {
@@ -35,6 +44,9 @@ impl Family {
             Family::Warmup => 1,
             Family::Cyclic => 2,
             Family::Thermal | Family::ThermalTemp => 3,
+            Family::Step => 4,
+            Family::ReversalDrift => 5,
+            Family::CycleOffsets => 6,
         }
     }
 
@@ -70,13 +82,41 @@ impl Family {
                 ],
                 None => vec![vec![0.0; obs.len()]],
             },
+            // Readings from θ on shift by the coefficient.
+            Family::Step => vec![obs.t.iter().map(|&t| f64::from(t >= theta)).collect()],
+            // The coefficient is B at the end minus B at the start (ISO 230-2 sign).
+            Family::ReversalDrift => vec![
+                obs.t
+                    .iter()
+                    .zip(&obs.dir_half)
+                    .map(|(t, h)| h * (t - obs.t0) / obs.duration_s)
+                    .collect(),
+            ],
+            // One offset per cycle after the first (the first is the baseline's).
+            Family::CycleOffsets => (1..obs.n_cycles)
+                .map(|c| obs.cycle.iter().map(|&k| f64::from(k == c)).collect())
+                .collect(),
         }
     }
 
     pub(super) fn grid(self, obs: &Obs) -> Vec<f64> {
         let d = obs.duration_s;
         match self {
-            Family::Linear | Family::ThermalTemp => vec![f64::NAN],
+            Family::Linear | Family::ThermalTemp | Family::ReversalDrift | Family::CycleOffsets => {
+                vec![f64::NAN]
+            }
+            // The first shifted reading: any reading but the first and last two in time.
+            Family::Step => {
+                let o = &obs.time_order;
+                let mut ts: Vec<f64> = o
+                    .iter()
+                    .skip(2)
+                    .take(o.len().saturating_sub(4))
+                    .map(|&j| obs.t[j])
+                    .collect();
+                ts.dedup();
+                ts
+            }
             Family::Warmup | Family::Thermal => {
                 let (lo, hi) = ((d / 100.0).max(obs.dt_s), 3.0 * d);
                 let n = 48;
@@ -97,8 +137,38 @@ impl Family {
                 let n = (((f_hi - f_lo) / df).ceil() as usize).clamp(2, 4000);
                 (0..=n)
                     .map(|k| 1.0 / (f_lo + (f_hi - f_lo) * k as f64 / n as f64))
+                    .filter(|p| !aliases_structure(obs, *p))
                     .collect()
             }
         }
     }
+}
+
+/// Length of one bidirectional cycle, s: the median time between the starts of successive
+/// cycles (None with fewer than two cycles).
+pub(super) fn cycle_length_s(obs: &Obs) -> Option<f64> {
+    let mut start = vec![f64::INFINITY; obs.n_cycles];
+    for j in 0..obs.len() {
+        start[obs.cycle[j]] = start[obs.cycle[j]].min(obs.t[j]);
+    }
+    let mut d: Vec<f64> = start
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied()
+}
+
+/// A period tied to the run's structure rather than to time: within half a beat over the run
+/// of a harmonic of the cycle length (the pass is half a cycle), where the per-target,
+/// per-direction baseline absorbs the sinusoid or turns it into a slow per-target pattern
+/// (`docs/methods.md`, "Diagnosis").
+pub(super) fn aliases_structure(obs: &Obs, period_s: f64) -> bool {
+    let Some(pc) = cycle_length_s(obs) else {
+        return false;
+    };
+    let (f, fc) = (1.0 / period_s, 1.0 / pc);
+    let k = (f / fc).round();
+    k >= 1.0 && (f - k * fc).abs() < 0.5 / obs.duration_s
 }

@@ -21,6 +21,16 @@ pub(super) struct Obs {
     pub(super) n_folds: usize,
     pub(super) duration_s: f64,
     pub(super) dt_s: f64,
+    /// Start of the run, s.
+    pub(super) t0: f64,
+    /// +½ for positive approaches, −½ for negative ones: B = x̄↑ − x̄↓ changes by the
+    /// coefficient of a column `dir_half · f(t)` when f goes from 0 to 1 (`docs/datasets.md`).
+    pub(super) dir_half: Vec<f64>,
+    /// 0-based cycle of every row.
+    pub(super) cycle: Vec<usize>,
+    pub(super) n_cycles: usize,
+    /// Rows in time order (ties in row order).
+    pub(super) time_order: Vec<usize>,
 }
 
 impl Obs {
@@ -58,6 +68,40 @@ impl Obs {
             n_folds,
             duration_s: (t1 - t0).max(1.0),
             dt_s,
+            t0,
+            dir_half: r
+                .iter()
+                .map(|r| 0.5 - dir_slot(r.direction) as f64)
+                .collect(),
+            cycle: r.iter().map(|r| r.cycle - 1).collect(),
+            n_cycles: data.n_cycles(),
+            time_order: {
+                let mut o: Vec<usize> = (0..r.len()).collect();
+                o.sort_by(|&a, &b| r[a].time_s.total_cmp(&r[b].time_s));
+                o
+            },
+        }
+    }
+
+    /// The same observations with folds dealt diagonally over (cycle, target): every held-out
+    /// reading then has readings of its own cycle and of its own target in the training set,
+    /// which an effect per cycle (`cycle_offsets`) needs to be predicted at all.
+    pub(super) fn with_diagonal_folds(&self) -> Obs {
+        let fold = (0..self.len())
+            .map(|j| (self.cycle[j] + self.target[j]) % self.n_folds)
+            .collect();
+        Obs {
+            y: self.y.clone(),
+            t: self.t.clone(),
+            x_mm: self.x_mm.clone(),
+            temp_c: self.temp_c.clone(),
+            group: self.group.clone(),
+            target: self.target.clone(),
+            fold,
+            dir_half: self.dir_half.clone(),
+            cycle: self.cycle.clone(),
+            time_order: self.time_order.clone(),
+            ..*self
         }
     }
     pub(super) fn len(&self) -> usize {

@@ -34,6 +34,7 @@ mod model;
 mod outliers;
 mod report;
 mod search;
+mod verdict;
 
 pub use model::{AxisTable, axis_model_from_toml, baseline_model, reproduction_check};
 
@@ -119,6 +120,9 @@ pub struct DiagnosisReport {
     pub reproduction: Option<Reproduction>,
     /// Caveats (missing readings, no real times, ...).
     pub notes: Vec<String>,
+    /// Which combination of effects explains the run, or that something is unexplained.
+    #[serde(default)]
+    pub conclusion: String,
 }
 
 /// A diagnosis: the report and the extended model.
@@ -141,17 +145,30 @@ pub enum DiagnoseError {
     /// too few readings to diagnose: need at least 3 cycles of at least 2 targets
     #[error("too few readings to diagnose: need at least 3 cycles of at least 2 targets")]
     TooFewReadings,
+    /// A sweep (fewer than 3 cycles) cannot show what the diagnosis looks for.
+    #[error(
+        "only {cycles} cycle(s): a sweep shows the systematic deviation along the travel and the \
+         reversal at each target (see `analyze positioning`), but not the repeatability, a drift \
+         or any other effect over time, which need repeated approaches; diagnosis needs at least \
+         3 cycles of at least 2 targets"
+    )]
+    Sweep { cycles: usize },
 }
 
 /// Diagnoses a positioning run against the static baseline.
 pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
     let m = data.n_targets();
-    if data.n_cycles() < 3 || m < 2 || data.readings.len() < 12 {
+    if data.n_cycles() < 3 && m >= 2 {
+        return Err(DiagnoseError::Sweep {
+            cycles: data.n_cycles(),
+        });
+    }
+    if m < 2 || data.readings.len() < 12 {
         return Err(DiagnoseError::TooFewReadings);
     }
     let obs = Obs::new(data, opt.max_folds);
     let n = obs.len();
-    let notes = input_notes(data);
+    let mut notes = input_notes(data);
     let use_temp = obs.temp_c.is_some() && !data.material_compensation;
 
     // Baseline on everything.
@@ -162,7 +179,7 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
 
     // Outliers: a first screen around the group medians, refined after each step.
     let mut out = flag_outliers(&obs, &group_median_residuals(&obs), opt.outlier_alpha, m);
-    let steps = search::forward_select(&obs, opt, use_temp, &mut out);
+    let steps = search::forward_select(&obs, opt, use_temp, &mut out, &mut notes);
     let cols = all_cols(&steps.iter().map(|s| s.sel.clone()).collect::<Vec<_>>());
     let fin = settle(&obs, opt, out, cols);
 
@@ -177,12 +194,52 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     if let Some(a) = &anomaly {
         found.push((a.finding.clone(), a.effect.clone()));
     }
-    if let Some(o) = report::outlier_finding(&obs, &fin, anomaly.as_ref()) {
-        found.push(o);
+    let res = verdict::residue(&obs, &fin);
+    // Parameters fitted in correlated noise are less certain than white noise implies.
+    for (f, _) in found.iter_mut() {
+        for u in f.params_u.values_mut() {
+            *u *= res.u_factor();
+        }
+    }
+    if res.rho > 0.3 {
+        notes.push(format!(
+            "consecutive readings correlate (lag-1 correlation {:.2}, air turbulence or a slow \
+             reference): the evidence for every effect and its uncertainties allow for it",
+            res.rho
+        ));
+    }
+    let unexplained = res.unexplained();
+    match report::outlier_finding(&obs, &fin, anomaly.as_ref()) {
+        Some(o) if !res.heavy_tails && !unexplained => found.push(o),
+        Some(_) if res.heavy_tails && !unexplained => notes.push(
+            "the noise is heavier-tailed than normal: the readings far off their trend are its \
+             tail, not isolated events, so they are left out of the fits but not reported as \
+             outliers"
+                .into(),
+        ),
+        _ => {}
+    }
+    if unexplained {
+        let weak = verdict::weak_next_to_unexplained(
+            &found.iter().map(|f| f.0.clone()).collect::<Vec<_>>(),
+        );
+        for &i in weak.iter().rev() {
+            let (f, _) = found.remove(i);
+            notes.push(format!(
+                "{} would lower the held-out error only from {:.2} to {:.2} µm: not reported, \
+                 it would stretch over structure it does not explain",
+                f.effect, f.heldout_rms_before_um, f.heldout_rms_after_um
+            ));
+        }
     }
     // Most significant first (a stable sort keeps the order of ties).
     found.sort_by(|a, b| b.0.significance.total_cmp(&a.0.significance));
-    let (findings, effects): (Vec<Finding>, Vec<Effect>) = found.into_iter().unzip();
+    let (mut findings, effects): (Vec<Finding>, Vec<Effect>) = found.into_iter().unzip();
+    if unexplained {
+        // Not a model effect: the extended model does not simulate it.
+        findings.push(verdict::unexplained_finding(&obs, &fin, &res));
+    }
+    let conclusion = verdict::conclusion(&findings, baseline_heldout, fin.sigma2.sqrt());
 
     let model = AxisModel {
         axis: data.axis.clone().unwrap_or_else(|| "X".into()),
@@ -211,6 +268,7 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
             extended_model: None,
             reproduction: None,
             notes,
+            conclusion,
         },
         model,
         baseline_residuals_um: r0,
@@ -237,6 +295,9 @@ fn input_notes(data: &PositioningData) -> Vec<String> {
                 .collect::<Vec<_>>()
                 .join(", ")
         ));
+    }
+    if let Some(n) = data.direction_target_note() {
+        notes.push(n);
     }
     if !data.has_times {
         notes.push(

@@ -6,7 +6,7 @@
 
 use std::collections::BTreeMap;
 
-use super::family::Family;
+use super::family::{Family, cycle_length_s};
 use super::fit::{FinalFit, Obs, Projector, fit_mean, heldout_residuals, heldout_rms};
 use super::outliers::weights;
 use super::search::{Step, search};
@@ -73,7 +73,10 @@ pub(super) fn mean_finding(
     let (params, params_u, cause, effect) = match st.sel.family {
         Family::Linear => linear(&c, data.has_times),
         Family::Warmup => warmup(&c, data.has_times),
-        Family::Cyclic => cyclic(&c, data.has_times),
+        Family::Cyclic => cyclic(obs, &c, data.has_times),
+        Family::Step => step(obs, &c, data.has_times),
+        Family::ReversalDrift => reversal_drift(obs, &c, data.has_times),
+        Family::CycleOffsets => cycle_offsets(&c),
         Family::Thermal => thermal(obs, data, fin, st, &c),
         Family::ThermalTemp => thermal_temp(obs, data, fin, st, &c),
     };
@@ -142,7 +145,7 @@ fn warmup(c: &Coefs, has_times: bool) -> Described {
     )
 }
 
-fn cyclic(c: &Coefs, has_times: bool) -> Described {
+fn cyclic(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
     let (a, b, ub) = (c.beta[0], c.beta[1], &c.ub);
     let th = c.theta;
     let amp = a.hypot(b);
@@ -157,10 +160,21 @@ fn cyclic(c: &Coefs, has_times: bool) -> Described {
     if let Some(u) = c.u_theta {
         params_u.insert("period_s".into(), u);
     }
+    // Worded from the evidence: the period is not tied to the run's structure, but without
+    // temperatures a coolant cycle is a hypothesis to confirm, not a finding.
+    let cycle = cycle_length_s(obs)
+        .map(|pc| format!(" (one measuring cycle lasts {})", dur(pc, has_times)))
+        .unwrap_or_default();
+    let temps = if obs.temp_c.is_some() {
+        "compare the file's temperatures with this period"
+    } else {
+        "the file holds no temperatures, so this is not established"
+    };
     let cause = format!(
-        "periodic drift of the measuring loop, period {}, {amp:.2} µm amplitude: a spindle or \
-         coolant temperature cycle (check the cooling unit's on/off cycle and the \
-         spindle/coolant temperatures)",
+        "periodic drift of the measuring loop, period {}, {amp:.2} µm amplitude, not tied to the \
+         run's structure{cycle}: a spindle or coolant temperature cycle with this period would \
+         explain it; {temps} — to confirm, log the coolant and spindle temperatures (or the \
+         cooling unit's on/off times) during a run and check that they cycle with the same period",
         dur(th, has_times)
     );
     (
@@ -215,6 +229,86 @@ fn thermal(obs: &Obs, data: &PositioningData, fin: &FinalFit, st: &Step, c: &Coe
         tau_s: th,
     };
     (params, params_u, cause, effect)
+}
+
+fn step(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
+    let (size, t_s) = (c.beta[0], c.theta);
+    let first = obs
+        .time_order
+        .iter()
+        .position(|&j| obs.t[j] >= t_s)
+        .map_or(0, |k| k + 1);
+    // The moment is known to the reading: half an interval either way.
+    let params_u = BTreeMap::from([
+        ("size_um".into(), c.ub[0]),
+        ("time_s".into(), 0.5 * obs.dt_s),
+    ]);
+    let at = if has_times {
+        format!("{:.1} min into the run", (t_s - obs.t0) / 60.0)
+    } else {
+        "(no real times)".into()
+    };
+    let cause = format!(
+        "every reading from reading {first} on {at} is shifted by {size:+.2} µm: a sudden change \
+         of the measuring set-up or the axis — a bumped optic, tripod or sensor bracket, a \
+         re-datum or a slipped coupling; check the run's log for an event at that moment and \
+         repeat the run"
+    );
+    (
+        BTreeMap::from([("size_um".into(), size), ("time_s".into(), t_s)]),
+        params_u,
+        cause,
+        Effect::Step {
+            time_s: t_s,
+            size_um: size,
+        },
+    )
+}
+
+fn reversal_drift(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
+    let change = c.beta[0];
+    let cause = format!(
+        "the reversal value B = x̄↑ − x̄↓ changes by {change:+.2} µm from the start to the end of \
+         the run ({}): backlash that changes as the screw nut, drive or guide warms; measure \
+         B again after a warm-up and check the nut preload",
+        dur(obs.duration_s, has_times)
+    );
+    (
+        BTreeMap::from([("change_um".into(), change)]),
+        BTreeMap::from([("change_um".into(), c.ub[0])]),
+        cause,
+        Effect::ReversalDrift {
+            change_um: change,
+            duration_s: obs.duration_s,
+        },
+    )
+}
+
+fn cycle_offsets(c: &Coefs) -> Described {
+    // Offsets relative to the first cycle (whose offset the baseline holds).
+    let mut off = vec![0.0];
+    off.extend(c.beta.iter().copied());
+    let n = off.len() as f64;
+    let mean = off.iter().sum::<f64>() / n;
+    let sd = (off.iter().map(|o| (o - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
+    // A standard deviation from n values: u ≈ s/√(2(n − 1)).
+    let u = sd / (2.0 * (n - 1.0).max(1.0)).sqrt();
+    let list = off
+        .iter()
+        .map(|o| format!("{:+.1}", o - mean))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let cause = format!(
+        "each cycle is shifted by its own amount (standard deviation {sd:.2} µm; offsets {list} \
+         µm): the reference was re-mounted, re-zeroed or moved between cycles, or the axis was \
+         re-homed; check the set-up's stability and keep the reference untouched during a run"
+    );
+    (
+        BTreeMap::from([("std_um".into(), sd)]),
+        BTreeMap::from([("std_um".into(), u)]),
+        cause,
+        Effect::CycleOffsets { std_um: sd },
+    )
 }
 
 /// The measured material temperature explains the scale change better than a time constant:

@@ -1,4 +1,7 @@
-//! Search of a candidate effect's non-linear parameter and its uncertainty.
+//! Search of a candidate effect's non-linear parameter and its uncertainty, and the forward
+//! selection of effects.
+
+#![allow(clippy::needless_range_loop)]
 
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -28,7 +31,11 @@ pub(super) fn candidate_rss(
     fam: Family,
     theta: f64,
 ) -> f64 {
-    let cols = fam.columns(obs, theta);
+    cols_rss(obs, p, y_perp, &fam.columns(obs, theta))
+}
+
+/// RSS of y on baseline + `p`'s columns + `cols`.
+fn cols_rss(obs: &Obs, p: &Projector, y_perp: &[f64], cols: &[Vec<f64>]) -> f64 {
     let cp: Vec<Vec<f64>> = cols.iter().map(|c| p.residualize(obs, c)).collect();
     let k = cp.len();
     let mut a = DMatrix::zeros(k, k);
@@ -42,12 +49,58 @@ pub(super) fn candidate_rss(
         }
     }
     let y2 = dotw(y_perp, y_perp, &p.w);
-    match a.clone().cholesky() {
+    match a.cholesky() {
         Some(ch) => {
             let x = ch.solve(&b);
             (y2 - b.dot(&x)).max(0.0)
         }
         None => y2,
+    }
+}
+
+/// Two effects can explain together what neither explains alone (a step and a drift look like
+/// offsets per cycle): when the best pair, each at the parameter of its own search, beats the
+/// best single candidate by more than `margin`, its better member is tried first (the other
+/// follows at the next step).
+fn prefer_pair(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    rss0: f64,
+    cands: &mut [(Family, Candidate, f64)],
+    margin: f64,
+) {
+    let Some(best_single) = cands.first().map(|c| c.2) else {
+        return;
+    };
+    let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
+    let ln_n = (obs.len() as f64).ln();
+    let mut best: Option<(usize, f64)> = None;
+    for a in 0..cands.len() {
+        for b in a + 1..cands.len() {
+            let (fa, fb) = (cands[a].0, cands[b].0);
+            if fa.slot() == fb.slot() {
+                continue;
+            }
+            let mut cols = fa.columns(obs, cands[a].1.theta);
+            cols.extend(fb.columns(obs, cands[b].1.theta));
+            let rss = cols_rss(obs, p, y_perp, &cols);
+            if rss <= 0.0 {
+                continue;
+            }
+            let dbic =
+                n_eff * (rss / rss0).ln() + (fa.n_params(obs) + fb.n_params(obs)) as f64 * ln_n;
+            // `a` < `b` in BIC order: `a` is the better member.
+            if b > 0 && best.is_none_or(|x| dbic < x.1) {
+                best = Some((a, dbic));
+            }
+        }
+    }
+    if let Some((a, dbic)) = best
+        && a > 0
+        && dbic < best_single - margin
+    {
+        cands[..=a].rotate_right(1);
     }
 }
 
@@ -121,24 +174,24 @@ pub(super) struct Step {
     pub(super) alpha_temp: bool,
 }
 
-/// Forward selection of mean effects (module docs): at each step the candidate with the
-/// lowest BIC is added if it beats [`Options::min_bic_gain`] and lowers the held-out error.
-/// `out` holds the outlier flags and is refined after each step.
+/// Forward selection of mean effects (module docs): at each step the candidates are tried in
+/// order of their BIC; the first that beats [`Options::min_bic_gain`] once its evidence is
+/// discounted for correlated noise, is not absorbed by the baseline and lowers the held-out
+/// error is added. `out` holds the outlier flags and is refined after each step.
 pub(super) fn forward_select(
     obs: &Obs,
     opt: &Options,
     use_temp: bool,
     out: &mut Vec<bool>,
+    notes: &mut Vec<String>,
 ) -> Vec<Step> {
-    let n = obs.len();
-    let ln_n = (n as f64).ln();
     let m = obs.n_targets;
     let var_factor = vec![1.0; m];
+    let diag = obs.with_diagonal_folds();
     let mut selected: Vec<Selected> = Vec::new();
     let mut steps: Vec<Step> = Vec::new();
     loop {
         let w = weights(obs, out, &var_factor);
-        let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
         let cols = all_cols(&selected);
         let p = Projector::new(obs, &w, &cols);
         let y_perp = p.residualize(obs, &obs.y);
@@ -146,64 +199,231 @@ pub(super) fn forward_select(
         if rss0 <= 0.0 {
             break;
         }
-        let mut best: Option<(Family, Candidate, f64)> = None;
-        let mut fams = vec![Family::Linear, Family::Warmup, Family::Cyclic];
-        if obs.x_mm.iter().any(|x| (x - obs.x_mm[0]).abs() > 1e-9) {
-            fams.push(Family::Thermal);
-            if use_temp {
-                fams.push(Family::ThermalTemp);
-            }
-        }
-        let mut temp_rss = None;
-        for fam in fams {
-            if selected.iter().any(|s| s.family.slot() == fam.slot()) {
-                continue;
-            }
-            let Some(c) = search(obs, &p, &y_perp, fam) else {
+        let mut cands = candidates(obs, &p, &y_perp, rss0, use_temp, &selected);
+        cands.sort_by(|a, b| a.2.total_cmp(&b.2));
+        prefer_pair(obs, &p, &y_perp, rss0, &mut cands, opt.min_bic_gain);
+        let temp_rss = cands
+            .iter()
+            .find(|c| c.0 == Family::ThermalTemp)
+            .map(|c| c.1.rss);
+        let partners: Vec<(Family, f64)> = cands.iter().map(|c| (c.0, c.1.theta)).collect();
+        let mut added = None;
+        for (fam, cand, _) in cands {
+            let new = Selected {
+                family: fam,
+                theta: cand.theta,
+                cols: fam.columns(obs, cand.theta),
+            };
+            let mut cols_after = cols.clone();
+            cols_after.extend(new.cols.iter().cloned());
+            // The residual correlation is read after this effect and, where another candidate
+            // explains what is left (two effects at once), after both: structure of a second
+            // effect is not correlated noise. The partner is the candidate that best explains
+            // the data together with this one (the lowest BIC of the pair), not the best one
+            // alone: a flexible effect (an offset per cycle) can rank high alone by absorbing
+            // part of two effects, yet leave the structure of either as "correlation".
+            let partner =
+                best_partner(obs, &p, &y_perp, rss0, fam, &new.cols, &partners).map(|pc| {
+                    let mut c = cols_after.clone();
+                    c.extend(pc);
+                    c
+                });
+            let Some(significance) =
+                discounted_gain(obs, &w, &cols_after, partner.as_deref(), rss0, &cand, fam)
+            else {
                 continue;
             };
-            if fam == Family::ThermalTemp {
-                temp_rss = Some(c.rss);
+            if significance < opt.min_bic_gain {
+                continue;
             }
-            let dbic = n_eff * (c.rss / rss0).ln() + fam.n_params() as f64 * ln_n;
-            if best.as_ref().is_none_or(|b| dbic < b.2) {
-                best = Some((fam, c, dbic));
+            // A scale change varies with position by definition: its spread over the targets
+            // is not a sign of the baseline absorbing it.
+            let by_position = matches!(fam, Family::Thermal | Family::ThermalTemp);
+            if !by_position && absorbed_by_baseline(obs, &p, &new.cols) {
+                let note = format!(
+                    "{} would fit, but the per-target, per-direction baseline absorbs most of \
+                     it (each target is measured over a short part of the run, or the pattern \
+                     follows the run's own order of targets): the data cannot tell it from the \
+                     baseline, so it is not reported",
+                    fam.name()
+                );
+                if !notes.contains(&note) {
+                    notes.push(note);
+                }
+                continue;
             }
-        }
-        let Some((fam, cand, dbic)) = best else { break };
-        if -dbic < opt.min_bic_gain {
+            let eval: Vec<bool> = out.iter().map(|o| !o).collect();
+            // An offset per cycle cannot be predicted for a cycle held out whole.
+            let ho = if fam == Family::CycleOffsets {
+                &diag
+            } else {
+                obs
+            };
+            if heldout_rms(ho, &w, &cols_after, &eval) >= heldout_rms(ho, &w, &cols, &eval) {
+                continue;
+            }
+            let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
+            let s2 = cand.rss / (n_eff - (obs.n_groups + cols_after.len()) as f64).max(1.0);
+            let u_theta = theta_uncertainty(obs, &p, &y_perp, fam, &cand, s2);
+            // A temperature-driven scale change reported as such when the temperatures
+            // explain it at least as well as the time-constant form.
+            let alpha_temp =
+                fam == Family::Thermal && temp_rss.is_some_and(|t| t <= cand.rss * 1.05);
+            added = Some(Step {
+                sel: new,
+                significance,
+                u_theta,
+                before_cols: cols.clone(),
+                alpha_temp,
+            });
             break;
         }
-        let new = Selected {
-            family: fam,
-            theta: cand.theta,
-            cols: fam.columns(obs, cand.theta),
-        };
-        let mut cols_after = cols.clone();
-        cols_after.extend(new.cols.iter().cloned());
-        let eval: Vec<bool> = out.iter().map(|o| !o).collect();
-        let before = heldout_rms(obs, &w, &cols, &eval);
-        let after = heldout_rms(obs, &w, &cols_after, &eval);
-        if after >= before {
-            break;
-        }
-        let s2 = cand.rss / (n_eff - (obs.n_groups + cols_after.len()) as f64).max(1.0);
-        let u_theta = theta_uncertainty(obs, &p, &y_perp, fam, &cand, s2);
-        // A temperature-driven scale change reported as such when the temperatures explain
-        // it at least as well as the time-constant form.
-        let alpha_temp = fam == Family::Thermal && temp_rss.is_some_and(|t| t <= cand.rss * 1.05);
-        steps.push(Step {
-            sel: new.clone(),
-            significance: -dbic,
-            u_theta,
-            before_cols: cols,
-            alpha_temp,
-        });
-        selected.push(new);
+        let Some(step) = added else { break };
+        selected.push(step.sel.clone());
+        steps.push(step);
         // Re-flag outliers against the richer model.
         let (_, r) =
             in_sample_residuals(obs, &weights(obs, out, &var_factor), &all_cols(&selected));
         *out = flag_outliers(obs, &r, opt.outlier_alpha, m);
     }
     steps
+}
+
+/// Columns of the candidate of another slot, not absorbed by the baseline, that, fitted
+/// together with `fam`'s `cols`, gives the lowest BIC (each at the parameter of its own
+/// search).
+fn best_partner(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    rss0: f64,
+    fam: Family,
+    cols: &[Vec<f64>],
+    partners: &[(Family, f64)],
+) -> Option<Vec<Vec<f64>>> {
+    let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
+    let ln_n = (obs.len() as f64).ln();
+    partners
+        .iter()
+        .filter(|(f, _)| f.slot() != fam.slot())
+        .filter_map(|&(f, th)| {
+            let pc = f.columns(obs, th);
+            // Only an effect the data can report is credited with the structure it explains:
+            // one the baseline absorbs (tested as for the candidates) is no partner.
+            let by_position = matches!(f, Family::Thermal | Family::ThermalTemp);
+            if !by_position && absorbed_by_baseline(obs, p, &pc) {
+                return None;
+            }
+            let mut both = cols.to_vec();
+            both.extend(pc.iter().cloned());
+            let rss = cols_rss(obs, p, y_perp, &both);
+            (rss > 0.0).then(|| {
+                let dbic =
+                    n_eff * (rss / rss0).ln() + (fam.n_params(obs) + f.n_params(obs)) as f64 * ln_n;
+                (pc, dbic)
+            })
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|x| x.0)
+}
+
+/// Every family not yet selected, searched, with its BIC change.
+fn candidates(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    rss0: f64,
+    use_temp: bool,
+    selected: &[Selected],
+) -> Vec<(Family, Candidate, f64)> {
+    let ln_n = (obs.len() as f64).ln();
+    let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
+    let mut fams = vec![
+        Family::Linear,
+        Family::Warmup,
+        Family::Cyclic,
+        Family::Step,
+        Family::ReversalDrift,
+        Family::CycleOffsets,
+    ];
+    if obs.x_mm.iter().any(|x| (x - obs.x_mm[0]).abs() > 1e-9) {
+        fams.push(Family::Thermal);
+        if use_temp {
+            fams.push(Family::ThermalTemp);
+        }
+    }
+    fams.into_iter()
+        .filter(|f| selected.iter().all(|s| s.family.slot() != f.slot()))
+        .filter_map(|fam| {
+            let c = search(obs, p, y_perp, fam)?;
+            let dbic = n_eff * (c.rss / rss0).ln() + fam.n_params(obs) as f64 * ln_n;
+            Some((fam, c, dbic))
+        })
+        .collect()
+}
+
+/// Lag-1 correlation of residuals in time order (rows with weight > 0).
+pub(super) fn lag1_correlation(obs: &Obs, w: &[f64], resid: &[f64]) -> f64 {
+    let r: Vec<f64> = obs
+        .time_order
+        .iter()
+        .filter(|&&j| w[j] > 0.0)
+        .map(|&j| resid[j])
+        .collect();
+    let ss: f64 = r.iter().map(|x| x * x).sum();
+    if r.len() < 3 || ss <= 0.0 {
+        return 0.0;
+    }
+    r.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / ss
+}
+
+/// The BIC gain of a candidate with its likelihood-ratio part discounted for correlated
+/// noise: with a lag-1 correlation ρ of what is left, consecutive readings carry about
+/// (1 − ρ)/(1 + ρ) of the information of independent ones (air turbulence, `docs/methods.md`).
+fn discounted_gain(
+    obs: &Obs,
+    w: &[f64],
+    cols_after: &[Vec<f64>],
+    with_partner: Option<&[Vec<f64>]>,
+    rss0: f64,
+    cand: &Candidate,
+    fam: Family,
+) -> Option<f64> {
+    if cand.rss <= 0.0 {
+        return None;
+    }
+    let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
+    let (_, r) = in_sample_residuals(obs, w, cols_after);
+    let mut rho = lag1_correlation(obs, w, &r);
+    if let Some(cols) = with_partner {
+        let (_, r2) = in_sample_residuals(obs, w, cols);
+        rho = rho.min(lag1_correlation(obs, w, &r2));
+    }
+    let rho = rho.clamp(0.0, 0.95);
+    let lr = n_eff * (rss0 / cand.rss).ln();
+    Some(lr * (1.0 - rho) / (1.0 + rho) - fam.n_params(obs) as f64 * (obs.len() as f64).ln())
+}
+
+/// An effect the per-target, per-direction constants mostly absorb: less than 30 % of its
+/// columns' variation within each direction is left once they are centred within their
+/// (target, direction) groups (the reference is per direction, so that an effect that differs
+/// by direction by definition, like `reversal_drift`, is measured on its variation in time).
+fn absorbed_by_baseline(obs: &Obs, p: &Projector, cols: &[Vec<f64>]) -> bool {
+    let (mut kept, mut total) = (0.0, 0.0);
+    for c in cols {
+        let (mut s, mut n) = ([0.0; 2], [0.0; 2]);
+        for j in 0..obs.len() {
+            let d = usize::from(obs.dir_half[j] < 0.0);
+            s[d] += p.w[j] * c[j];
+            n[d] += p.w[j];
+        }
+        for j in 0..obs.len() {
+            let d = usize::from(obs.dir_half[j] < 0.0);
+            let m = if n[d] > 0.0 { s[d] / n[d] } else { 0.0 };
+            total += p.w[j] * (c[j] - m).powi(2);
+        }
+        let cc = p.center(obs, c);
+        kept += dotw(&cc, &cc, &p.w);
+    }
+    total > 0.0 && kept < 0.3 * total
 }

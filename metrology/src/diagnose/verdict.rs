@@ -1,0 +1,177 @@
+//! What the report concludes once the effects are fitted: whether the noise is correlated or
+//! heavy-tailed (then the evidence and the outliers are read accordingly), whether structure
+//! is left that no effect explains (`unexplained`), and which combination explains the run
+//! (`docs/datasets.md`, "Diagnosis report"; `docs/methods.md`, "Diagnosis").
+
+#![allow(clippy::needless_range_loop)]
+
+use std::collections::BTreeMap;
+
+use statrs::distribution::{ContinuousCDF, Normal};
+
+use super::Finding;
+use super::fit::{FinalFit, Obs, heldout_rms};
+use super::outliers::robust_scale;
+use super::search::lag1_correlation;
+
+/// Residual RMS above this many times the short-term noise is structure, not noise.
+const UNEXPLAINED_RATIO: f64 = 3.0;
+/// More flagged readings than this share are not isolated outliers.
+const MAX_OUTLIER_SHARE: f64 = 0.10;
+/// A mean effect that gains less than this share of the held-out error is not reported next
+/// to an `unexplained` finding (it only stretches over structure it does not explain).
+const MIN_GAIN_WHEN_UNEXPLAINED: f64 = 0.10;
+
+/// What is left after the fit, read against the short-term noise.
+pub(super) struct Residue {
+    /// Lag-1 correlation of the final residuals in time order.
+    pub(super) rho: f64,
+    /// Short-term noise: robust scale of successive differences of the residuals / √2, µm.
+    pub(super) sigma_short_um: f64,
+    /// RMS of the final residuals (outliers left out), µm.
+    pub(super) rms_left_um: f64,
+    /// The flagged readings look like the tail of a heavy-tailed noise, not isolated events.
+    pub(super) heavy_tails: bool,
+    pub(super) outlier_share: f64,
+}
+
+pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
+    let rho = lag1_correlation(obs, &fin.w, &fin.resid);
+    let kept: Vec<f64> = obs
+        .time_order
+        .iter()
+        .filter(|&&j| fin.eval[j])
+        .map(|&j| fin.resid[j])
+        .collect();
+    let mut diffs: Vec<f64> = kept.windows(2).map(|w| w[1] - w[0]).collect();
+    let sigma_short_um = robust_scale(&mut diffs) / std::f64::consts::SQRT_2;
+    let rms_left_um = (kept.iter().map(|r| r * r).sum::<f64>() / kept.len().max(1) as f64).sqrt();
+    let n = obs.len();
+    let n_out = fin.out.iter().filter(|o| **o).count();
+    // Tails: readings between 3 and 4.5 robust scales from their trend, compared with what
+    // normal noise gives; a continuum there means the flagged ones are its tail.
+    let scale = robust_scale(&mut fin.resid.clone());
+    let n_mid = fin
+        .resid
+        .iter()
+        .filter(|r| (3.0 * scale..4.5 * scale).contains(&r.abs()))
+        .count() as f64;
+    let p_mid = Normal::new(0.0, 1.0)
+        .map(|d| 2.0 * (d.cdf(-3.0) - d.cdf(-4.5)))
+        .unwrap_or(0.0027);
+    let expected = n as f64 * p_mid;
+    // And the kurtosis of the readings inside the bound: 3 for normal noise, with a sampling
+    // standard deviation of √(24/n).
+    let inside: Vec<f64> = (0..n)
+        .filter(|&j| fin.eval[j])
+        .map(|j| fin.resid[j])
+        .collect();
+    let m2 = inside.iter().map(|r| r * r).sum::<f64>() / inside.len().max(1) as f64;
+    let m4 = inside.iter().map(|r| r.powi(4)).sum::<f64>() / inside.len().max(1) as f64;
+    let kurtosis = if m2 > 0.0 { m4 / (m2 * m2) } else { 3.0 };
+    // Isolated outliers are far off (8–15 σ is typical of a beam interruption); flagged
+    // readings that all stay below 6.5 robust scales are the tail of the noise.
+    let n_far = (0..n)
+        .filter(|&j| fin.out[j] && fin.resid[j].abs() >= 6.5 * scale)
+        .count();
+    let heavy_tails = n_out > 0
+        && (n_far == 0
+            || n_mid > expected + 3.0 * expected.sqrt() + 2.0
+            || kurtosis > 3.0 + 3.0 * (24.0 / inside.len().max(1) as f64).sqrt());
+    Residue {
+        rho,
+        sigma_short_um,
+        rms_left_um,
+        heavy_tails,
+        outlier_share: n_out as f64 / n.max(1) as f64,
+    }
+}
+
+impl Residue {
+    pub(super) fn unexplained(&self) -> bool {
+        (self.sigma_short_um > 0.0 && self.rms_left_um > UNEXPLAINED_RATIO * self.sigma_short_um)
+            || self.outlier_share > MAX_OUTLIER_SHARE
+    }
+
+    /// Factor on the uncertainties of fitted parameters for correlated noise.
+    pub(super) fn u_factor(&self) -> f64 {
+        let r = self.rho.clamp(0.0, 0.95);
+        ((1.0 + r) / (1.0 - r)).sqrt()
+    }
+}
+
+/// The `unexplained` finding.
+pub(super) fn unexplained_finding(obs: &Obs, fin: &FinalFit, res: &Residue) -> Finding {
+    let ho = heldout_rms(obs, &fin.w, &fin.cols, &fin.eval);
+    let ratio = res.rms_left_um / res.sigma_short_um.max(f64::MIN_POSITIVE);
+    let share = if res.outlier_share > MAX_OUTLIER_SHARE {
+        format!(
+            "; {:.0} % of the readings are far off their target's trend — too many to be \
+             isolated outliers",
+            100.0 * res.outlier_share
+        )
+    } else {
+        String::new()
+    };
+    Finding {
+        effect: "unexplained".into(),
+        params: BTreeMap::from([("rms_um".into(), res.rms_left_um)]),
+        params_u: BTreeMap::new(),
+        significance: obs.len() as f64 * (ratio * ratio).max(1.0).ln(),
+        heldout_rms_before_um: ho,
+        heldout_rms_after_um: ho,
+        cause: format!(
+            "after the best model {:.2} µm RMS is left, {ratio:.1}× the short-term noise of \
+             {:.2} µm that successive readings show{share}: the data hold structure no effect \
+             of the vocabulary explains. Suspect the measuring system first — a reference \
+             sensor that jumps or is out of range, a loose sensor or target mount, a beam cut \
+             or misaligned — then the axis; check the reference against a second one and \
+             repeat the run",
+            res.rms_left_um, res.sigma_short_um
+        ),
+    }
+}
+
+/// Mean-effect findings too weak to report next to `unexplained` (indices into `findings`).
+pub(super) fn weak_next_to_unexplained(findings: &[Finding]) -> Vec<usize> {
+    (0..findings.len())
+        .filter(|&i| {
+            let f = &findings[i];
+            let gain = 1.0 - f.heldout_rms_after_um / f.heldout_rms_before_um.max(1e-300);
+            f.effect != "local_anomaly" && gain < MIN_GAIN_WHEN_UNEXPLAINED
+        })
+        .collect()
+}
+
+/// The sentence that says which combination explains the run.
+pub(super) fn conclusion(findings: &[Finding], baseline_heldout: f64, noise_um: f64) -> String {
+    if let Some(u) = findings.iter().find(|f| f.effect == "unexplained") {
+        let others: Vec<&str> = findings
+            .iter()
+            .filter(|f| f.effect != "unexplained")
+            .map(|f| f.effect.as_str())
+            .collect();
+        let with = if others.is_empty() {
+            String::new()
+        } else {
+            format!(" besides {}", others.join(" + "))
+        };
+        return format!(
+            "unexplained: {:.2} µm RMS of structure is left{with} that no effect of the \
+             vocabulary explains; the measuring system is the first suspect",
+            u.params.get("rms_um").copied().unwrap_or(0.0)
+        );
+    }
+    if findings.is_empty() {
+        return format!(
+            "the baseline (a constant deviation per target and direction plus {noise_um:.2} µm \
+             of noise) explains the run: no effect beyond the noise"
+        );
+    }
+    let names: Vec<&str> = findings.iter().map(|f| f.effect.as_str()).collect();
+    format!(
+        "the run is explained by {} on top of the baseline (held-out error of the baseline \
+         {baseline_heldout:.2} µm; each finding gives its own gain)",
+        names.join(" + ")
+    )
+}

@@ -121,42 +121,7 @@ pub(crate) fn svg_chart(
     block: &[(String, String)],
 ) -> String {
     let (w, h, l, t, pw, ph) = (900.0, 440.0, 70.0, 30.0, 620.0, 320.0);
-    let mut xs = Vec::new();
-    let mut ys = Vec::new();
-    for s in series {
-        match s {
-            Series::Points { xy, .. } | Series::Line { xy, .. } => {
-                xs.extend(xy.iter().map(|p| p.0));
-                ys.extend(xy.iter().map(|p| p.1));
-            }
-            Series::Band { x, lo, hi, .. } => {
-                xs.extend(x);
-                ys.extend(lo.iter().chain(hi));
-            }
-        }
-    }
-    let fin = |v: &[f64]| {
-        v.iter()
-            .copied()
-            .filter(|x| x.is_finite())
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-                (a.min(x), b.max(x))
-            })
-    };
-    let (mut x0, mut x1) = fin(&xs);
-    let (mut y0, mut y1) = fin(&ys);
-    if !(x0.is_finite() && y0.is_finite()) {
-        (x0, x1, y0, y1) = (0.0, 1.0, -1.0, 1.0);
-    }
-    if x1 - x0 < 1e-9 {
-        x1 = x0 + 1.0;
-    }
-    if y1 - y0 < 1e-9 {
-        y0 -= 0.5;
-        y1 += 0.5;
-    }
-    let (mx, my) = (0.03 * (x1 - x0), 0.06 * (y1 - y0));
-    let (x0, x1, y0, y1) = (x0 - mx, x1 + mx, y0 - my, y1 + my);
+    let (x0, x1, y0, y1) = data_range(series);
     let px = |x: f64| l + (x - x0) / (x1 - x0) * pw;
     let py = |y: f64| t + ph - (y - y0) / (y1 - y0) * ph;
     let mut s = format!(
@@ -230,7 +195,7 @@ pub(crate) fn svg_chart(
                     r#"<polygon points="{}" fill="{color}" fill-opacity="0.18" stroke="{color}" stroke-opacity="0.5" stroke-dasharray="4 3"/>"#,
                     pts.join(" ")
                 );
-                legend.push((color, label, "band"));
+                legend.push((*color, *label, "band"));
             }
             Series::Line { xy, color, label } => {
                 let pts: Vec<String> = xy
@@ -242,7 +207,7 @@ pub(crate) fn svg_chart(
                     r#"<polyline points="{}" fill="none" stroke="{color}" stroke-width="2"/>"#,
                     pts.join(" ")
                 );
-                legend.push((color, label, "line"));
+                legend.push((*color, *label, "line"));
             }
             Series::Points { xy, color, label } => {
                 for (a, b) in xy {
@@ -253,14 +218,62 @@ pub(crate) fn svg_chart(
                         py(*b)
                     );
                 }
-                legend.push((color, label, "dot"));
+                legend.push((*color, *label, "dot"));
             }
         }
     }
+    write_legend(&mut s, &legend, (l, t + ph));
+    write_results_block(&mut s, block, (l + pw + 20.0, t));
+    s.push_str("</svg>");
+    s
+}
+
+/// The x and y range of all series (finite values only), with margins of 3 % and 6 %.
+fn data_range(series: &[Series]) -> (f64, f64, f64, f64) {
+    let mut xs = Vec::new();
+    let mut ys = Vec::new();
+    for s in series {
+        match s {
+            Series::Points { xy, .. } | Series::Line { xy, .. } => {
+                xs.extend(xy.iter().map(|p| p.0));
+                ys.extend(xy.iter().map(|p| p.1));
+            }
+            Series::Band { x, lo, hi, .. } => {
+                xs.extend(x);
+                ys.extend(lo.iter().chain(hi));
+            }
+        }
+    }
+    let fin = |v: &[f64]| {
+        v.iter()
+            .copied()
+            .filter(|x| x.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+                (a.min(x), b.max(x))
+            })
+    };
+    let (mut x0, mut x1) = fin(&xs);
+    let (mut y0, mut y1) = fin(&ys);
+    if !(x0.is_finite() && y0.is_finite()) {
+        (x0, x1, y0, y1) = (0.0, 1.0, -1.0, 1.0);
+    }
+    if x1 - x0 < 1e-9 {
+        x1 = x0 + 1.0;
+    }
+    if y1 - y0 < 1e-9 {
+        y0 -= 0.5;
+        y1 += 0.5;
+    }
+    let (mx, my) = (0.03 * (x1 - x0), 0.06 * (y1 - y0));
+    (x0 - mx, x1 + mx, y0 - my, y1 + my)
+}
+
+/// The legend below the plot area (`(l, bottom)`: its left edge and the plot's bottom).
+fn write_legend(s: &mut String, legend: &[(&str, &str, &str)], (l, bottom): (f64, f64)) {
     for (i, (color, label, kind)) in legend.iter().enumerate() {
         let (lx, ly) = (
             l + (i % 3) as f64 * 210.0,
-            t + ph + 52.0 + (i / 3) as f64 * 16.0,
+            bottom + 52.0 + (i / 3) as f64 * 16.0,
         );
         let mark = match *kind {
             "dot" => format!(
@@ -285,8 +298,11 @@ pub(crate) fn svg_chart(
             esc(label)
         );
     }
+}
+
+/// The results block right of the plot area, at `(bx, t)`.
+fn write_results_block(s: &mut String, block: &[(String, String)], (bx, t): (f64, f64)) {
     if !block.is_empty() {
-        let bx = l + pw + 20.0;
         let _ = write!(
             s,
             r##"<rect x="{bx}" y="{t}" width="180" height="{}" fill="#f7f7f7" stroke="#888"/><text x="{}" y="{}" font-weight="bold">Results</text>"##,
@@ -306,8 +322,6 @@ pub(crate) fn svg_chart(
             );
         }
     }
-    s.push_str("</svg>");
-    s
 }
 
 const UP: &str = "#1f5fbf";

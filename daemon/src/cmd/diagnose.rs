@@ -107,20 +107,13 @@ pub fn render_text(d: &Diagnosis) -> String {
                 None => format!("{name} = {v:.4}"),
             })
             .collect();
-        let _ = writeln!(
-            s,
-            "\n{}. {} (significance {:.1})",
-            k + 1,
-            f.effect,
-            f.significance
+        write_finding(
+            &mut s,
+            (k + 1, &f.effect, f.significance),
+            &params,
+            ("held-out", f.heldout_rms_before_um, f.heldout_rms_after_um),
+            &f.cause,
         );
-        let _ = writeln!(s, "   {}", params.join(", "));
-        let _ = writeln!(
-            s,
-            "   held-out error {:.3} → {:.3} µm",
-            f.heldout_rms_before_um, f.heldout_rms_after_um
-        );
-        let _ = writeln!(s, "   cause: {}", f.cause);
     }
     if !r.conclusion.is_empty() {
         let _ = writeln!(s, "\nConclusion: {}", r.conclusion);
@@ -144,4 +137,19 @@ pub fn render_text(d: &Diagnosis) -> String {
         let _ = writeln!(s, "Note: {n}");
     }
     s
+}
+
+/// One finding of a diagnosis report as text: number, effect and significance, parameters,
+/// the error before → after on the run the effect was checked against, and the cause.
+pub(crate) fn write_finding(
+    s: &mut String,
+    (number, effect, significance): (usize, &str, f64),
+    params: &[String],
+    (checked_on, before_um, after_um): (&str, f64, f64),
+    cause: &str,
+) {
+    let _ = writeln!(s, "\n{number}. {effect} (significance {significance:.1})");
+    let _ = writeln!(s, "   {}", params.join(", "));
+    let _ = writeln!(s, "   {checked_on} error {before_um:.3} → {after_um:.3} µm");
+    let _ = writeln!(s, "   cause: {cause}");
 }

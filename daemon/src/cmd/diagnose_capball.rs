@@ -141,20 +141,17 @@ pub fn render_text(d: &CapballDiagnosis) -> String {
                 None => format!("{n} = {}", compact(v)),
             })
             .collect();
-        let _ = writeln!(
-            s,
-            "\n{}. {} (significance {:.1})",
-            k + 1,
-            f.effect,
-            f.significance
+        crate::cmd::diagnose::write_finding(
+            &mut s,
+            (k + 1, &f.effect, f.significance),
+            &params,
+            (
+                "validation",
+                f.heldout_rms_before_um,
+                f.heldout_rms_after_um,
+            ),
+            &f.cause,
         );
-        let _ = writeln!(s, "   {}", params.join(", "));
-        let _ = writeln!(
-            s,
-            "   validation error {:.3} → {:.3} µm",
-            f.heldout_rms_before_um, f.heldout_rms_after_um
-        );
-        let _ = writeln!(s, "   cause: {}", f.cause);
     }
     let moved: Vec<String> = r
         .parameters

@@ -8,38 +8,10 @@ use metrology::uncertainty::{GumResult, McResult};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-const FONT: &str = "sans-serif";
+use super::{FONT, ensure_font};
+
 const MC: RGBColor = RGBColor(31, 119, 180);
 const GUM: RGBColor = RGBColor(214, 39, 40);
-
-/// Registers a TrueType font with plotters once (plotters' `ab_glyph` text has no built-in
-/// font). `METROLOG_FONT` names a .ttf; else common system fonts are tried.
-fn ensure_font() -> anyhow::Result<()> {
-    static DONE: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
-    DONE.get_or_init(|| {
-        let mut candidates: Vec<String> = std::env::var("METROLOG_FONT").into_iter().collect();
-        candidates.extend(
-            [
-                "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-                "/usr/share/fonts/TTF/DejaVuSans.ttf",
-                "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-                "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
-            ]
-            .map(String::from),
-        );
-        for c in candidates {
-            if let Ok(bytes) = std::fs::read(&c) {
-                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-                if plotters::style::register_font(FONT, FontStyle::Normal, bytes).is_ok() {
-                    return Ok(());
-                }
-            }
-        }
-        Err("no TrueType font found for the plot text; set METROLOG_FONT to a .ttf file".into())
-    })
-    .clone()
-    .map_err(|e| anyhow!(e))
-}
 
 /// Writes the plot to `path` (`.svg` or `.png`).
 pub fn write(

@@ -5,6 +5,11 @@
 //! the nominal tool point on one table point: the poses with `a`, `c` columns are grouped by
 //! their nominal work point (machine kinematics, to 10 µm) and the largest group in which A or
 //! C actually turns is taken. Only `ok` values are used; the others are listed as skipped.
+//!
+//! Runs (`docs/datasets.md`, CapBall dataset): a log holds one pose table, so the runs are
+//! told apart by the A axis. The identification run sweeps A one way; where A turns back the
+//! next run (the validation, A reversed) starts. A pose repeated exactly at the turn (the
+//! validation starting where the identification ended) belongs to the run it starts.
 
 use std::path::Path;
 
@@ -18,7 +23,8 @@ use drivers::Instrument;
 /// The CapBall dataset of a log.
 #[derive(Debug, Clone)]
 pub struct CapballFromLog {
-    /// Run 1, one record per pose with an `ok` value, in pose order.
+    /// One record per pose with an `ok` value, in pose order; run 1 up to where A turns back,
+    /// run 2 after it, and so on ([`runs_by_a_direction`]).
     pub records: Vec<CapballRecord>,
     /// Nominal ball centre (table frame) the poses hold the tool on, mm.
     pub ball_mm: Vector3<f64>,
@@ -155,6 +161,8 @@ pub fn capball_from_contents(
                 "does the trajectory have a_deg, c_deg columns, and is the machine description right?",
             )
         })?;
+    // Times in the simulated machine's seconds when the run compressed time, as positioning.
+    let time_scale = super::positioning::time_scale(log)?;
     let t0 = members
         .iter()
         .filter_map(|&i| values.get(&traj[i].pose))
@@ -162,9 +170,14 @@ pub fn capball_from_contents(
         .map(|p| p.t_first_ns)
         .min()
         .unwrap_or(0);
+    let a_of: Vec<f64> = members
+        .iter()
+        .map(|&i| traj[i].a_deg.unwrap_or(0.0))
+        .collect();
+    let runs = runs_by_a_direction(&a_of);
     let mut records = Vec::new();
     let mut skipped = Vec::new();
-    for &i in &members {
+    for (&i, &run) in members.iter().zip(&runs) {
         let r = &traj[i];
         let Some(p) = values.get(&r.pose) else {
             skipped.push((r.pose, "no value".to_string()));
@@ -176,9 +189,9 @@ pub fn capball_from_contents(
             continue;
         }
         records.push(CapballRecord {
-            run: 1,
+            run,
             pose_index: r.pose,
-            time_s: Some(p.t_first_ns.saturating_sub(t0) as f64 * 1e-9),
+            time_s: Some(p.t_first_ns.saturating_sub(t0) as f64 * 1e-9 * time_scale),
             pose: Pose {
                 x_mm: r.x_mm,
                 y_mm: r.y_mm,
@@ -197,6 +210,32 @@ pub fn capball_from_contents(
         machine: machine.clone(),
         machine_name: machine.chain.clone(),
     })
+}
+
+/// Run number (1, 2, …) of each pose of a CapBall sequence with A angles `a_deg`: a new run
+/// starts where A turns back. Poses that repeat the turning angle before the turn (the next run
+/// starting where the last ended) go to the new run.
+pub fn runs_by_a_direction(a_deg: &[f64]) -> Vec<u32> {
+    const SAME_DEG: f64 = 1e-6;
+    let mut runs = vec![1u32; a_deg.len()];
+    let mut run = 1;
+    let mut dir = 0.0f64;
+    for i in 1..a_deg.len() {
+        let d = a_deg[i] - a_deg[i - 1];
+        if d.abs() > SAME_DEG {
+            if dir != 0.0 && d.signum() != dir {
+                run += 1;
+                let mut j = i - 1;
+                while j > 0 && (a_deg[j] - a_deg[j - 1]).abs() <= SAME_DEG {
+                    runs[j] = run;
+                    j -= 1;
+                }
+            }
+            dir = d.signum();
+        }
+        runs[i] = run;
+    }
+    runs
 }
 
 /// An identification of the parameters a pose set can determine.
@@ -315,5 +354,24 @@ pub fn identify_subset(
             residual_rms_um: rms,
             n_poses: n,
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::runs_by_a_direction;
+
+    #[test]
+    fn a_reversal_starts_the_next_run() {
+        // Identification 0 → −90, validation −90 → 0 starting on the same pose.
+        let a = [0.0, -30.0, -60.0, -90.0, -90.0, -60.0, -30.0, 0.0];
+        assert_eq!(runs_by_a_direction(&a), vec![1, 1, 1, 1, 2, 2, 2, 2]);
+        // Without the repeated pose, and with a constant-A stretch inside a run.
+        let a = [0.0, 0.0, -45.0, -90.0, -45.0, 0.0, 45.0];
+        assert_eq!(runs_by_a_direction(&a), vec![1, 1, 1, 1, 2, 2, 2]);
+        // One sweep is one run; a sequence of one pose too.
+        assert_eq!(runs_by_a_direction(&[0.0, -10.0, -20.0]), vec![1, 1, 1]);
+        assert_eq!(runs_by_a_direction(&[5.0]), vec![1]);
+        assert!(runs_by_a_direction(&[]).is_empty());
     }
 }

@@ -11,6 +11,7 @@
 //! [`PositioningData`]: metrology::positioning_data::PositioningData
 
 pub mod capball;
+pub mod diagnosis_text;
 pub mod export;
 pub mod html_report;
 #[cfg(feature = "plot")]

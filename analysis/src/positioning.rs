@@ -250,7 +250,7 @@ fn datum_x_mm(log: &LogContents, opts: &PositioningOptions) -> Result<f64, Analy
 
 /// A simulated run may compress time (sim `time_scale`: slow effects run that much faster);
 /// the readings' times are then given in the simulated machine's seconds.
-fn time_scale(log: &LogContents) -> Result<f64, AnalysisError> {
+pub(crate) fn time_scale(log: &LogContents) -> Result<f64, AnalysisError> {
     match log.run_metadata.get("time_scale") {
         Some(s) => s
             .trim()

@@ -124,8 +124,10 @@ fn capball_section(log: &LogContents, s: &mut String) {
             let _ = writeln!(s, "\nCapBall: not available: {e}");
         }
         Ok(cb) => {
-            let poses: Vec<Pose> = cb.records.iter().map(|r| r.pose).collect();
-            let meas: Vec<[f64; 3]> = cb.records.iter().map(|r| r.e_um).collect();
+            // Run 1 identifies; a second run (A reversed) validates, in the diagnosis below.
+            let ident = cb.records.iter().filter(|r| r.run == 1);
+            let poses: Vec<Pose> = ident.clone().map(|r| r.pose).collect();
+            let meas: Vec<[f64; 3]> = ident.map(|r| r.e_um).collect();
             let res = CapballSetup::with_ball_from_poses(cb.machine.clone(), &poses)
                 .map_err(AnalysisError::from)
                 .and_then(|st| identify_subset(&st, &poses, &meas));
@@ -175,6 +177,49 @@ fn capball_section(log: &LogContents, s: &mut String) {
                         r[0], r[1], r[2]
                     );
                 }
+            }
+            capball_diagnosis_section(&cb, s);
+        }
+    }
+}
+
+/// The CapBall diagnosis (`metrolog diagnose --capball`) when the log holds an identification
+/// run and a validation run (A reversed).
+fn capball_diagnosis_section(cb: &super::capball::CapballFromLog, s: &mut String) {
+    use metrology::capball_diagnosis::{self, runs_from_records};
+    let Ok((ident, validation)) = runs_from_records(&cb.records) else {
+        let _ = writeln!(
+            s,
+            "\nCapBall diagnosis: not available: the log holds one run (a second run with A \
+             reversed validates)"
+        );
+        return;
+    };
+    let d = CapballSetup::with_ball_from_poses(cb.machine.clone(), &ident.poses)
+        .map_err(AnalysisError::from)
+        .and_then(|setup| {
+            capball_diagnosis::diagnose(
+                &setup,
+                &ident,
+                &validation,
+                None,
+                &capball_diagnosis::Options::default(),
+            )
+            .map_err(AnalysisError::from)
+        });
+    match d {
+        Err(e) => {
+            let _ = writeln!(s, "\nCapBall diagnosis: not available: {e}");
+        }
+        Ok(d) => {
+            let _ = writeln!(
+                s,
+                "\nCapBall diagnosis (run 1 identifies, {} validation pose(s); `metrolog diagnose \
+                 --capball LOG`):",
+                validation.iter().map(|v| v.poses.len()).sum::<usize>()
+            );
+            for line in super::diagnosis_text::capball_text(&d).lines() {
+                let _ = writeln!(s, "  {line}");
             }
         }
     }

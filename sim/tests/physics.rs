@@ -35,6 +35,10 @@ fn host_conversions_recover_the_truth_at_every_pose() {
     let mut sc = quick();
     sc.time_scale = 1.0;
     sc.program.dwell_s = 0.4;
+    // The conversions only: no per-visit scatter of the measuring loop (not in the per-pose
+    // truth) and no cooling cycle moving during the window.
+    sc.capball.truth.pose_noise_um = 0.0;
+    sc.capball.truth.cyclic_drift = None;
     let row = |x: f64, y: f64, z: f64, a: f64, c: f64| PoseRow {
         x_mm: x,
         y_mm: y,

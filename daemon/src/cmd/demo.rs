@@ -55,7 +55,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .collect();
     print_report(&report, &truth, home_x_mm, &reversals);
     print_analysis(&report);
+    print_capball_truth();
     Ok(())
+}
+
+/// What the simulation put into the CapBall data, to hold against the report's CapBall
+/// identification and diagnosis (the demo scenario's `[capball.truth]`).
+fn print_capball_truth() {
+    let t = Scenario::demo().capball.truth;
+    let e = t.errors().to_vector();
+    let params: Vec<String> = metrology::capball::PARAM_NAMES
+        .iter()
+        .zip(e)
+        .map(|(n, v)| format!("{n} {v:.2}"))
+        .collect();
+    println!(
+        "\nsimulation truth of the CapBall poses:\n  {}",
+        params.join("   ")
+    );
+    if let Some(c) = &t.cyclic_drift {
+        let a = c.amplitude_um;
+        println!(
+            "  cyclic_drift: period {:.0} s ({:.1} min) of machine time, amplitude x {:.2} y {:.2} \
+             z {:.2} µm (half peak-to-valley); per-visit scatter {:.2} µm",
+            c.period_s,
+            c.period_s / 60.0,
+            a[0],
+            a[1],
+            a[2],
+            t.pose_noise_um
+        );
+    }
 }
 
 async fn demo(out: PathBuf) -> anyhow::Result<(RunReport, Vec<PoseTruth>, f64)> {

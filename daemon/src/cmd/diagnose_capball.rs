@@ -1,7 +1,6 @@
 //! `metrolog diagnose` on CapBall data (`docs/datasets.md`, CapBall dataset and effects): what
 //! the 14-parameter link/setup model gets wrong, with the validation run's gain.
 
-use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::Context as _;
@@ -118,97 +117,6 @@ pub fn scenario_section(d: &CapballDiagnosis, source: &Path) -> anyhow::Result<S
     ))
 }
 
-/// The human-readable CapBall diagnosis.
-pub fn render_text(d: &CapballDiagnosis) -> String {
-    let r = &d.report;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "Baseline (14-parameter link/setup model + white noise): RMS residual {:.3} µm, \
-         validation run {:.3} µm",
-        r.baseline.rms_um, r.baseline.heldout_rms_um
-    );
-    if r.findings.is_empty() {
-        let _ = writeln!(s, "No finding: the baseline explains the data.");
-    }
-    for (k, f) in r.findings.iter().enumerate() {
-        let params: Vec<String> = f
-            .params
-            .iter()
-            .filter(|(n, _)| !matches!(n.as_str(), "cos_um" | "sin_um" | "identification_poses"))
-            .map(|(n, v)| match f.params_u.get(n) {
-                Some(u) => format!("{n} = {} ± {}", compact(v), compact(u)),
-                None => format!("{n} = {}", compact(v)),
-            })
-            .collect();
-        crate::cmd::diagnose::write_finding(
-            &mut s,
-            (k + 1, &f.effect, f.significance),
-            &params,
-            (
-                "validation",
-                f.heldout_rms_before_um,
-                f.heldout_rms_after_um,
-            ),
-            &f.cause,
-        );
-    }
-    let moved: Vec<String> = r
-        .parameters
-        .iter()
-        .filter(|p| p.shift_sigma.abs() >= 2.0)
-        .map(|p| {
-            format!(
-                "{} {:.2} → {:.2} ({:+.1} σ)",
-                p.name, p.baseline, p.extended, p.shift_sigma
-            )
-        })
-        .collect();
-    if !moved.is_empty() {
-        let _ = writeln!(
-            s,
-            "\nIdentified parameters once the effects are modelled: {}",
-            moved.join("; ")
-        );
-    }
-    for res in &r.residuals {
-        let _ = writeln!(
-            s,
-            "Residual RMS ({}) x {:.3} y {:.3} z {:.3} µm; white noise x {:.3} y {:.3} z {:.3} µm",
-            res.run,
-            res.rms_um[0],
-            res.rms_um[1],
-            res.rms_um[2],
-            res.noise_um[0],
-            res.noise_um[1],
-            res.noise_um[2]
-        );
-    }
-    if let Some(p) = &r.extended_model {
-        let _ = writeln!(s, "\nExtended model written to {p}");
-    }
-    for n in &r.notes {
-        let _ = writeln!(s, "Note: {n}");
-    }
-    s
-}
-
-/// A JSON value in a short form (numbers to 4 significant places).
-fn compact(v: &serde_json::Value) -> String {
-    match v {
-        serde_json::Value::Number(n) => n.as_f64().map(|x| format!("{x:.4}")).unwrap_or_default(),
-        serde_json::Value::Object(m) => {
-            let parts: Vec<String> = m
-                .iter()
-                .map(|(k, v)| format!("{k} {}", compact(v)))
-                .collect();
-            format!("{{{}}}", parts.join(", "))
-        }
-        serde_json::Value::String(s) => s.clone(),
-        other => other.to_string(),
-    }
-}
-
 /// `metrolog diagnose` for CapBall input.
 pub fn run(args: &crate::cmd::diagnose::Args) -> anyhow::Result<()> {
     let mut d = diagnose_path(&args.input, args.drift_record.as_deref())?;
@@ -220,7 +128,7 @@ pub fn run(args: &crate::cmd::diagnose::Args) -> anyhow::Result<()> {
     let text = if args.json {
         serde_json::to_string_pretty(&d.report)? + "\n"
     } else {
-        render_text(&d)
+        metrolog_analysis::diagnosis_text::capball_text(&d)
     };
     crate::cmd::input::print_out(&text)
 }

@@ -372,15 +372,10 @@ fn deviation_chart(data: &PositioningData, an: &PositioningAnalysis) -> String {
             label: pts_label,
         });
     }
-    let a = &an.iso230_2;
-    let block: Vec<(String, String)> = [("A", a.a), ("E", a.e), ("R", a.r), ("B", a.b), ("M", a.m)]
-        .iter()
-        .map(|(k, v)| {
-            (
-                k.to_string(),
-                v.map(|v| num(v, 2)).unwrap_or_else(|| "—".into()),
-            )
-        })
+    let block: Vec<(String, String)> = an
+        .results_block()
+        .into_iter()
+        .map(|r| (r.symbol.to_string(), r.value))
         .collect();
     svg_chart(
         "Positional deviation (ISO 230-2)",
@@ -564,7 +559,7 @@ fn header_table(
     s
 }
 
-const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:300px}";
+const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:300px}svg{max-width:100%;height:auto}@page{size:A4;margin:14mm 12mm}@page runs{size:A4 landscape}@media print{body{margin:0;max-width:none}h2,h3{break-after:avoid}svg,table.head,table.res,tr{break-inside:avoid}section.runs{page:runs}table.runs td,table.runs th{font-size:9px;padding:1px 3px}}";
 
 /// The whole report.
 pub fn positioning_html(
@@ -594,9 +589,10 @@ pub fn positioning_html(
     for n in an.notes.iter().chain(&an.drift_elimination.notes) {
         let _ = write!(s, "<p class=\"note\">{}</p>", esc(n));
     }
-    s.push_str("<h2>Readings</h2>");
+    // Its own section: printed on landscape pages (the runs table is wide), see STYLE.
+    s.push_str("<section class=\"runs\"><h2>Readings</h2>");
     s.push_str(&readings_table(data));
     s.push_str("<h2>Signatures</h2><table class=\"sign\"><tr><th>Measured by</th><td></td></tr><tr><th>Accepted by</th><td></td></tr></table>");
-    s.push_str("<p class=\"note\">Written by metrolog report.</p></body></html>\n");
+    s.push_str("<p class=\"note\">Written by metrolog report.</p></section></body></html>\n");
     s
 }

@@ -139,7 +139,7 @@ pub(crate) fn svg_chart(
             let label = num(
                 v,
                 if step < 1.0 {
-                    1 + (-step.log10()).ceil() as usize
+                    (-step.log10() - 1e-9).ceil() as usize
                 } else {
                     0
                 },
@@ -559,7 +559,7 @@ fn header_table(
     s
 }
 
-const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:300px}svg{max-width:100%;height:auto}@page{size:A4;margin:14mm 12mm}@page runs{size:A4 landscape}@media print{body{margin:0;max-width:none}h2,h3{break-after:avoid}svg,table.head,table.res,tr{break-inside:avoid}section.runs{page:runs}table.runs td,table.runs th{font-size:9px;padding:1px 3px}}";
+const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:300px}svg{max-width:100%;height:auto}@page{size:A4;margin:14mm 12mm}@page runs{size:A4 landscape}@media print{body{margin:0;max-width:none}h2,h3{break-after:avoid}svg,table.head,table.res,tr,section.keep{break-inside:avoid}section.runs{page:runs}table.runs td,table.runs th{font-size:9px;padding:1px 3px}}";
 
 /// The whole report.
 pub fn positioning_html(
@@ -584,8 +584,10 @@ pub fn positioning_html(
     s.push_str(&deviation_chart(data, an));
     s.push_str("<h2>Drift-free chart</h2><p class=\"note\">Thermal drift between cycles removed with adjacent-target differences (docs/methods.md, paper 000).</p>");
     s.push_str(&drift_chart(an));
-    s.push_str("<h2>Measurement uncertainty</h2>");
+    // One block: its heading is not left alone at the foot of a printed page.
+    s.push_str("<section class=\"keep\"><h2>Measurement uncertainty</h2>");
     s.push_str(&uncertainty_section(an));
+    s.push_str("</section>");
     for n in an.notes.iter().chain(&an.drift_elimination.notes) {
         let _ = write!(s, "<p class=\"note\">{}</p>", esc(n));
     }

@@ -61,11 +61,50 @@ struct Dot {
     r: f64,
 }
 
-/// The texts, rectangles and circles of an SVG file.
+/// A polyline: its vertices and whether its stroke has a colour (grid and axes are grey).
+#[derive(Debug, Clone)]
+struct Line {
+    points: Vec<(f64, f64)>,
+    coloured: bool,
+}
+
+/// The texts, rectangles, circles and polylines of an SVG file.
 struct Svg {
     texts: Vec<Txt>,
     rects: Vec<Rect>,
     dots: Vec<Dot>,
+    lines: Vec<Line>,
+}
+
+fn span(v: impl Iterator<Item = f64>) -> f64 {
+    let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |a, y| {
+        (a.0.min(y), a.1.max(y))
+    });
+    hi - lo
+}
+
+fn polyline(tag: &str) -> Line {
+    let stroke =
+        Regex::new(r##"stroke="#([0-9A-Fa-f]{2})([0-9A-Fa-f]{2})([0-9A-Fa-f]{2})""##).unwrap();
+    let coloured = stroke.captures(tag).is_some_and(|c| {
+        let v: Vec<u8> = (1..4)
+            .map(|i| u8::from_str_radix(&c[i], 16).unwrap())
+            .collect();
+        v.iter().max().unwrap() - v.iter().min().unwrap() > 40
+    });
+    let pts = Regex::new(r#"points="([^"]*)""#).unwrap();
+    let points = pts
+        .captures(tag)
+        .map(|c| {
+            c[1].split_whitespace()
+                .filter_map(|p| {
+                    let (x, y) = p.split_once(',')?;
+                    Some((x.parse().ok()?, y.parse().ok()?))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    Line { points, coloured }
 }
 
 fn attr(tag: &str, name: &str) -> Option<f64> {
@@ -77,6 +116,7 @@ fn parse(svg: &str) -> Svg {
     let text = Regex::new(r"(?s)<text([^>]*)>([^<]*)</text>").unwrap();
     let rect = Regex::new(r"<rect([^>]*)/>").unwrap();
     let circle = Regex::new(r"<circle([^>]*)/>").unwrap();
+    let line = Regex::new(r"<polyline([^>]*)/>").unwrap();
     let unescape = |s: &str| {
         s.replace("&lt;", "<")
             .replace("&gt;", ">")
@@ -109,6 +149,7 @@ fn parse(svg: &str) -> Svg {
                 r: attr(&c[1], "r").unwrap(),
             })
             .collect(),
+        lines: line.captures_iter(svg).map(|c| polyline(&c[1])).collect(),
     }
 }
 
@@ -120,11 +161,13 @@ fn assert_no_negative_zero(svg: &Svg, what: &str) {
     }
 }
 
-/// The plot areas: the large framed rectangles that hold plotted points.
+/// The plot areas: the large framed rectangles that hold plotted points and no text (the
+/// background and the legend boxes hold text; tick labels are outside the plot area).
 fn plot_frames(svg: &Svg) -> Vec<(Rect, Vec<Dot>)> {
     svg.rects
         .iter()
         .filter(|r| r.w > 250.0 && r.h > 150.0)
+        .filter(|r| !svg.texts.iter().any(|t| r.contains(t.x, t.y)))
         .map(|r| {
             let inside = svg
                 .dots
@@ -227,19 +270,30 @@ fn check_positioning_chart(run: &str, name: &str) {
                 );
             }
         }
-        // The points fill at least half of the y range (no empty 70 %).
-        let (lo, hi) = dots
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |a, d| {
-                (a.0.min(d.y), a.1.max(d.y))
-            });
-        let share = (hi - lo) / f.h;
+        // The data — points and coloured lines (means, band edges; the grid is grey) — fill
+        // at least half of the y range (no empty 70 %).
+        let ys = dots.iter().map(|d| d.y).chain(
+            svg.lines
+                .iter()
+                .filter(|l| l.coloured)
+                .flat_map(|l| &l.points)
+                .filter(|p| f.contains(p.0, p.1))
+                .map(|p| p.1),
+        );
+        let share = span(ys) / f.h;
         assert!(
             share >= 0.5,
-            "{name}: points fill {:.0} % of the plot {f:?}",
+            "{name}: data fill {:.0} % of the plot {f:?}",
             100.0 * share
         );
     }
+    // On the ISO chart the readings alone fill half of it.
+    let share = span(frames[0].1.iter().map(|d| d.y)) / frames[0].0.h;
+    assert!(
+        share >= 0.5,
+        "{name}: the readings fill {:.0} % of the ISO chart",
+        100.0 * share
+    );
     eprintln!("charts kept: {} {}", svg_path.display(), png_path.display());
 }
 

@@ -22,7 +22,7 @@ pub(crate) const DOWN: RGBColor = RGBColor(214, 39, 40);
 const Y_MARGIN: f64 = 0.06;
 /// Two charts share one y scale (so that the narrowing of the scatter is seen) only when each
 /// chart's own data still fill at least this share of the shared range.
-const SHARE_MIN_FILL: f64 = 0.6;
+const SHARE_MIN_FILL: f64 = 0.85;
 
 type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 

@@ -10,6 +10,7 @@ use std::path::Path;
 use crate::export::num;
 use anyhow::{Context as _, anyhow};
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
@@ -95,17 +96,20 @@ pub(crate) fn e<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 /// Labels per axis asked of plotters (`x_labels`, `y_labels`).
 pub(crate) const LABELS: usize = 10;
 
-/// The tick labels of an axis over `(lo, hi)`: plotters puts at most [`LABELS`] labels on
-/// multiples of a 1-2-5 step no finer than span / (LABELS + 1), so every label is a multiple
-/// of the power of ten below that and is written exactly with its decimals; one count of
-/// decimals for the whole axis keeps the labels aligned, and [`num`] never writes "-0".
+/// The tick labels of an axis over `(lo, hi)`: the fewest decimals that write every label
+/// plotters will put on it (its own key points for [`LABELS`]) exactly, one count for the
+/// whole axis so that the labels align; [`num`] never writes "-0".
 pub(crate) fn ticks((lo, hi): (f64, f64)) -> impl Fn(&f64) -> String {
-    let g = ((hi - lo) / (LABELS + 1) as f64).log10().floor();
-    let d = if g.is_finite() {
-        (-g).clamp(0.0, 9.0) as usize
-    } else {
-        2
+    use plotters::coord::ranged1d::Ranged as _;
+    let keys = RangedCoordf64::from(lo..hi).key_points(LABELS);
+    let exact = |d: usize| {
+        let f = 10f64.powi(d as i32);
+        keys.iter().all(|v| {
+            let x = v * f;
+            (x.round() - x).abs() <= 1e-6 * x.abs().max(1.0)
+        })
     };
+    let d = (0..=9).find(|d| exact(*d)).unwrap_or(9);
     move |v: &f64| num(*v, d)
 }
 

@@ -213,7 +213,7 @@ fn iso_chart<DB: DrawingBackend>(
             )
         })
         .collect();
-    side_column(&side, 40, "ISO 230-2 results", &block, &legend)
+    side_column(&side, 40, "ISO 230-2:2014 results", &block, &legend)
 }
 
 /// The drift-free chart: deviations rebuilt from adjacent-target differences with their

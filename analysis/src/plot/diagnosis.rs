@@ -122,7 +122,7 @@ fn draw_baseline_vs_time<DB: DrawingBackend>(
         data,
         &d.baseline_residuals_um,
         ta,
-        "baseline residuals vs time (line: found effects)",
+        "baseline residuals vs time (blue ↑, red ↓; line: found effects)",
     )?;
     // The common-mode part of the found effects at the axis middle, centred like the residuals.
     let m = &d.model;
@@ -235,7 +235,7 @@ fn draw_rms_per_target<DB: DrawingBackend>(
         + 1e-3;
     let mut c = ChartBuilder::on(area)
         .caption(
-            "RMS residual per target (after the found mean effects)",
+            "RMS residual per target (blue ↑, red ↓; after the found mean effects)",
             (FONT, 18),
         )
         .margin(10)
@@ -277,7 +277,7 @@ fn draw_final_residuals<DB: DrawingBackend>(
         data,
         rf,
         ta,
-        "residuals of the extended model (rings: outliers)",
+        "residuals of the extended model (blue ↑, red ↓; rings: outliers)",
     )?;
     c.draw_series(
         data.readings

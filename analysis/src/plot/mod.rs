@@ -102,14 +102,17 @@ pub(crate) const LABELS: usize = 10;
 pub(crate) fn ticks((lo, hi): (f64, f64)) -> impl Fn(&f64) -> String {
     use plotters::coord::ranged1d::Ranged as _;
     let keys = RangedCoordf64::from(lo..hi).key_points(LABELS);
+    let step = match keys.as_slice() {
+        [a, b, ..] => b - a,
+        _ => hi - lo,
+    };
+    // Exact: rounded to d decimals, every label is off by less than a millionth of the step.
     let exact = |d: usize| {
         let f = 10f64.powi(d as i32);
-        keys.iter().all(|v| {
-            let x = v * f;
-            (x.round() - x).abs() <= 1e-6 * x.abs().max(1.0)
-        })
+        keys.iter()
+            .all(|v| ((v * f).round() / f - v).abs() <= 1e-6 * step.abs())
     };
-    let d = (0..=9).find(|d| exact(*d)).unwrap_or(9);
+    let d = (0..=12).find(|d| exact(*d)).unwrap_or(12);
     move |v: &f64| num(*v, d)
 }
 
@@ -227,4 +230,47 @@ fn draw_mark<DB: DrawingBackend>(
         )),
     }
     .map_err(e)
+}
+
+#[cfg(test)]
+mod tests {
+    use plotters::coord::ranged1d::Ranged as _;
+
+    use super::*;
+
+    #[test]
+    fn tick_labels_are_exact_distinct_and_never_negative_zero() {
+        for r in [
+            (-0.155, 0.0371),
+            (-0.17, -0.03),
+            (-4.3, 4.3),
+            (0.0, 860000.0),
+            (1e-7, 3e-7),
+        ] {
+            let f = ticks(r);
+            let keys = RangedCoordf64::from(r.0..r.1).key_points(LABELS);
+            let labels: Vec<String> = keys.iter().map(&f).collect();
+            for (k, l) in keys.iter().zip(&labels) {
+                let back: f64 = l.parse().unwrap();
+                assert!((back - k).abs() <= 1e-9 * (r.1 - r.0), "{k} written {l}");
+            }
+            let mut d = labels.clone();
+            d.dedup();
+            assert_eq!(d.len(), labels.len(), "{labels:?}");
+            assert!(
+                !labels
+                    .iter()
+                    .any(|l| l == "-0" || l == "-0.0" || l == "-0.00")
+            );
+        }
+    }
+
+    #[test]
+    fn padded_range_of_flat_and_empty_data_has_a_span() {
+        let (a, b) = padded_range([2.0, 2.0].into_iter(), 0.06);
+        assert!(a < 2.0 && b > 2.0);
+        assert_eq!(padded_range(std::iter::empty(), 0.06), (-1.0, 1.0));
+        let (a, b) = padded_range([0.0, 10.0].into_iter(), 0.06);
+        assert!((a + 0.6).abs() < 1e-12 && (b - 10.6).abs() < 1e-12);
+    }
 }

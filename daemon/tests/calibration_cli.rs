@@ -301,6 +301,23 @@ fn report_prints_to_pdf_with_the_key_numbers() {
     }
     assert!(text.contains("A. Tester") && text.contains("Positioning accuracy"));
     eprintln!("PDF kept: {}", pdf.display());
+    // Both at once: the HTML and, with --pdf, its print.
+    let dir = tempfile::tempdir().unwrap();
+    let (html, pdf2) = (dir.path().join("r.html"), dir.path().join("r.pdf"));
+    metrolog(&[
+        "report",
+        RUN,
+        "-o",
+        html.to_str().unwrap(),
+        "--pdf",
+        pdf2.to_str().unwrap(),
+    ]);
+    assert!(
+        std::fs::read_to_string(&html)
+            .unwrap()
+            .starts_with("<!DOCTYPE html>")
+    );
+    assert!(std::fs::read(&pdf2).unwrap().starts_with(b"%PDF-"));
 }
 
 #[test]

@@ -139,7 +139,7 @@ pub(crate) fn svg_chart(
             let label = num(
                 v,
                 if step < 1.0 {
-                    1 + (-step.log10()).ceil() as usize
+                    (-step.log10() - 1e-9).ceil() as usize
                 } else {
                     0
                 },
@@ -372,15 +372,10 @@ fn deviation_chart(data: &PositioningData, an: &PositioningAnalysis) -> String {
             label: pts_label,
         });
     }
-    let a = &an.iso230_2;
-    let block: Vec<(String, String)> = [("A", a.a), ("E", a.e), ("R", a.r), ("B", a.b), ("M", a.m)]
-        .iter()
-        .map(|(k, v)| {
-            (
-                k.to_string(),
-                v.map(|v| num(v, 2)).unwrap_or_else(|| "—".into()),
-            )
-        })
+    let block: Vec<(String, String)> = an
+        .results_block()
+        .into_iter()
+        .map(|r| (r.symbol.to_string(), r.value))
         .collect();
     svg_chart(
         "Positional deviation (ISO 230-2)",
@@ -564,7 +559,7 @@ fn header_table(
     s
 }
 
-const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:300px}";
+const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:300px}svg{max-width:100%;height:auto}@page{size:A4;margin:14mm 12mm}@page runs{size:A4 landscape}@media print{body{margin:0;max-width:none}h2,h3{break-after:avoid}svg,table.head,table.res,tr,section.keep{break-inside:avoid}section.runs{page:runs}table.runs td,table.runs th{font-size:9px;padding:1px 3px}}";
 
 /// The whole report.
 pub fn positioning_html(
@@ -589,14 +584,17 @@ pub fn positioning_html(
     s.push_str(&deviation_chart(data, an));
     s.push_str("<h2>Drift-free chart</h2><p class=\"note\">Thermal drift between cycles removed with adjacent-target differences (docs/methods.md, paper 000).</p>");
     s.push_str(&drift_chart(an));
-    s.push_str("<h2>Measurement uncertainty</h2>");
+    // One block: its heading is not left alone at the foot of a printed page.
+    s.push_str("<section class=\"keep\"><h2>Measurement uncertainty</h2>");
     s.push_str(&uncertainty_section(an));
+    s.push_str("</section>");
     for n in an.notes.iter().chain(&an.drift_elimination.notes) {
         let _ = write!(s, "<p class=\"note\">{}</p>", esc(n));
     }
-    s.push_str("<h2>Readings</h2>");
+    // Its own section: printed on landscape pages (the runs table is wide), see STYLE.
+    s.push_str("<section class=\"runs\"><h2>Readings</h2>");
     s.push_str(&readings_table(data));
     s.push_str("<h2>Signatures</h2><table class=\"sign\"><tr><th>Measured by</th><td></td></tr><tr><th>Accepted by</th><td></td></tr></table>");
-    s.push_str("<p class=\"note\">Written by metrolog report.</p></body></html>\n");
+    s.push_str("<p class=\"note\">Written by metrolog report.</p></section></body></html>\n");
     s
 }

@@ -75,6 +75,39 @@ pub struct MissingReading {
 }
 
 /// The analysis of a run (pure; what `demo` and `replay` can call too).
+/// One row of the ISO 230-2 results block the charts carry (the report's SVG chart and the
+/// `--plot` charts): the standard's symbol, a short name and the value in µm with two
+/// decimals as [`crate::export::num`] prints it ("—" when the run does not define it).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResultRow {
+    pub symbol: &'static str,
+    pub name: &'static str,
+    pub value: String,
+}
+
+impl PositioningAnalysis {
+    /// The results block A, E, R, B, M of ISO 230-2 (`docs/methods.md`), from `iso230_2`.
+    pub fn results_block(&self) -> Vec<ResultRow> {
+        let a = &self.iso230_2;
+        [
+            ("A", "accuracy", a.a),
+            ("E", "systematic deviation", a.e),
+            ("R", "repeatability", a.r),
+            ("B", "reversal value", a.b),
+            ("M", "range of mean deviation", a.m),
+        ]
+        .into_iter()
+        .map(|(symbol, name, v)| ResultRow {
+            symbol,
+            name,
+            value: v
+                .map(|v| crate::export::num(v, 2))
+                .unwrap_or_else(|| "—".into()),
+        })
+        .collect()
+    }
+}
+
 pub fn analyze_positioning(
     data: &PositioningData,
     reference_cycle: Option<usize>,

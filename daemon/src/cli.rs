@@ -46,7 +46,7 @@ pub enum Command {
     /// Write a controller's compensation table from a measurement.
     #[command(subcommand)]
     Compensate(cmd::compensate::Command),
-    /// The positioning report a customer signs (self-contained HTML).
+    /// The positioning report a customer signs (self-contained HTML, or PDF printed by Chromium).
     Report(cmd::report::Args),
 }
 

@@ -248,3 +248,91 @@ fn report_renders_in_chromium_with_the_key_numbers() {
     );
     eprintln!("screenshot kept: {}", shot.display());
 }
+
+/// A tool the test needs: in CI (`CI` set, where `.ci/run` installs it) its absence fails the
+/// test; elsewhere the test is skipped with a message.
+fn have(found: bool, what: &str) -> bool {
+    if !found {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{what} is missing in CI (.ci/run installs it)"
+        );
+        eprintln!("SKIPPED: {what} not installed");
+    }
+    found
+}
+
+#[test]
+fn report_prints_to_pdf_with_the_key_numbers() {
+    let pdftotext = Command::new("pdftotext")
+        .arg("-v")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !have(chromium().is_some(), "chromium (apt-get install chromium)")
+        || !have(pdftotext, "pdftotext (apt-get install poppler-utils)")
+    {
+        return;
+    }
+    let pdf = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("report.pdf");
+    let _ = std::fs::remove_file(&pdf);
+    let out = metrolog(&[
+        "report",
+        RUN,
+        "-o",
+        pdf.to_str().unwrap(),
+        "--operator",
+        "A. Tester",
+    ]);
+    assert!(out.contains("printed by"), "{out}");
+    let bytes = std::fs::read(&pdf).unwrap();
+    assert!(bytes.starts_with(b"%PDF-"), "not a PDF");
+    // poppler's reader, not ours, takes the text back out of the PDF.
+    let text = Command::new("pdftotext")
+        .args([pdf.to_str().unwrap(), "-"])
+        .output()
+        .unwrap();
+    assert!(text.status.success());
+    let text = String::from_utf8_lossy(&text.stdout);
+    let d = PositioningData::from_csv_path(Path::new(RUN)).unwrap();
+    let iso = evaluate(&d, Standard::Iso230_2_2014);
+    for s in ["A", "E", "R"] {
+        let want = format!("{:.2}", iso.value(s).unwrap());
+        assert!(text.contains(&want), "{s} = {want} not in the PDF text");
+    }
+    assert!(text.contains("A. Tester") && text.contains("Positioning accuracy"));
+    eprintln!("PDF kept: {}", pdf.display());
+    // Both at once: the HTML and, with --pdf, its print.
+    let dir = tempfile::tempdir().unwrap();
+    let (html, pdf2) = (dir.path().join("r.html"), dir.path().join("r.pdf"));
+    metrolog(&[
+        "report",
+        RUN,
+        "-o",
+        html.to_str().unwrap(),
+        "--pdf",
+        pdf2.to_str().unwrap(),
+    ]);
+    assert!(
+        std::fs::read_to_string(&html)
+            .unwrap()
+            .starts_with("<!DOCTYPE html>")
+    );
+    assert!(std::fs::read(&pdf2).unwrap().starts_with(b"%PDF-"));
+}
+
+#[test]
+fn report_pdf_without_a_browser_says_what_to_install() {
+    let dir = tempfile::tempdir().unwrap();
+    let pdf = dir.path().join("report.pdf");
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["report", RUN, "-o", pdf.to_str().unwrap()])
+        .env("PATH", dir.path())
+        .env_remove("METROLOG_BROWSER")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "no browser, yet it succeeded");
+    assert!(err.contains("apt-get install chromium"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!pdf.exists(), "nothing written");
+}

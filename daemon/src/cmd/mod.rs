@@ -10,6 +10,7 @@ pub mod identify_mc;
 pub mod info;
 pub mod input;
 pub mod parts;
+pub mod pdf;
 pub mod plan;
 pub mod plots;
 pub mod progress;

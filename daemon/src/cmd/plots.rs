@@ -4,7 +4,9 @@
 //! to get a build that draws.
 
 #[cfg(feature = "plot")]
-pub use metrolog_analysis::plot::positioning::{draw_diagnosis, draw_positioning};
+pub use metrolog_analysis::plot::diagnosis::draw_diagnosis;
+#[cfg(feature = "plot")]
+pub use metrolog_analysis::plot::positioning::draw_positioning;
 #[cfg(feature = "plot")]
 pub use metrolog_analysis::plot::uncertainty::write as draw_uncertainty;
 

@@ -1,5 +1,6 @@
 //! `metrolog report`: the positioning report a customer signs, as one self-contained HTML
-//! file (`metrolog_analysis::html_report`), optionally with the CSV export.
+//! file (`metrolog_analysis::html_report`) or that page printed to PDF by a headless Chromium
+//! (`cmd::pdf`), optionally with the CSV export.
 
 use std::path::PathBuf;
 
@@ -14,9 +15,13 @@ use crate::cmd::input::{load_positioning, print_out};
 pub struct Args {
     /// Positioning dataset (CSV, see datasets.md) or MCAP log of a run.
     pub input: PathBuf,
-    /// The HTML file to write.
+    /// The report to write: `.html` (one self-contained page) or `.pdf` (that page printed by
+    /// a headless Chromium: `apt-get install chromium`, or METROLOG_BROWSER=/path/to/browser).
     #[arg(long, short = 'o')]
     pub out: PathBuf,
+    /// Also print the report to this PDF file (with an HTML `-o`).
+    #[arg(long, value_name = "FILE")]
+    pub pdf: Option<PathBuf>,
     /// Standards to evaluate by (repeat or comma-separate): iso230-2:2014, iso230-2:2006,
     /// iso230-2:1997, iso230-2:1988, vdi3441, asme-b5.54, jis-b6192, gb17421.2.
     #[arg(long, value_delimiter = ',', default_value = "iso230-2:2014")]
@@ -52,8 +57,32 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     h.compensation = a.compensation.clone().or(h.compensation);
     h.instruments.extend(a.instrument.iter().cloned());
     let html = positioning_html(&data, &an, &standards, &h);
-    std::fs::write(&a.out, html).with_context(|| format!("writing {}", a.out.display()))?;
-    let mut msg = format!("report: {}\n", a.out.display());
+    let is_pdf = |p: &std::path::Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("pdf"));
+    let pdfs: Vec<&PathBuf> = std::iter::once(&a.out)
+        .filter(|p| is_pdf(p))
+        .chain(&a.pdf)
+        .collect();
+    // Find the browser before anything is written, so that a missing one costs nothing.
+    let browser = if pdfs.is_empty() {
+        None
+    } else {
+        Some(crate::cmd::pdf::find_browser()?)
+    };
+    let mut msg = String::new();
+    if !is_pdf(&a.out) {
+        std::fs::write(&a.out, &html).with_context(|| format!("writing {}", a.out.display()))?;
+        msg.push_str(&format!("report: {}\n", a.out.display()));
+    }
+    if let Some(b) = &browser {
+        for p in pdfs {
+            crate::cmd::pdf::html_to_pdf(b, &html, p)?;
+            msg.push_str(&format!(
+                "report: {} (printed by {})\n",
+                p.display(),
+                b.display()
+            ));
+        }
+    }
     if let Some(dir) = &a.csv {
         for p in metrolog_analysis::export::write_csv_dir(dir, &data, &an.targets, &standards)
             .with_context(|| format!("writing CSV into {}", dir.display()))?

@@ -130,7 +130,12 @@ fn the_measured_errors_cancel_and_the_noise_propagates_exactly() {
     };
     let s = table4_with_reading_u(&l, &b, vec![0.0; n], &opts, LEVER_MM, None).unwrap();
     for o in &s.monte_carlo.outputs {
-        assert!(o.standard_uncertainty < 1e-3, "{} {}", o.name, o.standard_uncertainty);
+        assert!(
+            o.standard_uncertainty < 1e-3,
+            "{} {}",
+            o.name,
+            o.standard_uncertainty
+        );
     }
     // Reading noise only, one σ for all: the Monte Carlo u equals the exact linear propagation
     // of `psd_frame::derive_uncertainty` (a separate computation), with σ·√2 for the reference

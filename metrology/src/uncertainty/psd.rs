@@ -35,7 +35,9 @@ pub const TABLE4_ERRORS: [&str; 13] = [
 
 /// Paper 003 Table 4: U (k = 2, 95 %), µm; the angles as "max. resulting linear uncertainty
 /// with respect to the measurement volume".
-pub const TABLE4_PUBLISHED_UM: [f64; 13] = [1.3, 1.6, 1.5, 1.5, 3.9, 3.4, 0.4, 0.4, 8.2, 6.4, 4.2, 4.9, 4.4];
+pub const TABLE4_PUBLISHED_UM: [f64; 13] = [
+    1.3, 1.6, 1.5, 1.5, 3.9, 3.4, 0.4, 0.4, 8.2, 6.4, 4.2, 4.9, 4.4,
+];
 
 /// One draw of the 21 errors: per axis (X, Y, Z) and component (δx, δy, δz, εx, εy, εz) the
 /// coefficients of `A·(c1·t + c2·t² + c3·t³)/3`, `t ∈ [−1, 1]` over the travel; and the
@@ -52,8 +54,8 @@ struct ThermalDraw {
 
 /// Which motion-error components of X, Y, Z the frame measures (δx δy δz εx εy εz).
 const MEASURED: [[bool; 6]; 3] = [
-    [true, true, true, true, false, false],   // EXX EYX EZX EAX; not EBX ECX
-    [true, true, true, false, true, false],   // EXY EYY EZY EBY; not EAY ECY
+    [true, true, true, true, false, false], // EXX EYX EZX EAX; not EBX ECX
+    [true, true, true, false, true, false], // EXY EYY EZY EBY; not EAY ECY
     [true, true, false, false, false, false], // EXZ EYZ; not EZZ EAZ EBZ ECZ
 ];
 

@@ -203,7 +203,12 @@ impl PsdBudget {
         }
         let lin = s.linearity_um[k] * (2.0 * t - 1.0).abs();
         let psd = (lin / (2.0 * 3f64.sqrt())).hypot(self.psd_repeatability_um);
-        let constant = self.constants.iter().map(|c| c.u_um * c.u_um).sum::<f64>().sqrt();
+        let constant = self
+            .constants
+            .iter()
+            .map(|c| c.u_um * c.u_um)
+            .sum::<f64>()
+            .sqrt();
         let total = (constant * constant + deflection * deflection + psd * psd).sqrt();
         ReadingTerms {
             constant,

@@ -114,3 +114,71 @@ fn bad_budgets_get_errors_that_say_what_to_fix() {
         .unwrap();
     assert!(String::from_utf8_lossy(&out.stderr).contains("reading the budget file"));
 }
+
+fn psd_mc(extra: &[&str]) -> std::process::Output {
+    let data = format!(
+        "{}/../examples/models/psd_readings.csv",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    metrolog()
+        .args(["identify", "psd", &data, "--reference", "1"])
+        .args(["--uncertainty", "mc", "--trials", "2000", "--seed", "4"])
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn identify_psd_monte_carlo_uses_the_reading_budget() {
+    let b = budget("psd_frame_readings.toml");
+    let out = psd_mc(&["--budget", &b, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["study"]["monte_carlo"]["trials"].as_u64(), Some(2000));
+    let names = v["names"].as_array().unwrap();
+    assert_eq!(
+        names.len(),
+        v["expanded_uncertainty"].as_array().unwrap().len()
+    );
+    // Per-point U of a table-plane straightness: about 1.5 µm with the budget (paper 003
+    // Table 4: 1.3–1.6), against 3.0 µm with one σ for every reading.
+    let k = names.iter().position(|n| n == "EYX_um[6]").unwrap();
+    let u = v["expanded_uncertainty"][k].as_f64().unwrap();
+    assert!((1.2..2.0).contains(&u), "EYX[6] U {u}");
+    let rows = v["study"]["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 13);
+    assert_eq!(rows[4]["error"], "EZY");
+    assert_eq!(rows[4]["published_um"].as_f64(), Some(3.9));
+    assert_eq!(v["runs"][0]["run"].as_u64(), Some(0));
+    // Text form: our Table 4 beside the paper's and U beside every derived value.
+    let text = String::from_utf8(psd_mc(&["--budget", &b]).stdout).unwrap();
+    assert!(
+        text.contains("paper 003") && text.contains("EC0Y"),
+        "{text}"
+    );
+    assert!(text.contains("run 0 − run 1"), "{text}");
+}
+
+#[test]
+fn identify_psd_monte_carlo_errors_say_what_to_fix() {
+    let out = psd_mc(&[]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("needs --budget FILE"), "{err}");
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("b.toml");
+    let text = include_str!("../../examples/budgets/psd_frame_readings.toml")
+        .replace("segment = 4\n", "segment = 3\n");
+    std::fs::write(&bad, text).unwrap();
+    let out = psd_mc(&["--budget", bad.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("segment 3 must be given exactly once"),
+        "{err}"
+    );
+}

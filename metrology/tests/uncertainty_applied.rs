@@ -1,11 +1,9 @@
 //! The budgets applied to the measurements: LI-80 length (ISO/TR 230-9 style) and the PSD
-//! laser frame of paper 003 (Table 3 GUM budget, Table 4 Monte Carlo of the 13 errors).
+//! laser frame of paper 003 (Table 3 GUM budget, Table 4 is in `uncertainty_psd_table4.rs`).
 
-use metrology::psd_frame::{PsdLayout, derive_uncertainty};
 use metrology::uncertainty::budget::Budget;
 use metrology::uncertainty::length::LengthBudget;
 use metrology::uncertainty::mc::McOptions;
-use metrology::uncertainty::psd;
 
 #[test]
 fn li80_budget_file_and_function_agree() {
@@ -52,33 +50,4 @@ fn psd_table3_budget_reproduces_the_published_combination() {
     let u_rounded = (g.standard_uncertainty * 100.0).round() / 100.0;
     assert!((2.0 * u_rounded - 2.26).abs() < 1e-12);
     assert!((g.expanded_uncertainty - 2.2524).abs() < 1e-3);
-}
-
-#[test]
-fn psd_table4_monte_carlo_matches_the_exact_linear_propagation() {
-    // Reading noise: the Table 3 u_c,max with the reference subtraction (√2 on a difference of
-    // two independent runs). The model is linear, so the Monte Carlo u must equal the exact
-    // propagation of `psd_frame::derive_uncertainty` (an independent computation).
-    let layout = PsdLayout::paper();
-    let sigma = 1.13 * 2f64.sqrt();
-    let (rows, mc) = psd::table4(&layout, sigma, 30_000, 5, 350.0).unwrap();
-    let exact = derive_uncertainty(&layout, sigma).unwrap();
-    for (o, u) in mc.outputs.iter().zip(&exact) {
-        if *u > 0.0 {
-            assert!(
-                (o.standard_uncertainty / u - 1.0).abs() < 0.03,
-                "{}: {} vs {u}",
-                o.name,
-                o.standard_uncertainty
-            );
-        }
-    }
-    assert_eq!(rows.len(), 13);
-    for r in &rows {
-        eprintln!(
-            "{:5} ±{:.2} {}  {:?}",
-            r.error, r.expanded, r.unit, r.expanded_linear_um
-        );
-        assert!(r.expanded > 0.0, "{}", r.error);
-    }
 }

@@ -64,12 +64,16 @@ pub struct PsdArgs {
     /// Layout `x_lo,x_hi,y_lo,y_hi,z0,z1` in mm (default: paper 003's 0,184,0,167,0,350).
     #[arg(long, allow_hyphen_values = true)]
     pub layout: Option<String>,
-    /// Standard uncertainty of one reading, µm, for the uncertainty of the derived errors.
+    /// Standard uncertainty of one reading, µm, for the uncertainty of the derived errors
+    /// (one value for every reading; `--uncertainty mc --budget FILE` uses the
+    /// position-dependent budget of paper 003 instead).
     #[arg(long, default_value_t = 0.2)]
     pub sigma_um: f64,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub mc: super::identify_psd_mc::PsdMcArgs,
 }
 
 #[derive(Debug, clap::Args)]
@@ -552,6 +556,9 @@ fn run_psd(a: PsdArgs) -> anyhow::Result<()> {
     }
     if out.is_empty() {
         anyhow::bail!("{} holds only the reference run", a.data.display());
+    }
+    if a.mc.uncertainty.is_some() {
+        return super::identify_psd_mc::run(&layout, a.reference, &out, &a.mc, a.json);
     }
     if a.json {
         let v: Vec<_> = out

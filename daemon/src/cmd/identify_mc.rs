@@ -19,7 +19,8 @@ use serde::Serialize;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum UncertaintyMethod {
-    /// Adaptive Monte Carlo (JCGM 101 §7.9) over sensor noise, frame transform and drift.
+    /// Monte Carlo (JCGM 101): for `capball` adaptive (§7.9) over sensor noise, frame
+    /// transform and drift; for `psd` paper 003's study over the reading budget.
     Mc,
 }
 

@@ -7,6 +7,7 @@ pub mod diagnose;
 pub mod diagnose_capball;
 pub mod identify;
 pub mod identify_mc;
+pub mod identify_psd_mc;
 pub mod info;
 pub mod input;
 pub mod parts;

@@ -45,6 +45,7 @@ pub mod gum;
 pub mod length;
 pub mod mc;
 pub mod psd;
+pub mod psd_budget;
 
 pub use budget::{Budget, Method, Report};
 pub use dist::{Distribution, DriftShape};

@@ -5,8 +5,10 @@
 //!    receives must be in the log, byte for byte, on the same topic at the same log time, its
 //!    protobuf messages must decode with the advertised schemas, and it must receive every
 //!    `/pose` of the log (unless the daemon reported skipping messages for it).
-//! 2. The operator page rendered by headless Chromium shows pose values, which must be pose
-//!    values of the log; its screenshot is kept in the test's target directory.
+//! 2. The operator page rendered by headless Chromium (driven through the DevTools protocol by
+//!    `tests/js/render_page.cjs`, which waits until the page shows pose rows) shows pose values,
+//!    which must be pose values of the log; its screenshot is kept in the test's target
+//!    directory (`live_page_chromium.png`).
 //!
 //! Needs node with the npm packages `.ci/run` installs into `.ci/npm`, and `chromium`; without
 //! them the parts say so and skip, except in CI (`CI` set), where they fail.
@@ -18,9 +20,10 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
-use metrolog_log::LogItem;
 use metrolog_log::topics::PoseMsg;
 use serde_json::Value;
+
+mod log_common;
 
 /// Generous: a loaded 2-core CI runner; every wait ends as soon as its condition holds.
 const LIMIT: Duration = Duration::from_secs(120);
@@ -100,19 +103,7 @@ fn drain(rx: &mpsc::Receiver<String>, seen: &mut Vec<String>) {
 
 /// Every message of the log: (topic, log time, bytes).
 fn log_messages(path: &Path) -> Vec<(String, u64, Vec<u8>)> {
-    let mut v = Vec::new();
-    let summary = metrolog_log::read_log(path, |item| {
-        if let LogItem::Message {
-            topic,
-            log_ns,
-            data,
-            ..
-        } = item
-        {
-            v.push((topic.to_string(), log_ns, data.to_vec()));
-        }
-    })
-    .unwrap();
+    let (v, summary) = log_common::messages(path);
     assert!(summary.clean_close, "{summary:?}");
     v
 }
@@ -183,55 +174,28 @@ fn shown_poses(dom: &str) -> Vec<(String, u32, String, String)> {
     v
 }
 
-fn headless(bin: &Path, extra: &[String], url: &str) -> std::process::Output {
-    let profile = tempfile::tempdir().unwrap();
-    Command::new(bin)
-        .args([
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-first-run",
-            "--virtual-time-budget=5000",
-        ])
-        .arg(format!("--user-data-dir={}", profile.path().display()))
-        .args(extra)
-        .arg(url)
-        .output()
-        .unwrap()
-}
-
-/// Renders the page until it shows pose values (the page gets them over the WebSocket after
-/// it loads); returns them.
-fn render_page(bin: &Path, url: &str) -> Vec<(String, u32, String, String)> {
-    for _ in 0..10 {
-        let out = headless(bin, &["--dump-dom".into()], url);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-        let shown = shown_poses(&String::from_utf8_lossy(&out.stdout));
-        if !shown.is_empty() {
-            return shown;
-        }
-    }
-    panic!("the operator page never showed a pose value");
-}
-
-fn screenshot(bin: &Path, url: &str) {
+/// The operator page rendered by Chromium once it shows pose rows (`tests/js/render_page.cjs`
+/// waits for them through the DevTools protocol); its screenshot is kept.
+fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, String, String)> {
     let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("live_page_chromium.png");
     let _ = std::fs::remove_file(&shot);
-    let out = headless(
-        bin,
-        &[
-            format!("--screenshot={}", shot.display()),
-            "--window-size=1200,1400".into(),
-        ],
-        url,
-    );
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/render_page.cjs");
+    let out = Command::new("node")
+        .arg(script)
+        .arg(bin)
+        .arg(url)
+        .arg("tr.pose span.value")
+        .arg(&shot)
+        .env("NODE_PATH", modules)
+        .output()
+        .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let png = std::fs::read(&shot).unwrap();
     assert!(png.starts_with(b"\x89PNG") && png.len() > 10_000, "{} bytes", png.len());
     eprintln!("screenshot kept: {}", shot.display());
+    let shown = shown_poses(&String::from_utf8_lossy(&out.stdout));
+    assert!(!shown.is_empty(), "no pose value on the page");
+    shown
 }
 
 fn check_page(shown: &[(String, u32, String, String)], log: &[(String, u64, Vec<u8>)]) {
@@ -274,6 +238,7 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
     std::fs::create_dir_all(&ports).unwrap();
     let mut sc = sim::Scenario::demo();
     sc.program.poses.truncate(6);
+    sc.program.start = sim::ProgramStart::Manual;
     let sim = sim::Sim::start(sc, &ports).unwrap();
     let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
     let cfg = dir.path().join("metrolog.toml");
@@ -292,7 +257,7 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
     let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
     let addr = line.split("http://").nth(1).unwrap().split('/').next().unwrap().to_string();
 
-    let mut client = modules.map(|m| {
+    let mut client = modules.as_ref().map(|m| {
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/live_client.cjs");
         let mut c = Command::new("node")
             .arg(script)
@@ -309,12 +274,11 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
     sim.start_program();
     tokio::time::timeout(LIMIT, sim.program_done()).await.unwrap();
 
-    let shown = browser.as_ref().map(|b| {
-        let url = format!("http://{addr}/");
-        let shown = render_page(b, &url);
-        screenshot(b, &url);
-        shown
-    });
+    let url = format!("http://{addr}/");
+    let shown = match (&browser, &modules) {
+        (Some(b), Some(m)) => Some(render_page(b, m, &url)),
+        _ => None,
+    };
     sigterm(&daemon);
     let status = daemon.wait().unwrap();
     drain(&err_rx, &mut err);

@@ -227,7 +227,15 @@ impl Session {
         }
         loop {
             let ok = tokio::select! {
-                _ = stop.cancelled() => false,
+                _ = stop.cancelled() => {
+                    // The run ended: what it wrote last (final pose values, /status) first.
+                    while let Ok(m) = rx.try_recv() {
+                        if !self.forward(&mut ws, &m).await {
+                            break;
+                        }
+                    }
+                    false
+                }
                 m = ws.next() => match m {
                     Some(Ok(Message::Text(t))) => self.on_text(&mut ws, t.as_str()).await,
                     Some(Ok(Message::Binary(_))) => {

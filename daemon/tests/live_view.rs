@@ -143,12 +143,26 @@ fn check_client(out: &str, log: &[(String, u64, Vec<u8>)], stderr: &str) {
     } else {
         assert_eq!(got.get("/pose").copied().unwrap_or(0), poses, "every /pose");
     }
-    for topic in ["/status", "/event", "/cnc/trigger", "/interferometer/position"] {
-        assert!(got.get(topic).copied().unwrap_or(0) > 0, "nothing on {topic}");
+    for topic in [
+        "/status",
+        "/event",
+        "/cnc/trigger",
+        "/interferometer/position",
+    ] {
+        assert!(
+            got.get(topic).copied().unwrap_or(0) > 0,
+            "nothing on {topic}"
+        );
     }
     // Raw topics decimated to 10 batches/s from the log's 100.
-    let (live_raw, log_raw) = (got["/interferometer/position"], count(log, "/interferometer/position"));
-    assert!(live_raw * 5 <= log_raw, "{live_raw} of {log_raw} raw batches");
+    let (live_raw, log_raw) = (
+        got["/interferometer/position"],
+        count(log, "/interferometer/position"),
+    );
+    assert!(
+        live_raw * 5 <= log_raw,
+        "{live_raw} of {log_raw} raw batches"
+    );
 }
 
 /// The value of `name="..."` in `s`.
@@ -162,7 +176,8 @@ fn shown_poses(dom: &str) -> Vec<(String, u32, String, String)> {
     let mut v = Vec::new();
     for row in dom.split("<tr class=\"pose\"").skip(1) {
         let row = row.split("</tr>").next().unwrap_or("");
-        let (Some(inst), Some(pose)) = (attr(row, "data-instrument"), attr(row, "data-pose")) else {
+        let (Some(inst), Some(pose)) = (attr(row, "data-instrument"), attr(row, "data-pose"))
+        else {
             continue;
         };
         for span in row.split("<span class=\"value\"").skip(1) {
@@ -180,18 +195,28 @@ fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, Strin
     let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("live_page_chromium.png");
     let _ = std::fs::remove_file(&shot);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/render_page.cjs");
+    let profile = tempfile::tempdir().unwrap();
     let out = Command::new("node")
         .arg(script)
         .arg(bin)
         .arg(url)
         .arg("tr.pose span.value")
         .arg(&shot)
+        .arg(profile.path())
         .env("NODE_PATH", modules)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let png = std::fs::read(&shot).unwrap();
-    assert!(png.starts_with(b"\x89PNG") && png.len() > 10_000, "{} bytes", png.len());
+    assert!(
+        png.starts_with(b"\x89PNG") && png.len() > 10_000,
+        "{} bytes",
+        png.len()
+    );
     eprintln!("screenshot kept: {}", shot.display());
     let shown = shown_poses(&String::from_utf8_lossy(&out.stdout));
     assert!(!shown.is_empty(), "no pose value on the page");
@@ -208,11 +233,26 @@ fn check_page(shown: &[(String, u32, String, String)], log: &[(String, u64, Vec<
         let found = poses.iter().any(|p| {
             p.instrument.name() == inst
                 && p.pose == *pose
-                && p.mean.get(channel).is_some_and(|x| format!("{x:.3}") == *value)
+                && p.mean
+                    .get(channel)
+                    .is_some_and(|x| format!("{x:.3}") == *value)
         });
-        assert!(found, "the page shows {inst} pose {pose} {channel} = {value}, not in the log");
+        assert!(
+            found,
+            "the page shows {inst} pose {pose} {channel} = {value}, not in the log"
+        );
     }
     println!("the page shows {} pose values, all in the log", shown.len());
+}
+
+/// A child killed if the test ends early (a failed assertion must not leave a daemon behind).
+struct Reaped(Child);
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }
 
 fn sigterm(child: &Child) {
@@ -244,18 +284,27 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
 
-    let mut daemon = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(["run", "--config"])
-        .arg(&cfg)
-        .env("RUST_LOG", "info")
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let err_rx = lines_of(daemon.stderr.take().unwrap());
+    let mut daemon = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["run", "--config"])
+            .arg(&cfg)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
     let mut err = Vec::new();
     let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
-    let addr = line.split("http://").nth(1).unwrap().split('/').next().unwrap().to_string();
+    let addr = line
+        .split("http://")
+        .nth(1)
+        .unwrap()
+        .split('/')
+        .next()
+        .unwrap()
+        .to_string();
 
     let mut client = modules.as_ref().map(|m| {
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/live_client.cjs");
@@ -269,18 +318,20 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
         let rx = lines_of(c.stdout.take().unwrap());
         let mut out = Vec::new();
         wait_line(&rx, "subscribed", &mut out);
-        (c, rx)
+        (Reaped(c), rx)
     });
     sim.start_program();
-    tokio::time::timeout(LIMIT, sim.program_done()).await.unwrap();
+    tokio::time::timeout(LIMIT, sim.program_done())
+        .await
+        .unwrap();
 
     let url = format!("http://{addr}/");
     let shown = match (&browser, &modules) {
         (Some(b), Some(m)) => Some(render_page(b, m, &url)),
         _ => None,
     };
-    sigterm(&daemon);
-    let status = daemon.wait().unwrap();
+    sigterm(&daemon.0);
+    let status = daemon.0.wait().unwrap();
     drain(&err_rx, &mut err);
     let stderr = err.join("\n");
     assert!(status.success(), "{stderr}");
@@ -289,7 +340,7 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
     if let Some((c, rx)) = client.as_mut() {
         let mut out = Vec::new();
         let result = wait_line(rx, "\"received\"", &mut out);
-        assert!(c.wait().unwrap().success());
+        assert!(c.0.wait().unwrap().success());
         check_client(&result, &log, &stderr);
     }
     if let Some(shown) = shown {

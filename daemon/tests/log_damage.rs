@@ -20,7 +20,6 @@ fn short_run() -> SyntheticRun {
     }
 }
 
-
 #[test]
 fn truncated_logs_give_their_intact_prefix() {
     let dir = tempfile::tempdir().unwrap();

@@ -256,12 +256,27 @@ fn the_live_view_is_off_by_default_and_its_mistakes_are_reported() {
     let live = on.live.unwrap();
     assert_eq!(live.listen.to_string(), "127.0.0.1:8765");
     assert_eq!(live.raw_hz, 10);
-    let v6 = parse(&format!("{GOOD}[live]\nlisten = \"[::1]:9000\"\nraw_hz = 0\n")).unwrap();
+    let v6 = parse(&format!(
+        "{GOOD}[live]\nlisten = \"[::1]:9000\"\nraw_hz = 0\n"
+    ))
+    .unwrap();
     assert_eq!(v6.live.unwrap().raw_hz, 0);
     for (bad, needle, what) in [
-        ("listen = \"localhost\"", "listen =", "is not an address and port"),
-        ("listen = \"127.0.0.1:8765\"\nraw_hz = 101", "raw_hz", "outside 0 to 100"),
-        ("listen = \"127.0.0.1:8765\"\npublish = true", "publish", "unknown field"),
+        (
+            "listen = \"localhost\"",
+            "listen =",
+            "is not an address and port",
+        ),
+        (
+            "listen = \"127.0.0.1:8765\"\nraw_hz = 101",
+            "raw_hz",
+            "outside 0 to 100",
+        ),
+        (
+            "listen = \"127.0.0.1:8765\"\npublish = true",
+            "publish",
+            "unknown field",
+        ),
     ] {
         let text = format!("{GOOD}[live]\n{bad}\n");
         let (line, msg) = error(&text);

@@ -223,5 +223,8 @@ fn unit_exposure_is_at_most_1_1() {
     assert!(both > socketcan && both <= 1.5, "SocketCAN and live {both}");
     std::fs::remove_file(dropins.join("socketcan.conf")).unwrap();
     let live = exposure(&unit).unwrap();
-    assert!(live > default && live <= 1.3, "exposure with the live drop-in {live}");
+    assert!(
+        live > default && live <= 1.3,
+        "exposure with the live drop-in {live}"
+    );
 }

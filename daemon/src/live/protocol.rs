@@ -127,7 +127,8 @@ mod tests {
 
     #[test]
     fn client_messages_parse_and_anything_else_is_refused() {
-        let s = r#"{"op":"subscribe","subscriptions":[{"id":0,"channelId":5},{"id":1,"channelId":6}]}"#;
+        let s =
+            r#"{"op":"subscribe","subscriptions":[{"id":0,"channelId":5},{"id":1,"channelId":6}]}"#;
         assert_eq!(parse_client(s), ClientOp::Subscribe(vec![(0, 5), (1, 6)]));
         let u = r#"{"op":"unsubscribe","subscriptionIds":[1]}"#;
         assert_eq!(parse_client(u), ClientOp::Unsubscribe(vec![1]));

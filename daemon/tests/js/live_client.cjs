@@ -77,6 +77,7 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
 client.on("error", (e) => problems.push(`client error: ${e && e.message ? e.message : e}`));
 
 client.on("close", () => {
-  process.stdout.write(JSON.stringify({ server: serverName, received, problems }) + "\n");
-  process.exit(0);
+  // Exit once the pipe has it all (stdout to a pipe is asynchronous in node).
+  const out = JSON.stringify({ server: serverName, received, problems }) + "\n";
+  process.stdout.write(out, () => process.exit(0));
 });

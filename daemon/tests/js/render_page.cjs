@@ -5,18 +5,16 @@
 // `document.querySelectorAll(SELECTOR).length > 0` (or fails after 90 s), and saves a
 // screenshot.
 //
-// Usage: NODE_PATH=<npm dir>/node_modules node render_page.cjs CHROMIUM URL SELECTOR SHOT.png
+// Usage: NODE_PATH=<npm dir>/node_modules node render_page.cjs CHROMIUM URL SELECTOR SHOT.png PROFILE
+// (PROFILE: an empty directory for Chromium's profile, which the caller removes).
 
 "use strict";
 const { spawn } = require("child_process");
 const fs = require("fs");
-const os = require("os");
-const path = require("path");
 const WebSocket = require("ws");
 
-const [bin, url, selector, shot] = process.argv.slice(2);
+const [bin, url, selector, shot, profile] = process.argv.slice(2);
 const LIMIT_MS = 90000;
-const profile = fs.mkdtempSync(path.join(os.tmpdir(), "metrolog-chromium-"));
 const browser = spawn(bin, [
   "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
   "--disable-component-update", "--disable-sync", "--no-first-run",
@@ -29,7 +27,13 @@ function fail(msg) {
   browser.kill("SIGKILL");
   process.exit(1);
 }
-setTimeout(() => fail(`nothing matched ${selector} within ${LIMIT_MS} ms`), LIMIT_MS).unref();
+// What the page reported (exceptions, console), and its text, say why it showed nothing.
+const seen = [];
+let pageText = async () => "";
+setTimeout(async () => {
+  const text = await pageText().catch((e) => String(e));
+  fail(`nothing matched ${selector} within ${LIMIT_MS} ms; page text:\n${text}\n${seen.join("\n")}`);
+}, LIMIT_MS).unref();
 
 function devtoolsUrl() {
   return new Promise((resolve) => {
@@ -50,6 +54,8 @@ async function main() {
   const pending = new Map();
   ws.on("message", (raw) => {
     const m = JSON.parse(raw.toString());
+    if (m.method === "Runtime.exceptionThrown") seen.push(JSON.stringify(m.params.exceptionDetails));
+    if (m.method === "Runtime.consoleAPICalled") seen.push(JSON.stringify(m.params.args));
     const p = pending.get(m.id);
     if (!p) return;
     pending.delete(m.id);
@@ -65,6 +71,8 @@ async function main() {
   const { sessionId } = await call("Target.attachToTarget", { targetId, flatten: true });
   const evaluate = async (expression) =>
     (await call("Runtime.evaluate", { expression, returnByValue: true }, sessionId)).result.value;
+  await call("Runtime.enable", {}, sessionId);
+  pageText = () => evaluate("document.body.innerText");
   const query = `document.querySelectorAll(${JSON.stringify(selector)}).length`;
   while (!((await evaluate(query)) > 0)) {
     await new Promise((r) => setTimeout(r, 200)); // poll the condition
@@ -72,11 +80,10 @@ async function main() {
   const html = await evaluate("document.documentElement.outerHTML");
   const { data } = await call("Page.captureScreenshot", { format: "png" }, sessionId);
   fs.writeFileSync(shot, Buffer.from(data, "base64"));
-  process.stdout.write(html);
   await call("Browser.close").catch(() => {});
   browser.removeAllListeners("exit");
   browser.kill("SIGKILL");
-  fs.rmSync(profile, { recursive: true, force: true });
-  process.exit(0);
+  // Exit once the pipe has it all (stdout to a pipe is asynchronous in node).
+  process.stdout.write(html, () => process.exit(0));
 }
 main().catch((e) => fail(e.stack || String(e)));

@@ -200,7 +200,13 @@ impl LiveView {
     /// Closes every client and the listener; returns the messages slow clients skipped.
     pub async fn stop(self) -> u64 {
         self.stop.cancel();
-        let _ = self.task.await;
+        // Clients get what the run wrote last; one that takes nothing is cut off by
+        // SEND_TIMEOUT, and this bound ends the rest (aborting the server drops every client).
+        let mut task = self.task;
+        let limit = server::SEND_TIMEOUT + std::time::Duration::from_secs(2);
+        if tokio::time::timeout(limit, &mut task).await.is_err() {
+            task.abort();
+        }
         let dropped = self.hub.dropped.load(Ordering::Relaxed);
         tracing::info!(
             "live view closed; {dropped} messages skipped for slow clients (the log has them all)"
@@ -238,6 +244,55 @@ mod tests {
         assert_eq!(latched.len(), 8);
         assert_eq!(latched[7].data, b"{\"pose\":9}");
         assert_eq!(latched[0].log_ns, 2);
+    }
+
+    /// A client that subscribes and then reads nothing: the tap goes on at once whatever it
+    /// is sent, the client is counted as skipping messages, and stopping the view ends.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_stalled_client_neither_blocks_the_writer_nor_the_stop() {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let cfg = LiveConfig {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            raw_hz: 10,
+        };
+        let view = LiveView::start(&cfg, "m", "s".into()).await.unwrap();
+        let sock = tokio::net::TcpSocket::new_v4().unwrap();
+        sock.set_recv_buffer_size(4096).unwrap();
+        let mut c = sock.connect(view.addr()).await.unwrap();
+        let hello = "GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
+        c.write_all(hello.as_bytes()).await.unwrap();
+        let mut head = [0u8; 12];
+        c.read_exact(&mut head).await.unwrap();
+        assert_eq!(&head, b"HTTP/1.1 101");
+        let status = view.hub.channels.iter().position(|ch| ch.topic == "/status");
+        let sub = format!(
+            r#"{{"op":"subscribe","subscriptions":[{{"id":0,"channelId":{}}}]}}"#,
+            status.unwrap() + 1
+        );
+        // A client frame: text, masked with a zero key (RFC 6455 5.3).
+        let mut frame = vec![0x81, 0x80 | sub.len() as u8, 0, 0, 0, 0];
+        frame.extend_from_slice(sub.as_bytes());
+        c.write_all(&frame).await.unwrap();
+        // The session has subscribed once the latched /status reaches the client.
+        let mut tap = view.tap();
+        tap("/status", 0, b"{\"latched\":1}");
+        let mut got = Vec::new();
+        while !got.windows(13).any(|w| w == b"{\"latched\":1}") {
+            let mut buf = [0u8; 4096];
+            let n = c.read(&mut buf).await.unwrap();
+            assert!(n > 0, "closed early");
+            got.extend_from_slice(&buf[..n]);
+        }
+        // Now the client stalls under 64 MB of /status.
+        let big = vec![b' '; 64 << 10];
+        for k in 0..1024u64 {
+            tap("/status", k, &big);
+        }
+        let dropped = tokio::time::timeout(std::time::Duration::from_secs(60), view.stop())
+            .await
+            .expect("stop ends");
+        assert!(dropped > 0, "skipped messages are counted");
+        drop(c);
     }
 
     #[test]

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use futures_util::{SinkExt, StreamExt};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::broadcast::error::RecvError;
+use tokio::sync::broadcast::error::{RecvError, TryRecvError};
 use tokio_tungstenite::WebSocketStream;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::handshake::derive_accept_key;
@@ -30,6 +30,8 @@ pub const MAX_HEAD: usize = 16 << 10;
 pub const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
 /// Largest message a client may send (subscribe lists are small).
 const MAX_CLIENT_MESSAGE: usize = 1 << 20;
+/// Longest a client may take to accept one message before it is disconnected.
+pub const SEND_TIMEOUT: Duration = Duration::from_secs(10);
 /// Least time between two journal warnings about one slow client.
 const DROP_WARN_INTERVAL: Duration = Duration::from_secs(10);
 
@@ -190,6 +192,20 @@ async fn websocket(
 
 type Ws = WebSocketStream<TcpStream>;
 
+/// Sends one message; false when the client is gone or has taken nothing for [`SEND_TIMEOUT`]
+/// (a stalled client is let go rather than held on to).
+async fn send(ws: &mut Ws, msg: Message, peer: SocketAddr) -> bool {
+    match tokio::time::timeout(SEND_TIMEOUT, ws.send(msg)).await {
+        Ok(r) => r.is_ok(),
+        Err(_) => {
+            tracing::warn!(
+                "live view: client {peer} took nothing for {SEND_TIMEOUT:?}; disconnected"
+            );
+            false
+        }
+    }
+}
+
 /// One client: its subscriptions and what it missed.
 struct Session {
     hub: Arc<Hub>,
@@ -221,7 +237,7 @@ impl Session {
             protocol::advertise(&self.hub.channels),
         ];
         for text in hello {
-            if ws.send(Message::text(text)).await.is_err() {
+            if !send(&mut ws, Message::text(text), self.peer).await {
                 return 0;
             }
         }
@@ -240,7 +256,7 @@ impl Session {
                     Some(Ok(Message::Text(t))) => self.on_text(&mut ws, t.as_str()).await,
                     Some(Ok(Message::Binary(_))) => {
                         let s = protocol::status(2, "the live view is read-only: clients cannot publish");
-                        ws.send(Message::text(s)).await.is_ok()
+                        send(&mut ws, Message::text(s), self.peer).await
                     }
                     Some(Ok(Message::Close(_))) | Some(Err(_)) | None => false,
                     Some(Ok(_)) => true, // ping/pong: tungstenite answers pings itself
@@ -255,7 +271,12 @@ impl Session {
                 break;
             }
         }
-        let _ = ws.close(None).await;
+        let before = self.dropped;
+        self.count_unsent(&mut rx);
+        self.hub
+            .dropped
+            .fetch_add(self.dropped - before, Ordering::Relaxed);
+        let _ = tokio::time::timeout(SEND_TIMEOUT, ws.close(None)).await;
         self.dropped
     }
 
@@ -267,7 +288,19 @@ impl Session {
             return true;
         }
         let frame = protocol::message_data(sub, m.log_ns, &m.data);
-        ws.send(Message::binary(frame)).await.is_ok()
+        send(ws, Message::binary(frame), self.peer).await
+    }
+
+    /// What the client will not get any more: counted as skipped when it leaves.
+    fn count_unsent(&mut self, rx: &mut tokio::sync::broadcast::Receiver<Arc<LiveMsg>>) {
+        loop {
+            match rx.try_recv() {
+                Ok(m) if self.subs.contains_key(&m.channel) => self.dropped += 1,
+                Ok(_) => {}
+                Err(TryRecvError::Lagged(n)) => self.dropped += n,
+                Err(_) => break,
+            }
+        }
     }
 
     fn lagged(&mut self, n: u64) {
@@ -292,7 +325,7 @@ impl Session {
                 for (sub, channel_id) in list {
                     let Some(i) = self.channel_index(channel_id) else {
                         let s = protocol::status(1, &format!("no channel {channel_id}"));
-                        if ws.send(Message::text(s)).await.is_err() {
+                        if !send(ws, Message::text(s), self.peer).await {
                             return false;
                         }
                         continue;
@@ -318,11 +351,11 @@ impl Session {
                     1,
                     &format!("the live view is read-only: \"{op}\" is not supported"),
                 );
-                ws.send(Message::text(s)).await.is_ok()
+                send(ws, Message::text(s), self.peer).await
             }
             ClientOp::Invalid(why) => {
                 let s = protocol::status(2, &why);
-                ws.send(Message::text(s)).await.is_ok()
+                send(ws, Message::text(s), self.peer).await
             }
         }
     }

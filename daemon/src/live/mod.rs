@@ -264,7 +264,11 @@ mod tests {
         let mut head = [0u8; 12];
         c.read_exact(&mut head).await.unwrap();
         assert_eq!(&head, b"HTTP/1.1 101");
-        let status = view.hub.channels.iter().position(|ch| ch.topic == "/status");
+        let status = view
+            .hub
+            .channels
+            .iter()
+            .position(|ch| ch.topic == "/status");
         let sub = format!(
             r#"{{"op":"subscribe","subscriptions":[{{"id":0,"channelId":{}}}]}}"#,
             status.unwrap() + 1

@@ -135,7 +135,14 @@ fn check_client(out: &str, log: &[(String, u64, Vec<u8>)], stderr: &str) {
         *got.entry(topic.to_string()).or_default() += 1;
     }
     println!("received by the Foxglove client: {got:?}");
-    let skipped = stderr.contains("messages skipped for it so far");
+    // The daemon says when it skipped messages for a slow client (a loaded machine).
+    let skipped = stderr.lines().any(|l| {
+        l.contains("skipped for it so far")
+            || l.split("left; ")
+                .nth(1)
+                .and_then(|r| r.split(' ').next())
+                .is_some_and(|n| n != "0")
+    });
     let poses = count(log, "/pose");
     assert!(poses > 0);
     if skipped {

@@ -47,6 +47,15 @@ else
     rm -f /etc/systemd/system/metrolog.service.d/socketcan.conf
 fi
 
+# The live view listens on TCP: the host's network namespace and AF_INET/AF_INET6, loopback
+# peers only (metrolog-live.conf; docs/live-view.md).
+if grep -Eq '^[[:space:]]*\[live\]' /etc/metrolog/metrolog.toml; then
+    install -D -m 0644 "$here/metrolog-live.conf" /etc/systemd/system/metrolog.service.d/live.conf
+    echo "   [live] configured: installed the live.conf drop-in (TCP, loopback peers only)"
+else
+    rm -f /etc/systemd/system/metrolog.service.d/live.conf
+fi
+
 echo "== user and state directory"
 if ! id metrolog >/dev/null 2>&1; then
     useradd --system --home-dir /var/lib/metrolog --no-create-home --shell /usr/sbin/nologin \

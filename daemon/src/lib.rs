@@ -6,3 +6,4 @@ pub mod acquire;
 pub mod cli;
 pub mod cmd;
 pub mod exit;
+pub mod live;

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use metrolog::cmd::info::inspect;
 use metrolog::cmd::replay::{ReplayOptions, replay};
 use metrolog_log::synthetic::SyntheticRun;
-use metrolog_log::{LogError, LogItem, LogOptions, LogWriter, RunMetadata, read_log};
+use metrolog_log::{LogError, LogOptions, LogWriter, RunMetadata};
 
 fn short_run() -> SyntheticRun {
     SyntheticRun {
@@ -18,24 +18,6 @@ fn short_run() -> SyntheticRun {
         seed: 3,
         ..SyntheticRun::default()
     }
-}
-
-/// (topic, log time, data) of every message, in file order.
-fn messages(path: &Path) -> (Vec<(String, u64, Vec<u8>)>, metrolog_log::ReadSummary) {
-    let mut v = Vec::new();
-    let s = read_log(path, |item| {
-        if let LogItem::Message {
-            topic,
-            log_ns,
-            data,
-            ..
-        } = item
-        {
-            v.push((topic.to_string(), log_ns, data.to_vec()));
-        }
-    })
-    .unwrap();
-    (v, s)
 }
 
 #[test]
@@ -48,7 +30,7 @@ fn truncated_logs_give_their_intact_prefix() {
     };
     let w = log_common::write_run_with(dir.path(), "full.mcap", &short_run(), opts);
     let full = std::fs::read(&w.path).unwrap();
-    let (all, s) = messages(&w.path);
+    let (all, s) = log_common::messages(&w.path);
     assert!(s.clean_close);
     let full_replay = replay(&w.path, &ReplayOptions::default()).unwrap();
     assert!(full_replay.reproduces_log());
@@ -64,7 +46,7 @@ fn truncated_logs_give_their_intact_prefix() {
             full.len() * (i - 4) / (n_cuts - 4) - 1
         };
         std::fs::write(&cut_path, &full[..at]).unwrap();
-        let (got, s) = messages(&cut_path);
+        let (got, s) = log_common::messages(&cut_path);
         assert!(!s.clean_close, "cut at {at} reported clean");
         assert!(s.error.is_some());
         assert_eq!(got[..], all[..got.len()], "cut at {at}: not a prefix");
@@ -183,7 +165,7 @@ fn killed_writer_loses_at_most_about_a_second() {
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
 
-    let (msgs, s) = messages(&path);
+    let (msgs, s) = log_common::messages(&path);
     assert!(!s.clean_close);
     // Raw samples come in batches of 10 ms: decode them.
     let samples: Vec<drivers::Sample> = msgs
@@ -237,7 +219,7 @@ fn failed_write_is_reported_and_keeps_the_flushed_part() {
         });
     assert!(line.contains(&path.display().to_string()), "{line}");
     assert!(line.contains("last flush"), "{line}");
-    let (msgs, s) = messages(&path);
+    let (msgs, s) = log_common::messages(&path);
     assert!(!s.clean_close);
     assert!(!msgs.is_empty());
     // The half-written chunk was cut off: the file ends at a record boundary.
@@ -299,7 +281,7 @@ fn each_run_gets_a_new_file_and_earlier_ones_stay_intact() {
     w.flush().unwrap();
     drop(w);
     assert_eq!(std::fs::read(&a).unwrap(), before);
-    assert!(messages(&a).1.clean_close);
+    assert!(log_common::messages(&a).1.clean_close);
     // An explicit path that exists is refused.
     let e = LogWriter::create(&a, &meta, LogOptions::default())
         .err()

@@ -248,3 +248,41 @@ fn unreadable_file_names_the_path() {
         .to_string();
     assert!(e.contains("/nonexistent/metrolog.toml"), "{e}");
 }
+
+#[test]
+fn the_live_view_is_off_by_default_and_its_mistakes_are_reported() {
+    assert_eq!(parse(GOOD).unwrap().live, None);
+    let on = parse(&format!("{GOOD}[live]\nlisten = \"127.0.0.1:8765\"\n")).unwrap();
+    let live = on.live.unwrap();
+    assert_eq!(live.listen.to_string(), "127.0.0.1:8765");
+    assert_eq!(live.raw_hz, 10);
+    let v6 = parse(&format!(
+        "{GOOD}[live]\nlisten = \"[::1]:9000\"\nraw_hz = 0\n"
+    ))
+    .unwrap();
+    assert_eq!(v6.live.unwrap().raw_hz, 0);
+    for (bad, needle, what) in [
+        (
+            "listen = \"localhost\"",
+            "listen =",
+            "is not an address and port",
+        ),
+        (
+            "listen = \"127.0.0.1:8765\"\nraw_hz = 101",
+            "raw_hz",
+            "outside 0 to 100",
+        ),
+        (
+            "listen = \"127.0.0.1:8765\"\npublish = true",
+            "publish",
+            "unknown field",
+        ),
+    ] {
+        let text = format!("{GOOD}[live]\n{bad}\n");
+        let (line, msg) = error(&text);
+        assert_eq!(line, line_of(&text, needle), "{msg}");
+        assert!(msg.contains(what), "{msg}");
+    }
+    let (_, msg) = error(&format!("{GOOD}[live]\nraw_hz = 5\n"));
+    assert!(msg.contains("listen"), "{msg}");
+}

@@ -213,4 +213,18 @@ fn unit_exposure_is_at_most_1_1() {
         socketcan > default && socketcan <= 1.2,
         "exposure with the SocketCAN drop-in {socketcan}"
     );
+    // The live view's drop-in (TCP, loopback peers only): measured 1.3, 1.5 with both.
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/metrolog-live.conf"),
+        dropins.join("live.conf"),
+    )
+    .unwrap();
+    let both = exposure(&unit).unwrap();
+    assert!(both > socketcan && both <= 1.5, "SocketCAN and live {both}");
+    std::fs::remove_file(dropins.join("socketcan.conf")).unwrap();
+    let live = exposure(&unit).unwrap();
+    assert!(
+        live > default && live <= 1.3,
+        "exposure with the live drop-in {live}"
+    );
 }

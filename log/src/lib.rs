@@ -59,7 +59,7 @@ use serde::{Deserialize, Serialize};
 pub use reader::{
     LogItem, ReadSummary, read_log, read_log_progress, read_log_until, read_run_metadata,
 };
-pub use writer::{LogOptions, LogWriter};
+pub use writer::{ChannelSpec, LogOptions, LogWriter, MessageTap, channel_specs};
 
 /// Name of the metadata record describing the run.
 pub const RUN_METADATA: &str = "metrolog.run";

@@ -86,6 +86,50 @@ impl Seek for SyncFile {
     }
 }
 
+/// One channel of the log: its topic, encodings and schema, as the MCAP file declares it.
+/// The live view (`metrolog::live`) advertises the same, so a client decodes both alike.
+#[derive(Debug, Clone)]
+pub struct ChannelSpec {
+    pub topic: &'static str,
+    /// `protobuf` (raw batches) or `json`.
+    pub message_encoding: &'static str,
+    pub schema_name: &'static str,
+    /// `protobuf` (a `FileDescriptorSet`) or `jsonschema`.
+    pub schema_encoding: &'static str,
+    pub schema: Vec<u8>,
+}
+
+/// Every channel a log has, in the order the writer declares them: the raw topics (protobuf
+/// batches), then the JSON topics (docs/log-format.md).
+pub fn channel_specs() -> Vec<ChannelSpec> {
+    let descriptors = raw::descriptor_set();
+    let mut v: Vec<ChannelSpec> = raw::RAW_TOPICS
+        .iter()
+        .map(|&(topic, schema_name)| ChannelSpec {
+            topic,
+            message_encoding: "protobuf",
+            schema_name,
+            schema_encoding: "protobuf",
+            schema: descriptors.clone(),
+        })
+        .collect();
+    for (topic, schema_name, schema) in topics::json_topics() {
+        v.push(ChannelSpec {
+            topic,
+            message_encoding: "json",
+            schema_name,
+            schema_encoding: "jsonschema",
+            schema: serde_json::to_vec(&schema).unwrap_or_default(),
+        });
+    }
+    v
+}
+
+/// A copy of every message the writer has written: topic, log time (ns) and the encoded
+/// bytes as they are in the file. Called on the writer's thread, so it must not block
+/// (the live view hands the message to a lossy queue).
+pub type MessageTap = Box<dyn FnMut(&'static str, u64, &[u8]) + Send>;
+
 /// Writes one run to one MCAP file.
 pub struct LogWriter {
     mcap: Option<mcap::Writer<SyncFile>>,
@@ -102,6 +146,7 @@ pub struct LogWriter {
     /// Encoding buffer, reused.
     buf: Vec<u8>,
     samples: u64,
+    tap: Option<MessageTap>,
 }
 
 /// The error with its causes (the mcap crate's message alone hides the OS error).
@@ -169,25 +214,14 @@ impl LogWriter {
         };
         let mut mcap = wopts.create(sink).map_err(werr)?;
         let mut channels = BTreeMap::new();
-        let descriptors = raw::descriptor_set();
-        for (topic, schema_name) in raw::RAW_TOPICS {
+        for c in channel_specs() {
             let sid = mcap
-                .add_schema(schema_name, "protobuf", &descriptors)
+                .add_schema(c.schema_name, c.schema_encoding, &c.schema)
                 .map_err(werr)?;
             let cid = mcap
-                .add_channel(sid, topic, "protobuf", &BTreeMap::new())
+                .add_channel(sid, c.topic, c.message_encoding, &BTreeMap::new())
                 .map_err(werr)?;
-            channels.insert(topic, cid);
-        }
-        for (topic, schema_name, schema) in topics::json_topics() {
-            let data = serde_json::to_vec(&schema).unwrap_or_default();
-            let sid = mcap
-                .add_schema(schema_name, "jsonschema", &data)
-                .map_err(werr)?;
-            let cid = mcap
-                .add_channel(sid, topic, "json", &BTreeMap::new())
-                .map_err(werr)?;
-            channels.insert(topic, cid);
+            channels.insert(c.topic, cid);
         }
         mcap.write_metadata(&Metadata {
             name: RUN_METADATA.into(),
@@ -206,6 +240,7 @@ impl LogWriter {
             pending: Default::default(),
             buf: Vec::with_capacity(64 << 10),
             samples: 0,
+            tap: None,
         };
         w.flush()?;
         Ok(w)
@@ -340,8 +375,13 @@ impl LogWriter {
         Ok(())
     }
 
+    /// Every message written from now on is also handed to `tap` (after it is in the file).
+    pub fn set_tap(&mut self, tap: MessageTap) {
+        self.tap = Some(tap);
+    }
+
     fn write_message(&mut self, topic: &str, log_ns: u64, data: &[u8]) -> Result<(), LogError> {
-        let Some(&channel_id) = self.channels.get(topic) else {
+        let Some((&topic, &channel_id)) = self.channels.get_key_value(topic) else {
             return Err(LogError::Write {
                 path: self.path.clone(),
                 reason: format!("unknown topic {topic}"),
@@ -360,6 +400,9 @@ impl LogWriter {
         }
         self.sequence = self.sequence.wrapping_add(1);
         self.messages += 1;
+        if let Some(tap) = self.tap.as_mut() {
+            tap(topic, log_ns, data);
+        }
         Ok(())
     }
 

@@ -67,6 +67,7 @@ struct RawConfig {
     capball: Option<Spanned<RawCapball>>,
     psd: Option<Spanned<RawPsd>>,
     trigger: Option<Spanned<RawTrigger>>,
+    live: Option<Spanned<RawLive>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -120,6 +121,13 @@ struct RawTrigger {
     can_id: Option<Spanned<i64>>,
 }
 
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLive {
+    listen: Spanned<String>,
+    raw_hz: Option<Spanned<i64>>,
+}
+
 // ---------------------------------------------------------------------------------------------
 // The validated configuration.
 
@@ -136,6 +144,19 @@ pub struct Config {
     pub capball: Option<CapballConfig>,
     pub psd: Option<drivers::PsdConfig>,
     pub trigger: Option<TriggerConfig>,
+    /// The live view (`[live]`, off when absent): docs/live-view.md.
+    pub live: Option<LiveConfig>,
+}
+
+/// Default of `[live] raw_hz`: raw batches per second and raw topic sent to the live view.
+pub const DEFAULT_LIVE_RAW_HZ: u32 = 10;
+
+/// `[live]`: where the live view (Foxglove WebSocket and operator page) listens.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveConfig {
+    pub listen: std::net::SocketAddr,
+    /// Raw batches per second and raw topic streamed (0: no raw topics); the log keeps all.
+    pub raw_hz: u32,
 }
 
 #[derive(Debug, Clone)]
@@ -320,6 +341,11 @@ impl Ctx<'_> {
             Some(s) => Some(self.validate_trigger(s)?),
         };
 
+        let live = match raw.live {
+            None => None,
+            Some(s) => Some(self.validate_live(s.into_inner())?),
+        };
+
         Ok(Config {
             path: self.path.to_path_buf(),
             text: self.text.to_string(),
@@ -329,7 +355,34 @@ impl Ctx<'_> {
             capball,
             psd,
             trigger,
+            live,
         })
+    }
+
+    fn validate_live(&self, r: RawLive) -> Result<LiveConfig, ConfigError> {
+        let listen = r.listen.get_ref().trim().parse().map_err(|_| {
+            self.err(
+                r.listen.span(),
+                format!(
+                    "listen = {:?} is not an address and port; write e.g. \"127.0.0.1:8765\"",
+                    r.listen.get_ref()
+                ),
+            )
+        })?;
+        let raw_hz = match r.raw_hz {
+            None => DEFAULT_LIVE_RAW_HZ,
+            Some(v) if (0..=100).contains(v.get_ref()) => *v.get_ref() as u32,
+            Some(v) => {
+                return Err(self.err(
+                    v.span(),
+                    format!(
+                        "raw_hz = {} is outside 0 to 100 (raw batches per second and topic; the log holds 100)",
+                        v.get_ref()
+                    ),
+                ));
+            }
+        };
+        Ok(LiveConfig { listen, raw_hz })
     }
 
     fn validate_interferometer(

@@ -99,6 +99,11 @@ impl LiveLog {
     pub fn path(&self) -> &std::path::Path {
         &self.path
     }
+
+    /// Hands every message written from now on to `tap` too (the live view).
+    pub fn set_tap(&mut self, tap: metrolog_log::MessageTap) {
+        self.recorder.writer().set_tap(tap);
+    }
 }
 
 impl EventSink for LiveLog {

@@ -151,10 +151,14 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
-    let recorder = crate::acquire::pipeline::open_log(cfg, &clock)
+    let mut recorder = crate::acquire::pipeline::open_log(cfg, &clock)
         .map_err(|e| crate::exit::LogCreateFailed(format!("{e:#}")))?;
     let log_path = recorder.path().to_path_buf();
     tracing::info!("logging to {}", log_path.display());
+    let live = start_live(cfg, &log_path).await;
+    if let Some(l) = &live {
+        recorder.set_tap(l.tap());
+    }
 
     let (tx, rx) = mpsc::channel::<DriverEvent>(pipeline::QUEUE_CAPACITY);
     let drivers_cancel = CancellationToken::new();
@@ -280,9 +284,29 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
             return Err(crate::exit::PipelinePanicked.into());
         }
     };
+    if let Some(l) = live {
+        l.stop().await;
+    }
     Ok(RunReport {
         log_path,
         outcome,
         signal,
     })
+}
+
+/// The live view of `[live]`, if configured. One that cannot start is reported and left out:
+/// the measurement runs without it.
+async fn start_live(cfg: &Config, log_path: &std::path::Path) -> Option<crate::live::LiveView> {
+    let live = cfg.live.as_ref()?;
+    let session = log_path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    match crate::live::LiveView::start(live, &cfg.run.machine, session).await {
+        Ok(l) => Some(l),
+        Err(e) => {
+            tracing::error!("live view not started: {e:#}; the run goes on without it");
+            None
+        }
+    }
 }

@@ -81,3 +81,21 @@ pub fn write_run_with(dir: &Path, name: &str, run: &SyntheticRun, opts: LogOptio
         meta,
     }
 }
+
+/// (topic, log time, data) of every message, in file order, and what the reader saw.
+pub fn messages(path: &Path) -> (Vec<(String, u64, Vec<u8>)>, metrolog_log::ReadSummary) {
+    let mut v = Vec::new();
+    let s = metrolog_log::read_log(path, |item| {
+        if let metrolog_log::LogItem::Message {
+            topic,
+            log_ns,
+            data,
+            ..
+        } = item
+        {
+            v.push((topic.to_string(), log_ns, data.to_vec()));
+        }
+    })
+    .unwrap();
+    (v, s)
+}

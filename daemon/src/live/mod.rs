@@ -1,0 +1,316 @@
+//! The live view (docs/live-view.md): what the run writes to its log, streamed to Foxglove,
+//! Lichtblick or the operator page while it runs, read-only.
+//!
+//! ```text
+//! LogWriter ──tap (every message, after it is in the file)──▶ Hub: decimation of raw topics,
+//!      │                                                        latest /pose, /status, /event
+//!      ▼                                                        ──lossy broadcast──▶ clients
+//!   the log (never waits on a viewer)
+//! ```
+//!
+//! The tap runs on the pipeline thread and never blocks: it puts the message into a
+//! `tokio::sync::broadcast` channel of [`BACKLOG`] messages, which overwrites the oldest
+//! message a slow client has not taken yet; that client then skips what it missed (counted,
+//! and reported in the journal). Messages keep the log's bytes, topics, schemas and encodings,
+//! so a client decodes them exactly as it decodes the log.
+//!
+//! One TCP port serves both the Foxglove WebSocket protocol ([`protocol`], subprotocol
+//! `foxglove.websocket.v1`) and the operator page ([`server`], `GET /`).
+
+pub mod protocol;
+pub mod server;
+
+use std::collections::VecDeque;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use anyhow::Context;
+use metrolog_log::{ChannelSpec, MessageTap};
+use tokio::sync::broadcast;
+use tokio_util::sync::CancellationToken;
+
+use crate::acquire::config::LiveConfig;
+
+/// Messages a client may fall behind before it starts losing the oldest (at the live rates
+/// — four raw topics at 10 Hz, /status at 1 Hz, a few /pose and triggers — about 5 s).
+pub const BACKLOG: usize = 256;
+
+/// How many of the latest messages of a JSON topic a new subscriber gets at once: the current
+/// pose of every instrument, the recent faults, the last counters and trigger.
+fn latch_depth(topic: &str) -> usize {
+    match topic {
+        "/pose" => 8,
+        "/event" => 16,
+        "/status" | "/cnc/trigger" => 1,
+        _ => 0,
+    }
+}
+
+/// One message as the log holds it: channel (index into [`Hub::channels`]), log time, bytes.
+#[derive(Debug)]
+pub struct LiveMsg {
+    /// Order of publication (a client told the latched messages skips them in the stream).
+    pub seq: u64,
+    pub channel: usize,
+    pub log_ns: u64,
+    pub data: Vec<u8>,
+}
+
+/// What the tap and the client sessions share.
+pub struct Hub {
+    pub channels: Vec<ChannelSpec>,
+    tx: broadcast::Sender<Arc<LiveMsg>>,
+    latest: Mutex<Vec<VecDeque<Arc<LiveMsg>>>>,
+    /// Messages skipped by slow clients, all clients together.
+    pub dropped: AtomicU64,
+    published: AtomicU64,
+    /// Run identity for `serverInfo`.
+    pub session: String,
+    pub machine: String,
+}
+
+impl Hub {
+    fn new(machine: &str, session: String) -> Hub {
+        let channels = metrolog_log::channel_specs();
+        let latest = vec![VecDeque::new(); channels.len()];
+        Hub {
+            channels,
+            tx: broadcast::channel(BACKLOG).0,
+            latest: Mutex::new(latest),
+            dropped: AtomicU64::new(0),
+            published: AtomicU64::new(0),
+            session,
+            machine: machine.to_string(),
+        }
+    }
+
+    /// A receiver of every message published from now on.
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<LiveMsg>> {
+        self.tx.subscribe()
+    }
+
+    /// The latched messages of a channel, oldest first.
+    pub fn latched(&self, channel: usize) -> Vec<Arc<LiveMsg>> {
+        match self.latest.lock() {
+            Ok(l) => l
+                .get(channel)
+                .map(|q| q.iter().cloned().collect())
+                .unwrap_or_default(),
+            Err(_) => Vec::new(),
+        }
+    }
+
+    fn publish(&self, channel: usize, log_ns: u64, data: &[u8]) {
+        let depth = latch_depth(self.channels[channel].topic);
+        if depth == 0 && self.tx.receiver_count() == 0 {
+            return; // nobody watches: no copy
+        }
+        let msg = Arc::new(LiveMsg {
+            seq: self.published.fetch_add(1, Ordering::Relaxed),
+            channel,
+            log_ns,
+            data: data.to_vec(),
+        });
+        if depth > 0
+            && let Ok(mut l) = self.latest.lock()
+        {
+            let q = &mut l[channel];
+            if q.len() == depth {
+                q.pop_front();
+            }
+            q.push_back(msg.clone());
+        }
+        // Err only when no client is connected.
+        let _ = self.tx.send(msg);
+    }
+}
+
+/// The tap for [`metrolog_log::LogWriter::set_tap`]: every JSON message, and at most `raw_hz`
+/// raw batches per second and raw topic (by log time), go to the hub.
+pub fn tap(hub: Arc<Hub>, raw_hz: u32) -> MessageTap {
+    let gap_ns = 1_000_000_000 / u64::from(raw_hz.max(1));
+    let mut last_raw: Vec<Option<u64>> = vec![None; hub.channels.len()];
+    Box::new(move |topic, log_ns, data| {
+        let Some(i) = hub.channels.iter().position(|c| c.topic == topic) else {
+            return;
+        };
+        if hub.channels[i].message_encoding == "protobuf" {
+            if raw_hz == 0 || last_raw[i].is_some_and(|t| log_ns < t.saturating_add(gap_ns)) {
+                return;
+            }
+            last_raw[i] = Some(log_ns);
+        }
+        hub.publish(i, log_ns, data);
+    })
+}
+
+/// A running live view: the listener and its clients.
+pub struct LiveView {
+    hub: Arc<Hub>,
+    addr: SocketAddr,
+    raw_hz: u32,
+    stop: CancellationToken,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl LiveView {
+    /// Binds `cfg.listen` and starts serving. A non-loopback address is warned about loudly:
+    /// anyone who reaches it can watch the run.
+    pub async fn start(cfg: &LiveConfig, machine: &str, session: String) -> anyhow::Result<Self> {
+        let listener = tokio::net::TcpListener::bind(cfg.listen)
+            .await
+            .with_context(|| {
+                format!(
+                    "cannot listen on {} for the live view; change [live] listen or free the port",
+                    cfg.listen
+                )
+            })?;
+        let addr = listener.local_addr().context("the live view's address")?;
+        if !addr.ip().is_loopback() {
+            tracing::warn!(
+                "LIVE VIEW ON A NETWORK ADDRESS {addr}: anyone who can reach this host can watch the run (read-only, no password). Use listen = \"127.0.0.1:{}\" and an SSH tunnel unless this network is trusted (docs/live-view.md)",
+                addr.port()
+            );
+        }
+        let hub = Arc::new(Hub::new(machine, session));
+        let stop = CancellationToken::new();
+        let task = tokio::spawn(server::serve(listener, hub.clone(), stop.clone()));
+        tracing::info!(
+            "live view: operator page http://{addr}/ ; Foxglove WebSocket ws://{addr} (read-only)"
+        );
+        Ok(LiveView {
+            hub,
+            addr,
+            raw_hz: cfg.raw_hz,
+            stop,
+            task,
+        })
+    }
+
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The tap to put on the run's log writer.
+    pub fn tap(&self) -> MessageTap {
+        tap(self.hub.clone(), self.raw_hz)
+    }
+
+    /// Closes every client and the listener; returns the messages slow clients skipped.
+    pub async fn stop(self) -> u64 {
+        self.stop.cancel();
+        // Clients get what the run wrote last; one that takes nothing is cut off by
+        // SEND_TIMEOUT, and this bound ends the rest (aborting the server drops every client).
+        let mut task = self.task;
+        let limit = server::SEND_TIMEOUT + std::time::Duration::from_secs(2);
+        if tokio::time::timeout(limit, &mut task).await.is_err() {
+            task.abort();
+        }
+        let dropped = self.hub.dropped.load(Ordering::Relaxed);
+        tracing::info!(
+            "live view closed; {dropped} messages skipped for slow clients (the log has them all)"
+        );
+        dropped
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn topic_index(hub: &Hub, topic: &str) -> usize {
+        hub.channels.iter().position(|c| c.topic == topic).unwrap()
+    }
+
+    #[test]
+    fn raw_topics_are_decimated_and_json_topics_latched() {
+        let hub = Arc::new(Hub::new("m", "s".into()));
+        let mut rx = hub.subscribe();
+        let mut t = tap(hub.clone(), 10);
+        let raw = hub.channels[0].topic;
+        for k in 0..100u64 {
+            t(raw, k * 10_000_000, b"r"); // 100 batches of 10 ms: 1 s
+        }
+        for k in 0..10u64 {
+            t("/pose", k, format!("{{\"pose\":{k}}}").as_bytes());
+        }
+        let mut raw_seen = 0;
+        while let Ok(m) = rx.try_recv() {
+            raw_seen += usize::from(m.channel == 0);
+        }
+        assert_eq!(raw_seen, 10);
+        let latched = hub.latched(topic_index(&hub, "/pose"));
+        assert_eq!(latched.len(), 8);
+        assert_eq!(latched[7].data, b"{\"pose\":9}");
+        assert_eq!(latched[0].log_ns, 2);
+    }
+
+    /// A client that subscribes and then reads nothing: the tap goes on at once whatever it
+    /// is sent, the client is counted as skipping messages, and stopping the view ends.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_stalled_client_neither_blocks_the_writer_nor_the_stop() {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let cfg = LiveConfig {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            raw_hz: 10,
+        };
+        let view = LiveView::start(&cfg, "m", "s".into()).await.unwrap();
+        let sock = tokio::net::TcpSocket::new_v4().unwrap();
+        sock.set_recv_buffer_size(4096).unwrap();
+        let mut c = sock.connect(view.addr()).await.unwrap();
+        let hello = "GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
+        c.write_all(hello.as_bytes()).await.unwrap();
+        let mut head = [0u8; 12];
+        c.read_exact(&mut head).await.unwrap();
+        assert_eq!(&head, b"HTTP/1.1 101");
+        let status = view
+            .hub
+            .channels
+            .iter()
+            .position(|ch| ch.topic == "/status");
+        let sub = format!(
+            r#"{{"op":"subscribe","subscriptions":[{{"id":0,"channelId":{}}}]}}"#,
+            status.unwrap() + 1
+        );
+        // A client frame: text, masked with a zero key (RFC 6455 5.3).
+        let mut frame = vec![0x81, 0x80 | sub.len() as u8, 0, 0, 0, 0];
+        frame.extend_from_slice(sub.as_bytes());
+        c.write_all(&frame).await.unwrap();
+        // The session has subscribed once the latched /status reaches the client.
+        let mut tap = view.tap();
+        tap("/status", 0, b"{\"latched\":1}");
+        let mut got = Vec::new();
+        while !got.windows(13).any(|w| w == b"{\"latched\":1}") {
+            let mut buf = [0u8; 4096];
+            let n = c.read(&mut buf).await.unwrap();
+            assert!(n > 0, "closed early");
+            got.extend_from_slice(&buf[..n]);
+        }
+        // Now the client stalls under 64 MB of /status.
+        let big = vec![b' '; 64 << 10];
+        for k in 0..1024u64 {
+            tap("/status", k, &big);
+        }
+        let dropped = tokio::time::timeout(std::time::Duration::from_secs(60), view.stop())
+            .await
+            .expect("stop ends");
+        assert!(dropped > 0, "skipped messages are counted");
+        drop(c);
+    }
+
+    #[test]
+    fn a_slow_client_loses_the_oldest_and_the_sender_never_waits() {
+        let hub = Arc::new(Hub::new("m", "s".into()));
+        let mut rx = hub.subscribe();
+        let mut t = tap(hub.clone(), 10);
+        for k in 0..(BACKLOG as u64 + 10) {
+            t("/status", k, b"{}");
+        }
+        match rx.try_recv() {
+            Err(broadcast::error::TryRecvError::Lagged(n)) => assert_eq!(n, 10),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(rx.try_recv().unwrap().log_ns, 10);
+    }
+}

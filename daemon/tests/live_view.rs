@@ -1,0 +1,356 @@
+//! The live view (docs/live-view.md) during a simulated run, checked from outside:
+//!
+//! 1. Foxglove's own protocol client (npm `@foxglove/ws-protocol`, `tests/js/live_client.cjs`)
+//!    subscribes to every advertised channel before the CNC program starts; every message it
+//!    receives must be in the log, byte for byte, on the same topic at the same log time, its
+//!    protobuf messages must decode with the advertised schemas, and it must receive every
+//!    `/pose` of the log (unless the daemon reported skipping messages for it).
+//! 2. The operator page rendered by headless Chromium (driven through the DevTools protocol by
+//!    `tests/js/render_page.cjs`, which waits until the page shows pose rows) shows pose values,
+//!    which must be pose values of the log; its screenshot is kept in the test's target
+//!    directory (`live_page_chromium.png`).
+//!
+//! Needs node with the npm packages `.ci/run` installs into `.ci/npm`, and `chromium`; without
+//! them the parts say so and skip, except in CI (`CI` set), where they fail.
+
+use std::collections::{BTreeMap, HashSet};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use metrolog_log::topics::PoseMsg;
+use serde_json::Value;
+
+mod log_common;
+
+/// Generous: a loaded 2-core CI runner; every wait ends as soon as its condition holds.
+const LIMIT: Duration = Duration::from_secs(120);
+
+fn skip_or_fail(msg: &str) {
+    assert!(std::env::var_os("CI").is_none(), "{msg}");
+    println!("SKIPPED: {msg}");
+}
+
+fn node_modules() -> Option<PathBuf> {
+    let dir = match std::env::var_os("METROLOG_NPM_DIR") {
+        Some(d) => PathBuf::from(d),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../.ci/npm"),
+    };
+    let modules = dir.join("node_modules");
+    let node = Command::new("node").arg("--version").output().is_ok();
+    if node && modules.join("@foxglove/ws-protocol").exists() && modules.join("ws").exists() {
+        return Some(modules);
+    }
+    skip_or_fail(&format!(
+        "the live client check needs node and the npm packages @foxglove/ws-protocol, ws and protobufjs in {} (.ci/run installs them)",
+        modules.display()
+    ));
+    None
+}
+
+fn chromium() -> Option<PathBuf> {
+    let found = ["chromium", "chromium-browser", "google-chrome"]
+        .iter()
+        .find(|c| {
+            Command::new(c)
+                .arg("--version")
+                .output()
+                .is_ok_and(|o| o.status.success())
+        })
+        .map(PathBuf::from);
+    if found.is_none() {
+        skip_or_fail("the operator page check needs chromium (apt-get install chromium)");
+    }
+    found
+}
+
+/// The lines a child prints on one of its pipes, as they come, and all of them at the end.
+fn lines_of(pipe: impl std::io::Read + Send + 'static) -> mpsc::Receiver<String> {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(pipe).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+/// Waits for a line containing `needle` (keeping every line in `seen`).
+fn wait_line(rx: &mpsc::Receiver<String>, needle: &str, seen: &mut Vec<String>) -> String {
+    let t0 = std::time::Instant::now();
+    while t0.elapsed() < LIMIT {
+        match rx.recv_timeout(Duration::from_millis(200)) {
+            Ok(l) => {
+                seen.push(l.clone());
+                if l.contains(needle) {
+                    return l;
+                }
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    panic!("no line with {needle:?}; seen:\n{}", seen.join("\n"));
+}
+
+fn drain(rx: &mpsc::Receiver<String>, seen: &mut Vec<String>) {
+    seen.extend(rx.iter());
+}
+
+/// Every message of the log: (topic, log time, bytes).
+fn log_messages(path: &Path) -> Vec<(String, u64, Vec<u8>)> {
+    let (v, summary) = log_common::messages(path);
+    assert!(summary.clean_close, "{summary:?}");
+    v
+}
+
+fn count(msgs: &[(String, u64, Vec<u8>)], topic: &str) -> usize {
+    msgs.iter().filter(|m| m.0 == topic).count()
+}
+
+fn check_client(out: &str, log: &[(String, u64, Vec<u8>)], stderr: &str) {
+    let r: Value = serde_json::from_str(out).unwrap();
+    assert_eq!(r["problems"], serde_json::json!([]), "{}", r["problems"]);
+    assert!(r["server"].as_str().unwrap().starts_with("metrolog"));
+    let in_log: HashSet<(&str, u64, &[u8])> = log
+        .iter()
+        .map(|(t, ns, d)| (t.as_str(), *ns, d.as_slice()))
+        .collect();
+    let mut got: BTreeMap<String, usize> = BTreeMap::new();
+    for m in r["received"].as_array().unwrap() {
+        let topic = m["topic"].as_str().unwrap();
+        let ns: u64 = m["log_ns"].as_str().unwrap().parse().unwrap();
+        let data = data_encoding::BASE64
+            .decode(m["data"].as_str().unwrap().as_bytes())
+            .unwrap();
+        assert!(
+            in_log.contains(&(topic, ns, data.as_slice())),
+            "{topic} at {ns} received but not in the log: {}",
+            String::from_utf8_lossy(&data)
+        );
+        *got.entry(topic.to_string()).or_default() += 1;
+    }
+    println!("received by the Foxglove client: {got:?}");
+    // The daemon says when it skipped messages for a slow client (a loaded machine).
+    let skipped = stderr.lines().any(|l| {
+        l.contains("skipped for it so far")
+            || l.split("left; ")
+                .nth(1)
+                .and_then(|r| r.split(' ').next())
+                .is_some_and(|n| n != "0")
+    });
+    let poses = count(log, "/pose");
+    assert!(poses > 0);
+    if skipped {
+        assert!(got.get("/pose").copied().unwrap_or(0) > 0, "{stderr}");
+    } else {
+        assert_eq!(got.get("/pose").copied().unwrap_or(0), poses, "every /pose");
+    }
+    for topic in [
+        "/status",
+        "/event",
+        "/cnc/trigger",
+        "/interferometer/position",
+    ] {
+        assert!(
+            got.get(topic).copied().unwrap_or(0) > 0,
+            "nothing on {topic}"
+        );
+    }
+    // Raw topics decimated to 10 batches/s from the log's 100.
+    let (live_raw, log_raw) = (
+        got["/interferometer/position"],
+        count(log, "/interferometer/position"),
+    );
+    assert!(
+        live_raw * 5 <= log_raw,
+        "{live_raw} of {log_raw} raw batches"
+    );
+}
+
+/// The value of `name="..."` in `s`.
+fn attr<'a>(s: &'a str, name: &str) -> Option<&'a str> {
+    let start = s.find(&format!("{name}=\""))? + name.len() + 2;
+    s[start..].split('"').next()
+}
+
+/// Pose rows of the rendered page: (instrument, pose, channel, value as shown).
+fn shown_poses(dom: &str) -> Vec<(String, u32, String, String)> {
+    let mut v = Vec::new();
+    for row in dom.split("<tr class=\"pose\"").skip(1) {
+        let row = row.split("</tr>").next().unwrap_or("");
+        let (Some(inst), Some(pose)) = (attr(row, "data-instrument"), attr(row, "data-pose"))
+        else {
+            continue;
+        };
+        for span in row.split("<span class=\"value\"").skip(1) {
+            if let (Some(c), Some(x)) = (attr(span, "data-channel"), attr(span, "data-value")) {
+                v.push((inst.into(), pose.parse().unwrap(), c.into(), x.into()));
+            }
+        }
+    }
+    v
+}
+
+/// The operator page rendered by Chromium once it shows pose rows (`tests/js/render_page.cjs`
+/// waits for them through the DevTools protocol); its screenshot is kept.
+fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, String, String)> {
+    let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("live_page_chromium.png");
+    let _ = std::fs::remove_file(&shot);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/render_page.cjs");
+    let profile = tempfile::tempdir().unwrap();
+    let out = Command::new("node")
+        .arg(script)
+        .arg(bin)
+        .arg(url)
+        .arg("tr.pose span.value")
+        .arg(&shot)
+        .arg(profile.path())
+        .env("NODE_PATH", modules)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let png = std::fs::read(&shot).unwrap();
+    assert!(
+        png.starts_with(b"\x89PNG") && png.len() > 10_000,
+        "{} bytes",
+        png.len()
+    );
+    eprintln!("screenshot kept: {}", shot.display());
+    let shown = shown_poses(&String::from_utf8_lossy(&out.stdout));
+    assert!(!shown.is_empty(), "no pose value on the page");
+    shown
+}
+
+fn check_page(shown: &[(String, u32, String, String)], log: &[(String, u64, Vec<u8>)]) {
+    let poses: Vec<PoseMsg> = log
+        .iter()
+        .filter(|m| m.0 == "/pose")
+        .map(|m| serde_json::from_slice(&m.2).unwrap())
+        .collect();
+    for (inst, pose, channel, value) in shown {
+        let found = poses.iter().any(|p| {
+            p.instrument.name() == inst
+                && p.pose == *pose
+                && p.mean
+                    .get(channel)
+                    .is_some_and(|x| format!("{x:.3}") == *value)
+        });
+        assert!(
+            found,
+            "the page shows {inst} pose {pose} {channel} = {value}, not in the log"
+        );
+    }
+    println!("the page shows {} pose values, all in the log", shown.len());
+}
+
+/// A child killed if the test ends early (a failed assertion must not leave a daemon behind).
+struct Reaped(Child);
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn sigterm(child: &Child) {
+    let pid = libc::pid_t::try_from(child.id()).unwrap();
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGTERM) }, 0);
+}
+
+fn the_log(dir: &Path) -> PathBuf {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
+    let modules = node_modules();
+    let browser = chromium();
+    let dir = tempfile::tempdir().unwrap();
+    let (ports, logs) = (dir.path().join("ports"), dir.path().join("logs"));
+    std::fs::create_dir_all(&ports).unwrap();
+    let mut sc = sim::Scenario::demo();
+    sc.program.poses.truncate(6);
+    sc.program.start = sim::ProgramStart::Manual;
+    let sim = sim::Sim::start(sc, &ports).unwrap();
+    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
+    let cfg = dir.path().join("metrolog.toml");
+    std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
+
+    let mut daemon = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["run", "--config"])
+            .arg(&cfg)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
+    let mut err = Vec::new();
+    let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
+    let addr = line
+        .split("http://")
+        .nth(1)
+        .unwrap()
+        .split('/')
+        .next()
+        .unwrap()
+        .to_string();
+
+    let mut client = modules.as_ref().map(|m| {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/live_client.cjs");
+        let mut c = Command::new("node")
+            .arg(script)
+            .arg(format!("ws://{addr}"))
+            .env("NODE_PATH", m)
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let rx = lines_of(c.stdout.take().unwrap());
+        let mut out = Vec::new();
+        wait_line(&rx, "subscribed", &mut out);
+        (Reaped(c), rx)
+    });
+    sim.start_program();
+    tokio::time::timeout(LIMIT, sim.program_done())
+        .await
+        .unwrap();
+
+    let url = format!("http://{addr}/");
+    let shown = match (&browser, &modules) {
+        (Some(b), Some(m)) => Some(render_page(b, m, &url)),
+        _ => None,
+    };
+    sigterm(&daemon.0);
+    let status = daemon.0.wait().unwrap();
+    drain(&err_rx, &mut err);
+    let stderr = err.join("\n");
+    assert!(status.success(), "{stderr}");
+    sim.shutdown().await;
+    let log = log_messages(&the_log(&logs));
+    if let Some((c, rx)) = client.as_mut() {
+        let mut out = Vec::new();
+        let result = wait_line(rx, "\"received\"", &mut out);
+        assert!(c.0.wait().unwrap().success());
+        check_client(&result, &log, &stderr);
+    }
+    if let Some(shown) = shown {
+        check_page(&shown, &log);
+    }
+}

@@ -5,19 +5,25 @@
 //! feeds the very same calls, so it reproduces the logged pose values bit for bit (JSON
 //! numbers are written in shortest round-trip form, so every `f64` reads back exactly).
 //!
-//! Time axis: samples enter the detector at their clock-fitted time (`Sample::fitted_ns`, the
-//! device clock mapped onto the host axis), triggers at their host arrival time — the one
-//! axis all instruments and triggers share.
+//! Time axis (docs/design.md, timing model): samples enter the detector at their clock-fitted
+//! time (`Sample::fitted_ns`, the device clock mapped onto the host axis), triggers at their
+//! NC clock fitted the same way ([`drivers::NcClock`], setting
+//! [`TriggerTime::NcClock`]) — when each thing happened, not when it arrived. Logs written
+//! before that setting placed triggers at their host arrival time ([`TriggerTime::Arrival`]);
+//! replay keeps doing so for them. The fit is made here, from the `nc_ms` and arrival time
+//! every `/cnc/trigger` record holds, so a replay makes the same fit in the same order.
 
-use drivers::{Instrument, Sample, SampleValues, Trigger};
+use drivers::{Instrument, NcClock, Sample, SampleValues, Trigger};
 use metrolog_log::topics::PoseMsg;
-use metrolog_log::{DetectorSettings, LogError};
+use metrolog_log::{DetectorSettings, LogError, TriggerTime};
 use metrology::steady::SteadyDetector;
 
 /// The steady-value detectors of the interferometer, the CapBall and the PSD.
 #[derive(Debug, Clone)]
 pub struct PoseEngine {
     detectors: Vec<(Instrument, SteadyDetector)>,
+    /// The NC clock fit, when triggers are placed by it.
+    nc_clock: Option<NcClock>,
 }
 
 impl PoseEngine {
@@ -35,7 +41,22 @@ impl PoseEngine {
                 detectors.push(mk(inst, cfg)?);
             }
         }
-        Ok(PoseEngine { detectors })
+        let nc_clock = match settings.trigger_time {
+            TriggerTime::NcClock => Some(NcClock::default()),
+            TriggerTime::Arrival => None,
+        };
+        Ok(PoseEngine {
+            detectors,
+            nc_clock,
+        })
+    }
+
+    /// The time on the host axis at which the detectors take a trigger.
+    pub fn trigger_time(&mut self, t: &Trigger) -> u64 {
+        match &mut self.nc_clock {
+            Some(c) => c.time(t.nc_ms, t.host_ns),
+            None => t.host_ns,
+        }
     }
 
     /// Feeds a sample to its instrument's detector (environment records are not).
@@ -60,9 +81,10 @@ impl PoseEngine {
     /// Feeds a trigger to every detector.
     pub fn on_trigger(&mut self, t: &Trigger) -> Vec<PoseMsg> {
         let kind = t.kind();
+        let t_ns = self.trigger_time(t);
         let mut out = Vec::new();
         for (inst, det) in &mut self.detectors {
-            for v in det.push_trigger(kind, u32::from(t.pose), t.host_ns) {
+            for v in det.push_trigger(kind, u32::from(t.pose), t_ns) {
                 out.push(PoseMsg::from_value(*inst, &v));
             }
         }
@@ -78,5 +100,205 @@ impl PoseEngine {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The dwell of a pose must land on that pose's samples however late its trigger frames
+    //! arrive (issue 15: under load, "ok" LI-80 values of the neighbouring pose, ~100 mm off).
+    //! The machine, the instrument and the trigger link are generated here, with the truth.
+    use super::*;
+    use protocol::can::TriggerEvent;
+
+    const T0_NS: u64 = 1_800_000_000_000_000_000;
+    const RATE_HZ: f64 = 5_000.0;
+    const LEAD_IN_S: f64 = 0.3;
+    const MOVE_S: f64 = 0.1;
+    const DWELL_S: f64 = 0.4;
+    const POSES: u16 = 20;
+    /// Trigger frames sent in [STALL_FROM_S, STALL_TO_S) reach the host 450 ms late, in order
+    /// (a starved reader on a loaded host): poses 15 and 16's frames arrive a dwell and more
+    /// behind their samples.
+    const STALL_FROM_S: f64 = 7.35;
+    const STALL_TO_S: f64 = 8.35;
+    const STALL_S: f64 = 0.45;
+
+    fn pose_start_s(k: u16) -> f64 {
+        LEAD_IN_S + f64::from(k - 1) * (MOVE_S + DWELL_S)
+    }
+    fn pose_um(k: u16) -> f64 {
+        f64::from(k) * 100_000.0
+    }
+    /// The machine's position at true time `t` (s after program start): a ramp during each
+    /// move, standing still during each dwell.
+    fn position_um(t: f64) -> f64 {
+        let mut x = 0.0;
+        for k in 1..=POSES {
+            let m = pose_start_s(k);
+            if t < m {
+                break;
+            }
+            x = if t < m + MOVE_S {
+                pose_um(k - 1) + (pose_um(k) - pose_um(k - 1)) * (t - m) / MOVE_S
+            } else {
+                pose_um(k)
+            };
+        }
+        x
+    }
+
+    enum Ev {
+        Sample(Sample),
+        Trigger(Trigger),
+    }
+
+    /// Samples and triggers in the order the pipeline receives them (by host arrival).
+    fn run_events() -> Vec<Ev> {
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = move || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let ns = |t: f64| T0_NS + (t * 1e9).round() as u64;
+        let end_s = pose_start_s(POSES) + MOVE_S + DWELL_S + 0.2;
+        let mut evs: Vec<(u64, Ev)> = Vec::new();
+        // The LI-80: 5 kHz, device clock 30 ppm slow; arrival 0.1–2 ms late. Its fitted time
+        // is taken as the truth here (the clock fit is tested in drivers::clock).
+        let n = (end_s * RATE_HZ) as u64;
+        for i in 0..n {
+            let t = i as f64 / RATE_HZ;
+            let x = position_um(t) + (uniform() - 0.5) * 0.02;
+            let s = Sample {
+                instrument: Instrument::Interferometer,
+                seq: i,
+                device_t_us: (t * 1e6 * (1.0 - 30e-6)) as u64,
+                host_ns: ns(t + 1e-4 + uniform() * 2e-3),
+                fitted_ns: ns(t),
+                valid: true,
+                values: SampleValues::Position {
+                    raw_nm: (x * 1e3) as i64,
+                    position_um: x,
+                    sig: 80,
+                    flags: 0,
+                },
+            };
+            evs.push((s.host_ns, Ev::Sample(s)));
+        }
+        // The NC: program start, per pose motion start, exact stop, dwell end. Its clock runs
+        // 50 ppm fast and wraps 3 s into the run; frames arrive 0.2–3 ms late, in order, except
+        // in the stall.
+        let mut frames = vec![(0.0, TriggerEvent::ProgramStart, 0)];
+        for k in 1..=POSES {
+            let m = pose_start_s(k);
+            frames.push((m, TriggerEvent::MotionStart, k));
+            frames.push((m + MOVE_S, TriggerEvent::ExactStop, k));
+            frames.push((m + MOVE_S + DWELL_S, TriggerEvent::DwellEnd, k));
+        }
+        frames.push((end_s - 0.1, TriggerEvent::ProgramEnd, 0));
+        let mut last_arrival = 0.0f64;
+        for (t, event, pose) in frames {
+            let delay = if (STALL_FROM_S..STALL_TO_S).contains(&t) {
+                STALL_S
+            } else {
+                2e-4 + uniform() * 2.8e-3
+            };
+            last_arrival = last_arrival.max(t + delay);
+            let nc = (4_294_964_000.0 + t * 1e3 * (1.0 + 50e-6)).round() as u64;
+            let tr = Trigger {
+                event,
+                pose,
+                nc_ms: (nc & 0xFFFF_FFFF) as u32,
+                host_ns: ns(last_arrival),
+            };
+            evs.push((tr.host_ns, Ev::Trigger(tr)));
+        }
+        evs.sort_by_key(|(t, _)| *t);
+        evs.into_iter().map(|(_, e)| e).collect()
+    }
+
+    /// The LI-80 pose values of the run, by pose.
+    fn poses_with(trigger_time: TriggerTime) -> Vec<PoseMsg> {
+        let settings = DetectorSettings {
+            instruments: vec![Instrument::Interferometer],
+            trigger_time,
+            ..DetectorSettings::default()
+        };
+        let mut engine = PoseEngine::new(&settings).unwrap();
+        let mut out = Vec::new();
+        for ev in run_events() {
+            out.extend(match &ev {
+                Ev::Sample(s) => engine.on_sample(s),
+                Ev::Trigger(t) => engine.on_trigger(t),
+            });
+        }
+        out.extend(engine.finish(u64::MAX));
+        out
+    }
+
+    /// Poses whose value is not that pose's position (within 1 µm) or whose window is not the
+    /// first one after the exact stop (the machine stands still from the stop on, so that
+    /// window is steady), with what they got.
+    fn misplaced(poses: &[PoseMsg]) -> Vec<(u32, String, f64)> {
+        poses
+            .iter()
+            .filter_map(|p| {
+                let got = p.mean.get("position_um").copied().unwrap_or(f64::NAN);
+                let want = f64::from(p.pose) * 100_000.0;
+                let stop_ns = T0_NS + ((pose_start_s(p.pose as u16) + MOVE_S) * 1e9) as u64;
+                let late_ms = (p.t_first_ns as f64 - stop_ns as f64) / 1e6;
+                (p.status.name() != "ok"
+                    || (got - want).abs() > 1.0
+                    || !(-0.5..5.0).contains(&late_ms))
+                .then(|| {
+                    (
+                        p.pose,
+                        format!("{} {late_ms:.1} ms after the stop", p.status.name()),
+                        got,
+                    )
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_dwell_lands_on_its_pose_when_its_trigger_frames_arrive_450_ms_late() {
+        let poses = poses_with(TriggerTime::NcClock);
+        assert_eq!(poses.len(), usize::from(POSES), "{poses:#?}");
+        assert_eq!(misplaced(&poses), vec![]);
+    }
+
+    #[test]
+    fn placed_by_arrival_the_late_frames_take_the_next_poses_values() {
+        // What the daemon did before the NC clock fit (and replay still does for old logs):
+        // poses 15 and 16 get "ok" values of poses 16 and 17, 100 mm off — the fault the HIL
+        // test saw under load; pose 17's window is right but 350 ms into its dwell. This shows
+        // the scenario above does provoke it.
+        let wrong = misplaced(&poses_with(TriggerTime::Arrival));
+        let poses: Vec<u32> = wrong.iter().map(|w| w.0).collect();
+        assert_eq!(poses, vec![15, 16, 17], "{wrong:?}");
+        for (pose, status, got) in &wrong {
+            assert!(status.starts_with("ok "), "{wrong:?}");
+            let neighbour = if *pose == 17 { *pose } else { pose + 1 };
+            assert!(
+                (got - f64::from(neighbour) * 100_000.0).abs() < 1.0,
+                "{wrong:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn old_logs_without_the_setting_place_triggers_by_arrival() {
+        let old: DetectorSettings = serde_json::from_str(r#"{"instruments":["capball"]}"#).unwrap();
+        assert_eq!(old.trigger_time, TriggerTime::Arrival);
+        assert_eq!(
+            DetectorSettings::default().trigger_time,
+            TriggerTime::NcClock
+        );
+        let new = serde_json::to_string(&DetectorSettings::default()).unwrap();
+        let back: DetectorSettings = serde_json::from_str(&new).unwrap();
+        assert_eq!(back.trigger_time, TriggerTime::NcClock);
     }
 }

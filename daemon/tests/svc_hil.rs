@@ -400,7 +400,10 @@ async fn run_killed_in_the_middle_leaves_a_readable_log() {
     let mut sc = scenario();
     sc.faults = Default::default();
     let sim = sim::Sim::start(sc, &ports).unwrap();
-    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, true).unwrap();
+    // The run goes on after the program end (the instruments keep streaming), so the kill
+    // always comes in the middle of it: on a loaded machine the first /pose can reach the file
+    // only as the 6 s program ends, and a run that stops there would have closed its file.
+    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, toml).unwrap();
 
@@ -586,7 +589,12 @@ async fn full_disk_stops_the_run_with_exit_74_and_a_readable_log() {
         }
     })
     .unwrap();
-    assert!(summary.messages > 1000, "{summary:?}");
+    // The prefix up to the failed write reads whole (how many messages fill 1 MiB depends
+    // on the batch sizes, which grow on a loaded machine: 191 seen under load, > 1000 quiet).
+    assert!(
+        summary.messages > 10 && summary.bytes_read + 64 * 1024 >= summary.file_bytes,
+        "{summary:?}"
+    );
     assert!(topics.contains("/interferometer/position"), "{topics:?}");
     if python_ok() {
         let r = read_log(&log);

@@ -45,7 +45,7 @@
 //!
 //! Triggers that are processed after samples with later times (queues of different lengths,
 //! frames that arrived late) are handled: the detector keeps the samples since the last motion
-//! start and at least the last [`LATE_MARGIN_NS`] (3 s), and starts the search at the first
+//! start and at least the last [`LATE_MARGIN_NS`] (10 s), and starts the search at the first
 //! sample at or after the trigger's time. A window is taken as soon as it is found: when an
 //! exact stop is processed more than its dwell late and its own dwell holds no steady window,
 //! the search can run on past the dwell's end, which is not known yet.
@@ -243,9 +243,10 @@ const LATE_MARGIN_WINDOWS: u64 = 4;
 /// Time kept behind the newest sample in every triggered state, so that a trigger processed
 /// after later samples — a frame that arrived late and is placed at the time the CNC sent it
 /// (the daemon's timing model, docs/design.md) — still finds the samples from its time on
-/// instead of the oldest one kept. Longer than any delay a working host shows (the daemon's
-/// queue holds about a second); bounded by `max_history` like everything else.
-pub const LATE_MARGIN_NS: u64 = 3_000_000_000;
+/// instead of the oldest one kept. 10 s: a debug build beside two busy loops at load average
+/// 13-17 was seen to run a stream 3.7 s behind; bounded by `max_history` like everything else
+/// (2¹⁸ samples: 13 s at 20 kHz).
+pub const LATE_MARGIN_NS: u64 = 10_000_000_000;
 
 /// Statistics of one window.
 struct Window {

@@ -256,19 +256,25 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
             )
         })
         .collect();
-    // 11 poses, one reversal, pose 4 without exact stop: at most 9 ok per instrument.
-    assert!(
-        ok.get("interferometer").copied().unwrap_or(0) >= 8,
-        "{ok:?}; not ok: {not_ok:#?}"
-    );
-    assert!(
-        ok.get("psd").copied().unwrap_or(0) >= 8,
-        "{ok:?}; not ok: {not_ok:#?}"
-    );
-    assert!(
-        ok.get("capball").copied().unwrap_or(0) >= 6,
-        "{ok:?}; not ok: {not_ok:#?}"
-    );
+    // Every pose the simulated instrument streamed through (each sample of its dwell sent
+    // intact or with a single injected fault; none lost to "not connected" — the CB-3's
+    // unplug and its reconnect, which takes seconds on a loaded machine — or to a port the
+    // host did not read in time) has an "ok" value; pose 4 (no exact stop) and the reversal
+    // (no dwell) never do. The injected single-sample faults cannot keep a 0.4 s dwell from
+    // a steady window, so one pose of slack is plenty.
+    for (inst, dev) in [
+        ("interferometer", sim::Device::Interferometer),
+        ("capball", sim::Device::Capball),
+        ("psd", sim::Device::Psd),
+    ] {
+        let streamed = streamed_poses(&record, dev);
+        let got = ok.get(inst).copied().unwrap_or(0);
+        assert!(
+            streamed.len() >= 3 && got + 1 >= streamed.len(),
+            "{inst}: {got} ok of {} streamed poses {streamed:?}; {ok:?}; not ok: {not_ok:#?}",
+            streamed.len()
+        );
+    }
 
     // The counters saw the injected faults.
     let st = &r["last_status"]["instruments"];
@@ -349,6 +355,29 @@ fn check_poses(
         }
     }
     (ok, wrong)
+}
+
+/// The measurable poses (a dwell, an exact stop) through whose whole dwell the simulated
+/// device sent every sample (intact, or with a single-sample injected fault).
+fn streamed_poses(record: &sim::Record, dev: sim::Device) -> Vec<u16> {
+    let start = record.program_started_s.unwrap_or(0.0);
+    let samples = &record.device(dev).samples;
+    record
+        .truth
+        .iter()
+        .filter(|t| t.pose != 4 && t.dwell_end_s - t.exact_stop_s > 0.1)
+        .filter(|t| {
+            let (a, b) = (start + t.exact_stop_s, start + t.dwell_end_s);
+            let mut inside = samples.iter().filter(|s| s.true_s >= a && s.true_s <= b);
+            let mut n = 0;
+            let all = inside.all(|s| {
+                n += 1;
+                !matches!(s.fate, sim::Fate::NotConnected | sim::Fate::Overflow)
+            });
+            all && n > 0
+        })
+        .map(|t| t.pose)
+        .collect()
 }
 
 /// The log of this run replayed with the triggers at their arrival time (the timing model

@@ -231,6 +231,7 @@ fn replay_reproduces_logged_poses_bit_for_bit() {
         &ReplayOptions {
             output: Some(o.clone()),
             detector_samples: None,
+            trigger_time: None,
         },
     )
     .unwrap();
@@ -247,7 +248,8 @@ fn replay_reproduces_logged_poses_bit_for_bit() {
             &w.path,
             &ReplayOptions {
                 output: Some(o),
-                detector_samples: None
+                detector_samples: None,
+                trigger_time: None,
             }
         )
         .is_err()
@@ -259,6 +261,7 @@ fn replay_reproduces_logged_poses_bit_for_bit() {
         &ReplayOptions {
             output: None,
             detector_samples: Some(100),
+            trigger_time: None,
         },
     )
     .unwrap();

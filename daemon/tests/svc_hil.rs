@@ -216,20 +216,108 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
     );
 
     // Pose values against the simulation's truth (independent: the sim's physics at mid-dwell).
-    // Known to fail under heavy load (issue 15, `.ci/hil-under-load` at load average ~22, 2 of
-    // 2 rounds): "ok" LI-80 values about 97-100 mm from their pose, once at the next pose's
-    // position, once at the previous one's. So the samples' fitted times and the triggers'
-    // times disagree by more than a move under load: a real fault of the daemon, not a timing
-    // assumption of the test. Cause not established; candidates: the trigger time (host
-    // arrival, delayed by load) and the LI-80 clock fit under load. What would confirm it:
-    // log the fit's offset and the trigger delay per pose in such a run.
-    // A value equal to the previous pose's position means the samples' fitted times and the
-    // triggers' host times disagree by more than a move (seen under heavy CPU load for the
-    // LI-80 and CB-3: windows of one pose 0.4 s apart between instruments).
+    // Under heavy load (issue 15, load average ~22) this failed before the triggers were
+    // placed by their NC clock: "ok" values ~100 mm off, of the next or the previous pose. The
+    // same log replayed with the trigger placed at its arrival time shows what that did in
+    // this run (printed: the evidence the timing model is the cause; docs/design.md).
+    let poses = r["poses"].as_array().unwrap();
+    let (ok, wrong) = check_poses(poses, &record);
+    let (delays, arrival_wrong) = arrival_model_in_this_run(&log, &record);
+    println!(
+        "trigger frames' arrival delay (host arrival - NC-fitted time), ms: max {:.1}, \
+         exact stops {:?}; placed by arrival this run would have had {} misplaced ok values{}",
+        delays.iter().map(|d| d.1).fold(0.0, f64::max),
+        delays,
+        arrival_wrong.len(),
+        if arrival_wrong.is_empty() {
+            String::new()
+        } else {
+            format!(":\n{}", arrival_wrong.join("\n"))
+        }
+    );
+    if !wrong.is_empty() {
+        // Keep the log for a look (the temporary directory goes with the panic).
+        let kept = Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("svc_hil-misplaced-{}.mcap", std::process::id()));
+        let _ = std::fs::copy(&log, &kept);
+        println!("log kept: {}", kept.display());
+    }
+    assert!(wrong.is_empty(), "{}\n{}", wrong.join("\n"), r["poses"]);
+    // What was not ok, and why (the status says it: gap, away, too few samples...).
+    let not_ok: Vec<String> = r["poses"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["status"] != "ok")
+        .map(|p| {
+            format!(
+                "{} pose {}: {} (n {})",
+                p["instrument"], p["pose"], p["status"], p["n"]
+            )
+        })
+        .collect();
+    // Every pose the simulated instrument streamed through (each sample of its dwell sent
+    // intact or with a single injected fault; none lost to "not connected" — the CB-3's
+    // unplug and its reconnect, which takes seconds on a loaded machine — or to a port the
+    // host did not read in time) has an "ok" value; pose 4 (no exact stop) and the reversal
+    // (no dwell) never do. The injected single-sample faults cannot keep a 0.4 s dwell from
+    // a steady window, so one pose of slack is plenty.
+    for (inst, dev) in [
+        ("interferometer", sim::Device::Interferometer),
+        ("capball", sim::Device::Capball),
+        ("psd", sim::Device::Psd),
+    ] {
+        let streamed = streamed_poses(&record, dev);
+        let got = ok.get(inst).copied().unwrap_or(0);
+        assert!(
+            streamed.len() >= 3 && got + 1 >= streamed.len(),
+            "{inst}: {got} ok of {} streamed poses {streamed:?}; {ok:?}; not ok: {not_ok:#?}",
+            streamed.len()
+        );
+    }
+
+    // The counters saw the injected faults.
+    let st = &r["last_status"]["instruments"];
+    let rej = |i: &str| -> u64 {
+        st[i]["rejections"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|v| v.as_u64().unwrap())
+            .sum()
+    };
+    let f = &record.interferometer.faults;
+    assert!(
+        rej("interferometer") >= f.bad_checksum + f.garbage.min(1),
+        "{st}"
+    );
+    assert!(
+        st["interferometer"]["gap_samples"].as_u64().unwrap() >= f.dropped,
+        "{st}"
+    );
+    let f = &record.capball.faults;
+    assert!(rej("capball") >= f.bad_checksum, "{st}");
+    assert!(
+        st["capball"]["reconnects"].as_u64().unwrap() >= 1,
+        "the unplugged CB-3 came back: {st}"
+    );
+    assert_eq!(
+        st["interferometer"]["dropped"], 0,
+        "nothing dropped between drivers and pipeline"
+    );
+}
+
+/// The pose values against the simulation's truth: "ok" values per instrument, and those
+/// farther from the truth than the sim's noise allows. Pose 4 (exact stop left out) must
+/// not be "ok".
+fn check_poses(
+    poses: &[Value],
+    record: &sim::Record,
+) -> (std::collections::BTreeMap<String, usize>, Vec<String>) {
     let home_x_mm = scenario().program.home.x_mm;
     let mut ok = std::collections::BTreeMap::<String, usize>::new();
     let mut wrong = Vec::new();
-    for p in r["poses"].as_array().unwrap() {
+    for p in poses {
         let inst = p["instrument"].as_str().unwrap();
         let pose = p["pose"].as_u64().unwrap() as u16;
         let status = p["status"].as_str().unwrap();
@@ -266,63 +354,70 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
             wrong.push(format!("{inst} pose {pose}: {err} µm from the truth: {p}"));
         }
     }
-    assert!(wrong.is_empty(), "{}\n{}", wrong.join("\n"), r["poses"]);
-    // What was not ok, and why (the status says it: gap, away, too few samples...).
-    let not_ok: Vec<String> = r["poses"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|p| p["status"] != "ok")
-        .map(|p| {
-            format!(
-                "{} pose {}: {} (n {})",
-                p["instrument"], p["pose"], p["status"], p["n"]
-            )
-        })
-        .collect();
-    // 11 poses, one reversal, pose 4 without exact stop: at most 9 ok per instrument.
-    assert!(
-        ok.get("interferometer").copied().unwrap_or(0) >= 8,
-        "{ok:?}; not ok: {not_ok:#?}"
-    );
-    assert!(
-        ok.get("psd").copied().unwrap_or(0) >= 8,
-        "{ok:?}; not ok: {not_ok:#?}"
-    );
-    assert!(
-        ok.get("capball").copied().unwrap_or(0) >= 6,
-        "{ok:?}; not ok: {not_ok:#?}"
-    );
+    (ok, wrong)
+}
 
-    // The counters saw the injected faults.
-    let st = &r["last_status"]["instruments"];
-    let rej = |i: &str| -> u64 {
-        st[i]["rejections"]
-            .as_object()
-            .unwrap()
-            .values()
-            .map(|v| v.as_u64().unwrap())
-            .sum()
+/// The measurable poses (a dwell, an exact stop) through whose whole dwell the simulated
+/// device sent every sample (intact, or with a single-sample injected fault).
+fn streamed_poses(record: &sim::Record, dev: sim::Device) -> Vec<u16> {
+    let start = record.program_started_s.unwrap_or(0.0);
+    let samples = &record.device(dev).samples;
+    record
+        .truth
+        .iter()
+        .filter(|t| t.pose != 4 && t.dwell_end_s - t.exact_stop_s > 0.1)
+        .filter(|t| {
+            let (a, b) = (start + t.exact_stop_s, start + t.dwell_end_s);
+            let mut inside = samples.iter().filter(|s| s.true_s >= a && s.true_s <= b);
+            let mut n = 0;
+            let all = inside.all(|s| {
+                n += 1;
+                !matches!(s.fate, sim::Fate::NotConnected | sim::Fate::Overflow)
+            });
+            all && n > 0
+        })
+        .map(|t| t.pose)
+        .collect()
+}
+
+/// The log of this run replayed with the triggers at their arrival time (the timing model
+/// before the NC clock fit): the exact stops' arrival delays (pose, ms) as the NC clock fit
+/// sees them, and the misplaced "ok" values that model gives.
+fn arrival_model_in_this_run(log: &Path, record: &sim::Record) -> (Vec<(u16, f64)>, Vec<String>) {
+    use metrolog::cmd::replay::{ReplayOptions, replay};
+    use metrolog_log::TriggerTime;
+    let opts = ReplayOptions {
+        trigger_time: Some(TriggerTime::Arrival),
+        ..ReplayOptions::default()
     };
-    let f = &record.interferometer.faults;
-    assert!(
-        rej("interferometer") >= f.bad_checksum + f.garbage.min(1),
-        "{st}"
-    );
-    assert!(
-        st["interferometer"]["gap_samples"].as_u64().unwrap() >= f.dropped,
-        "{st}"
-    );
-    let f = &record.capball.faults;
-    assert!(rej("capball") >= f.bad_checksum, "{st}");
-    assert!(
-        st["capball"]["reconnects"].as_u64().unwrap() >= 1,
-        "the unplugged CB-3 came back: {st}"
-    );
-    assert_eq!(
-        st["interferometer"]["dropped"], 0,
-        "nothing dropped between drivers and pipeline"
-    );
+    let out = replay(log, &opts).unwrap();
+    let poses: Vec<Value> = out
+        .replayed
+        .iter()
+        .map(|(_, p)| serde_json::to_value(p).unwrap())
+        .collect();
+    let (_, wrong) = check_poses(&poses, record);
+    let mut nc = drivers::NcClock::default();
+    let mut delays = Vec::new();
+    let _ = metrolog_log::reader::read_log_until(log, |item| {
+        if let metrolog_log::reader::LogItem::Message {
+            topic: "/cnc/trigger",
+            encoding,
+            log_ns,
+            data,
+        } = item
+            && let Ok(Some(metrolog_log::topics::LogMessage::Trigger(msg))) =
+                metrolog_log::topics::decode_message("/cnc/trigger", encoding, log_ns, data)
+        {
+            // A trigger's log time is its host arrival time.
+            let t = nc.time(msg.nc_ms, log_ns);
+            if msg.event == protocol::can::TriggerEvent::ExactStop {
+                delays.push((msg.pose, (log_ns - t) as f64 / 1e6));
+            }
+        }
+        std::ops::ControlFlow::Continue(())
+    });
+    (delays, wrong)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -334,7 +429,10 @@ async fn run_killed_in_the_middle_leaves_a_readable_log() {
     let mut sc = scenario();
     sc.faults = Default::default();
     let sim = sim::Sim::start(sc, &ports).unwrap();
-    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, true).unwrap();
+    // The run goes on after the program end (the instruments keep streaming), so the kill
+    // always comes in the middle of it: on a loaded machine the first /pose can reach the file
+    // only as the 6 s program ends, and a run that stops there would have closed its file.
+    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, toml).unwrap();
 
@@ -520,7 +618,12 @@ async fn full_disk_stops_the_run_with_exit_74_and_a_readable_log() {
         }
     })
     .unwrap();
-    assert!(summary.messages > 1000, "{summary:?}");
+    // The prefix up to the failed write reads whole (how many messages fill 1 MiB depends
+    // on the batch sizes, which grow on a loaded machine: 191 seen under load, > 1000 quiet).
+    assert!(
+        summary.messages > 10 && summary.bytes_read + 64 * 1024 >= summary.file_bytes,
+        "{summary:?}"
+    );
     assert!(topics.contains("/interferometer/position"), "{topics:?}");
     if python_ok() {
         let r = read_log(&log);

@@ -35,6 +35,9 @@ pub struct ClockFit {
     minima: VecDeque<(f64, f64)>,
     /// Fitted line `r = a + c·x`.
     line: Option<(f64, f64)>,
+    /// Least excess `r` of every point so far, the first window included: the offset-only
+    /// estimate [`ClockFit::estimate`] uses until the line exists.
+    floor: Option<f64>,
 }
 
 /// Windows needed before the fit is used (with fewer, [`ClockFit::map`] gives `None`).
@@ -64,6 +67,7 @@ impl ClockFit {
             current: None,
             minima: VecDeque::new(),
             line: None,
+            floor: None,
         }
     }
 
@@ -73,6 +77,7 @@ impl ClockFit {
         self.current = None;
         self.minima.clear();
         self.line = None;
+        self.floor = None;
     }
 
     /// Number of closed windows in the fit.
@@ -94,6 +99,7 @@ impl ClockFit {
             self.origin = Some((device_us, host_ns));
         }
         let (x, r) = self.rel(device_us, host_ns);
+        self.floor = Some(self.floor.map_or(r, |f| f.min(r)));
         let idx = (x.max(0.0) as u64) / self.window_us;
         // The first window is left out: its samples arrive while the driver is still in its
         // command exchange (reading at once, not in batches) and a device starting its stream
@@ -158,12 +164,105 @@ impl ClockFit {
         (h.is_finite() && h >= 0.0).then_some(h as u64)
     }
 
+    /// Device time on the host axis from the first point on: [`ClockFit::map`] once the line
+    /// is fitted; before that (the first ~2 s of a stream) the device clock shifted by the
+    /// least delay seen so far, without drift (100 ppm over 2 s is 0.2 ms). The arrival time
+    /// itself would be late by the whole delay of the sample, which on a loaded host is
+    /// hundreds of milliseconds (docs/design.md, timing model). `None` before the first point.
+    pub fn estimate(&self, device_us: u64) -> Option<u64> {
+        if let Some(h) = self.map(device_us) {
+            return Some(h);
+        }
+        let floor = self.floor?;
+        let (d0, h0) = self.origin?;
+        let x = (device_us as i128 - d0 as i128) as f64;
+        let h = h0 as f64 + x * 1000.0 + floor;
+        (h.is_finite() && h >= 0.0).then_some(h as u64)
+    }
+
     /// Drift of the device clock against the host clock, ppm (positive: the device clock runs
     /// fast), once fitted.
     pub fn drift_ppm(&self) -> Option<f64> {
         let (_, c) = self.line?;
         // dh/dd = 1000 + c ns per device µs; device rate / host rate = 1000 / (1000 + c).
         Some((1000.0 / (1000.0 + c) - 1.0) * 1e6)
+    }
+}
+
+/// The CNC's clock (`nc_ms` of every trigger frame, instruments.md §4) fitted against the
+/// host clock like an instrument's device clock: the time of a trigger on the host axis is
+/// when the NC says it happened, not when the frame arrived. Frames arrive late by whatever
+/// the CAN adapter, the serial link and the scheduler add — on a loaded host hundreds of
+/// milliseconds, more than a dwell — while the instruments' samples sit at their fitted
+/// device times; a dwell opened at the arrival time then averages samples of another pose
+/// (docs/design.md, timing model).
+///
+/// Windows of 2 s of NC time (triggers are sparse: a few per pose) over the last hour. An NC
+/// clock that steps back (control restarted), jumps ahead of the host or stands still while
+/// triggers keep arriving is fitted afresh from that frame on.
+#[derive(Debug, Clone)]
+pub struct NcClock {
+    fit: ClockFit,
+    nc: Unwrap,
+    restarts: u64,
+}
+
+/// A trigger whose NC time maps to this much before its arrival is not late but comes from a
+/// clock that stood still or stepped: the fit starts afresh. (The pipeline's queue holds about
+/// a second; no real delay comes near.)
+pub const NC_MAX_DELAY_NS: u64 = 10_000_000_000;
+/// A trigger whose NC time maps to this much after its arrival comes from a clock that jumped
+/// ahead (the fit's own error is below a millisecond or two).
+pub const NC_MAX_LEAD_NS: u64 = 1_000_000_000;
+
+impl Default for NcClock {
+    fn default() -> Self {
+        NcClock {
+            fit: ClockFit::new(2_000_000, 1800),
+            nc: Unwrap::new(32),
+            restarts: 0,
+        }
+    }
+}
+
+impl NcClock {
+    /// The host-axis time of a trigger stamped `nc_ms` by the NC that arrived at `host_ns`:
+    /// never later than its arrival.
+    pub fn time(&mut self, nc_ms: u32, host_ns: u64) -> u64 {
+        let raw = u64::from(nc_ms);
+        let mut ms = match self.nc.push(raw) {
+            Some(ms) => ms,
+            None => {
+                self.restart();
+                self.nc.rebase(raw)
+            }
+        };
+        if let Some(e) = self.fit.estimate(ms.saturating_mul(1000))
+            && (host_ns.saturating_sub(e) > NC_MAX_DELAY_NS
+                || e.saturating_sub(host_ns) > NC_MAX_LEAD_NS)
+        {
+            self.restart();
+            ms = self.nc.rebase(raw);
+        }
+        let us = ms.saturating_mul(1000);
+        self.fit.push(us, host_ns);
+        self.fit.estimate(us).unwrap_or(host_ns).min(host_ns)
+    }
+
+    fn restart(&mut self) {
+        self.restarts += 1;
+        self.fit.reset();
+        self.nc.reset();
+    }
+
+    /// Times the NC clock was fitted afresh (stepped back, jumped, stood still).
+    pub fn restarts(&self) -> u64 {
+        self.restarts
+    }
+
+    /// Fitted drift of the NC clock against the host, ppm (None until fitted).
+    pub fn drift_ppm(&self) -> Option<f64> {
+        self.fit.drift_ppm()
     }
 }
 
@@ -464,5 +563,73 @@ mod tests {
         }
         let est = fit.drift_ppm().unwrap();
         assert!((est + 20.0).abs() < 0.1, "{est}");
+    }
+
+    #[test]
+    fn before_the_fit_the_estimate_sits_at_the_least_delay_not_the_arrival() {
+        // A stream that starts on a loaded host: the first samples arrive 1 ms late, then a
+        // stall delays everything by 300 ms. The arrival time is 300 ms late; the estimate
+        // (no line yet: less than 2 s) stays within the least delay of the send time.
+        let mut fit = ClockFit::default();
+        assert_eq!(fit.estimate(0), None);
+        let host0 = 1_000_000_000_000u64;
+        for i in 0..1000u64 {
+            let send_ns = host0 + i * 1_000_000;
+            let delay = if i < 100 { 1_000_000 } else { 300_000_000 };
+            fit.push(5_000_000 + i * 1000, send_ns + delay);
+            assert!(fit.map(5_000_000 + i * 1000).is_none());
+            let e = fit.estimate(5_000_000 + i * 1000).unwrap();
+            assert!(
+                e.abs_diff(send_ns) <= 1_000_000,
+                "sample {i}: {e} vs {send_ns}"
+            );
+        }
+    }
+
+    #[test]
+    fn nc_clock_maps_late_frames_back_to_their_nc_time_across_the_wrap() {
+        // Triggers 4 a second for 60 s, NC clock 80 ppm slow starting 10 s before the u32
+        // wrap; frames arrive 0.2-3 ms late, and every 7th is held up 100-900 ms.
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut nc = NcClock::default();
+        let host0 = 1_800_000_000_000_000_000u64;
+        for i in 0..240u64 {
+            let t_s = i as f64 * 0.25;
+            let raw = (u32::MAX as f64 - 10_000.0 + t_s * 1e3 * (1.0 - 80e-6)).round() as u64;
+            let delay_s = if i % 7 == 3 {
+                rng.random_range(0.1..0.9)
+            } else {
+                rng.random_range(2e-4..3e-3)
+            };
+            let send = host0 + (t_s * 1e9) as u64;
+            let got = nc.time((raw & 0xFFFF_FFFF) as u32, send + (delay_s * 1e9) as u64);
+            // Within the NC clock's 1 ms resolution and the least delay.
+            assert!(
+                got.abs_diff(send) < 2_000_000,
+                "frame {i} at {t_s} s, {delay_s} s late: {} ms off",
+                got.abs_diff(send) as f64 / 1e6
+            );
+        }
+        assert_eq!(nc.restarts(), 0);
+        let d = nc.drift_ppm().unwrap();
+        assert!((d + 80.0).abs() < 40.0, "drift {d} ppm");
+    }
+
+    #[test]
+    fn nc_clock_restarts_when_the_control_restarts_or_its_clock_stands_still() {
+        let mut nc = NcClock::default();
+        let h = 1_000_000_000_000u64;
+        assert_eq!(nc.time(50_000, h), h);
+        assert_eq!(nc.time(50_500, h + 500_000_000), h + 500_000_000);
+        // The control restarted: its clock is back at 10 ms.
+        assert_eq!(nc.time(10, h + 600_000_000), h + 600_000_000);
+        assert_eq!(nc.restarts(), 1);
+        assert_eq!(nc.time(410, h + 1_000_000_000), h + 1_000_000_000);
+        // A clock that stands still while frames keep coming for 11 s: not 11 s of delay.
+        assert_eq!(nc.time(410, h + 12_000_000_000), h + 12_000_000_000);
+        assert_eq!(nc.restarts(), 2);
+        // A clock that jumps 5 s ahead: fitted afresh, never later than the arrival.
+        assert_eq!(nc.time(5_410, h + 12_000_000_100), h + 12_000_000_100);
+        assert_eq!(nc.restarts(), 3);
     }
 }

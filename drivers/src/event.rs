@@ -15,7 +15,7 @@ pub struct Sample {
     /// Host arrival time, ns since the Unix epoch (see [`HostClock`]).
     pub host_ns: u64,
     /// Device time mapped onto the host axis by the clock fit, ns since the Unix epoch
-    /// (equals `host_ns` until the fit has enough points).
+    /// (offset by the least delay seen, without drift, until the fit has enough points).
     pub fitted_ns: u64,
     pub valid: bool,
     pub values: SampleValues,

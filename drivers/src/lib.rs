@@ -14,7 +14,8 @@
 //! - [`trigger_from_frame`] and [`from_socketcan`] — the one decoding path of SLCAN and
 //!   SocketCAN frames; [`trigger_kind`] / [`trigger_event`] — CAN trigger events to the pose
 //!   detector's `metrology::steady::TriggerKind` and back;
-//! - [`HostClock`] — the host monotonic clock as ns since the Unix epoch.
+//! - [`HostClock`] — the host monotonic clock as ns since the Unix epoch; [`NcClock`] — the
+//!   CNC's clock of the trigger frames fitted against it (the pose engine's trigger times).
 //!
 //! A sample's way through a serial driver is one direction (docs/design.md):
 //!
@@ -52,6 +53,7 @@ mod stamper;
 mod trigger;
 
 pub use cb3::{Cb3Config, spawn_cb3};
+pub use clock::NcClock;
 pub use error::DriverError;
 pub use event::{Counters, DriverEvent, EventSender, Sample, SampleValues, Trigger};
 pub use host_clock::HostClock;

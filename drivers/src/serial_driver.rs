@@ -16,6 +16,8 @@ use crate::serial_link::{SerialLink, open_port};
 
 /// How long a command waits for its answer.
 pub(crate) const ANSWER_TIMEOUT: Duration = Duration::from_secs(1);
+/// Longest wait for an answer while the device keeps sending data (see `command`).
+pub(crate) const ANSWER_TIMEOUT_BUSY: Duration = Duration::from_secs(30);
 /// First and longest wait between attempts to open a vanished port.
 const BACKOFF_MIN: Duration = Duration::from_millis(100);
 const BACKOFF_MAX: Duration = Duration::from_secs(2);
@@ -67,14 +69,24 @@ impl<C: FrameConverter> SerialSession<'_, C> {
     pub(crate) async fn command(&mut self, line: &str) -> Result<String, DriverError> {
         self.answers.clear();
         self.send(line).await?;
-        let deadline = tokio::time::Instant::now() + ANSWER_TIMEOUT;
+        // The answer comes after whatever the device sent before it. A streaming reader that
+        // has fallen behind (a loaded host: seconds of samples queued in the port) still has
+        // them to take, so while samples are accepted the wait restarts as data flows, up to
+        // ANSWER_TIMEOUT_BUSY; a silent device, or one that sends noise during setup, times out
+        // after ANSWER_TIMEOUT. (Issue 15: `STREAM OFF` at the end of a run timed out behind
+        // 2 s of backlog and the backlog's samples were lost.)
+        let now = tokio::time::Instant::now();
+        let hard = now + ANSWER_TIMEOUT_BUSY;
+        let mut deadline = now + ANSWER_TIMEOUT;
         loop {
             if let Some(a) = self.answers.pop_front() {
                 return Ok(a);
             }
             match tokio::time::timeout_at(deadline, self.read_once()).await {
                 Ok(r) => {
-                    r?;
+                    if r? > 0 && self.path.reporter.accepting {
+                        deadline = hard.min(tokio::time::Instant::now() + ANSWER_TIMEOUT);
+                    }
                 }
                 Err(_) => {
                     return Err(DriverError::NoAnswer {

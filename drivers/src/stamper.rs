@@ -11,8 +11,8 @@ pub(crate) struct Stamp {
     pub seq: u64,
     /// Device clock, µs, unwrapped.
     pub device_t_us: u64,
-    /// Device time on the host axis, ns since the Unix epoch (the arrival time until the fit
-    /// has enough points).
+    /// Device time on the host axis, ns since the Unix epoch (offset-only until the fit has
+    /// enough points: [`ClockFit::estimate`]).
     pub fitted_ns: u64,
     /// Samples missing between the previous frame and this one (0: none).
     pub missed: u64,
@@ -88,7 +88,7 @@ impl SampleStamper {
             _ => 0,
         };
         self.fit.push(t, host_ns);
-        let fitted_ns = self.fit.map(t).unwrap_or(host_ns);
+        let fitted_ns = self.fit.estimate(t).unwrap_or(host_ns);
         Stamp {
             seq,
             device_t_us: t,

@@ -87,6 +87,31 @@ pub struct DetectorSettings {
     pub interferometer: SteadyConfig,
     pub capball: SteadyConfig,
     pub psd: SteadyConfig,
+    /// Which time of a CNC trigger opens and closes the dwells. Logs written before this
+    /// setting existed used the arrival time, and replay must reproduce them: a missing key
+    /// reads as [`TriggerTime::Arrival`]; new runs write [`TriggerTime::NcClock`].
+    #[serde(default = "TriggerTime::arrival")]
+    pub trigger_time: TriggerTime,
+}
+
+/// Which time of a CNC trigger places the dwells on the host axis, where the samples sit at
+/// their clock-fitted device times (docs/design.md, timing model).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TriggerTime {
+    /// The frame's NC clock (`nc_ms`) fitted against the host clock (`drivers::NcClock`):
+    /// when the NC says the event happened.
+    #[default]
+    NcClock,
+    /// The host arrival time of the frame: late by the adapter's, the link's and the
+    /// scheduler's delays (hundreds of ms on a loaded host). Only for replaying old logs.
+    Arrival,
+}
+
+impl TriggerTime {
+    fn arrival() -> TriggerTime {
+        TriggerTime::Arrival
+    }
 }
 
 impl Default for DetectorSettings {
@@ -96,6 +121,7 @@ impl Default for DetectorSettings {
             interferometer: SteadyConfig::default(),
             capball: SteadyConfig::default(),
             psd: SteadyConfig::default(),
+            trigger_time: TriggerTime::NcClock,
         }
     }
 }

@@ -43,9 +43,12 @@
 //! valid ones), [`PoseStatus::NeverSteady`] otherwise (including a dwell too short for a
 //! window).
 //!
-//! Triggers that are processed after samples with later times (queues of different lengths)
-//! are handled: the detector keeps the samples since the last motion start and starts the
-//! search at the first sample at or after the trigger's time.
+//! Triggers that are processed after samples with later times (queues of different lengths,
+//! frames that arrived late) are handled: the detector keeps the samples since the last motion
+//! start and at least the last [`LATE_MARGIN_NS`] (10 s), and starts the search at the first
+//! sample at or after the trigger's time. A window is taken as soon as it is found: when an
+//! exact stop is processed more than its dwell late and its own dwell holds no steady window,
+//! the search can run on past the dwell's end, which is not known yet.
 //!
 //! *Missing exact stop.* A `DwellEnd(k)` after a `MotionStart` but without `ExactStop(k)`: the
 //! detector searches the samples between the motion start and the dwell end for the first
@@ -236,6 +239,14 @@ impl SteadyConfig {
 /// Samples (in windows) kept while standing between dwells, so that an exact stop processed
 /// after later samples (a longer queue) still finds the samples from its time on.
 const LATE_MARGIN_WINDOWS: u64 = 4;
+
+/// Time kept behind the newest sample in every triggered state, so that a trigger processed
+/// after later samples — a frame that arrived late and is placed at the time the CNC sent it
+/// (the daemon's timing model, docs/design.md) — still finds the samples from its time on
+/// instead of the oldest one kept. 10 s: a debug build beside two busy loops at load average
+/// 13-17 was seen to run a stream 3.7 s behind; bounded by `max_history` like everything else
+/// (2¹⁸ samples: 13 s at 20 kHz).
+pub const LATE_MARGIN_NS: u64 = 10_000_000_000;
 
 /// Statistics of one window.
 struct Window {
@@ -677,6 +688,15 @@ impl SteadyDetector {
         let n = self.cfg.samples as u64;
         let end = self.end();
         let recent = end.saturating_sub(n);
+        // The first sample within LATE_MARGIN_NS of the newest (times are in arrival order and
+        // nearly sorted: a clock fit's small steps back do not matter for a margin).
+        let late = {
+            let cutoff = self
+                .times
+                .back()
+                .map_or(0, |t| t.saturating_sub(LATE_MARGIN_NS));
+            self.base + self.times.partition_point(|&t| t < cutoff) as u64
+        };
         let keep_from = match &self.state {
             State::Searching { .. } | State::Plateau { .. } => recent,
             // Moving: everything since the motion start (missing-exact-stop recovery).
@@ -684,11 +704,11 @@ impl SteadyDetector {
                 since,
                 moving: true,
                 ..
-            } => (*since).min(recent),
+            } => (*since).min(recent).min(late),
             // Standing between dwells: a margin for an exact stop processed late.
-            State::Idle { .. } => end.saturating_sub(LATE_MARGIN_WINDOWS * n),
-            State::Dwell(d) if !d.done => d.first.min(recent),
-            State::Dwell(_) => recent,
+            State::Idle { .. } => end.saturating_sub(LATE_MARGIN_WINDOWS * n).min(late),
+            State::Dwell(d) if !d.done => d.first.min(recent).min(late),
+            State::Dwell(_) => recent.min(late),
         };
         let keep_from = keep_from.max(end.saturating_sub(self.cfg.max_history as u64));
         while self.base < keep_from {

@@ -109,7 +109,7 @@ async fn cb3_values_wraps_and_fault_counts() {
         .collect();
     let expected = N - lost.len() as u64;
     let mut c = Collected::default();
-    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| {
+    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(120), |c| {
         c.samples.len() as u64 >= expected
     })
     .await;
@@ -231,7 +231,7 @@ async fn psd_values_gating_and_bad_lines() {
     let lost: BTreeSet<u64> = bad_field_count.union(&unparsable).copied().collect();
     let expected = N - lost.len() as u64;
     let mut c = Collected::default();
-    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| {
+    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(120), |c| {
         c.samples.len() as u64 >= expected
     })
     .await;
@@ -588,7 +588,7 @@ async fn li80_values_compensation_validity_and_fault_counts() {
         .collect();
     let expected = N - lost.len() as u64;
     let mut c = Collected::default();
-    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(30), |c| {
+    let ok = collect_until(&mut rx, &mut c, Duration::from_secs(120), |c| {
         c.stream().count() as u64 >= expected
     })
     .await;

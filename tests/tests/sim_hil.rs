@@ -443,11 +443,13 @@ async fn clock_fit_recovers_the_simulated_drift_within_5_ppm() {
         ));
         assert!((est - drift_ppm).abs() < 5.0, "{report:?}");
         // The fitted time is the arrival time less the delay: never later than the arrival
-        // (beyond the fit's scatter), and not far earlier.
+        // (beyond the fit's scatter), and not far earlier. "Far" is generous: on a loaded
+        // machine a starved reader gets samples late by 0.2 s and, in a debug build beside two
+        // busy loops at load average 13-17, by 3.7 s; the fit is right to put them back.
         for s in c.stream().skip(c.stream().count() / 2) {
             let lag_ms = (s.host_ns as f64 - s.fitted_ns as f64) / 1e6;
             assert!(
-                (-1.0..200.0).contains(&lag_ms),
+                (-1.0..10_000.0).contains(&lag_ms),
                 "{i:?}: arrival {lag_ms} ms after the fitted send time"
             );
         }

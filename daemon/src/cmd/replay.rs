@@ -1,4 +1,4 @@
-//! `metrolog replay LOG.mcap [-o OUT.mcap] [--detector-samples N]`: re-runs the steady-value
+//! `metrolog replay LOG.mcap [-o OUT.mcap] [--detector-samples N] [--trigger-time T]`: re-runs the steady-value
 //! detection on the raw topics and triggers of a log, in file order, through the same
 //! [`PoseEngine`] the live pipeline uses. With the logged settings it reproduces the logged
 //! `/pose` records exactly; `-o` writes a new log with the raw topics copied and the new
@@ -15,7 +15,7 @@ use metrolog_log::topics::{LogMessage, PoseMsg, TopicMessage, decode_message};
 use crate::acquire::detect::PoseEngine;
 use metrolog_log::{
     DetectorSettings, LogItem, LogOptions, LogWriter, RUN_METADATA, ReadSummary, RunMetadata,
-    read_log_progress, read_run_metadata,
+    TriggerTime, read_log_progress, read_run_metadata,
 };
 
 #[derive(Debug, clap::Args)]
@@ -28,6 +28,11 @@ pub struct Args {
     /// Samples averaged per pose (overrides the logged detector settings).
     #[arg(long)]
     pub detector_samples: Option<usize>,
+    /// Which time of a trigger places the dwells (overrides the logged setting): `nc_clock`
+    /// (the NC clock fitted to the host clock) or `arrival` (the frame's arrival time, what
+    /// logs from before the NC clock fit used); docs/design.md, timing model.
+    #[arg(long, value_parser = parse_trigger_time)]
+    pub trigger_time: Option<TriggerTime>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -38,6 +43,12 @@ pub struct Args {
 pub struct ReplayOptions {
     pub output: Option<PathBuf>,
     pub detector_samples: Option<usize>,
+    pub trigger_time: Option<TriggerTime>,
+}
+
+fn parse_trigger_time(s: &str) -> Result<TriggerTime, String> {
+    serde_json::from_value(serde_json::Value::String(s.replace('-', "_")))
+        .map_err(|_| format!("`{s}` is not a trigger time: use nc_clock or arrival"))
 }
 
 /// What a replay produced.
@@ -76,10 +87,13 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
         None => RunMetadata::default(),
     };
     let logged_settings = run.detector.clone();
-    let detector = match opts.detector_samples {
+    let mut detector = match opts.detector_samples {
         Some(n) => logged_settings.clone().with_samples(n),
         None => logged_settings.clone(),
     };
+    if let Some(t) = opts.trigger_time {
+        detector.trigger_time = t;
+    }
     let mut engine = PoseEngine::new(&detector).context("cannot build the detectors")?;
 
     let mut writer = match &opts.output {
@@ -239,6 +253,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let opts = ReplayOptions {
         output: args.output.clone(),
         detector_samples: args.detector_samples,
+        trigger_time: args.trigger_time,
     };
     let out = replay(&args.log, &opts)
         .with_context(|| format!("cannot replay {}", args.log.display()))?;

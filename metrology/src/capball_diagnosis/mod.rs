@@ -201,9 +201,10 @@ pub fn diagnose(
             condition: base.condition_number,
             worst: "?".into(),
         })?;
-    // Outliers: judged on the baseline residuals of every run.
+    // Outliers: judged on the baseline residuals of every run, then again on the final model's:
+    // a pose that only looked far off because an effect was not yet modelled (a cooling cycle
+    // at its peak) is not an outlier, and the selection runs again without leaving it out.
     let out_id = checks::outlier_poses(&baseline.fit.resid, ident.len(), opt.outlier_alpha);
-    let keep = row_mask(&out_id);
     let val_all: Vec<Vec<bool>> = validation.iter().map(|v| vec![true; 3 * v.len()]).collect();
     let (_, _, _, val_res0) = validate(setup, validation, &val_all, &baseline);
     let out_val: Vec<Vec<bool>> = validation
@@ -211,6 +212,69 @@ pub fn diagnose(
         .zip(&val_res0)
         .map(|(v, r)| checks::outlier_poses(r, v.len(), opt.outlier_alpha))
         .collect();
+    let inputs = Inputs {
+        setup,
+        ident,
+        validation,
+        drift,
+        opt,
+        base: &base,
+        baseline: &baseline,
+        p0: &p0,
+    };
+    let (d, fin) = select_with_outliers(&inputs, &out_id, &out_val)?;
+    let any = |o: &[bool]| o.iter().any(|&x| x);
+    if fin.terms.is_empty() || !(any(&out_id) || out_val.iter().any(|o| any(o))) {
+        return Ok(d);
+    }
+    let still = |was: &[bool], resid: &DVector<f64>| -> Vec<bool> {
+        let now = checks::outlier_poses(resid, was.len(), opt.outlier_alpha);
+        was.iter().zip(now).map(|(a, b)| *a && b).collect()
+    };
+    let (_, _, _, r_id) = validate(setup, std::slice::from_ref(ident), &[all_rows], &fin);
+    let id2 = still(&out_id, &r_id[0]);
+    let (_, _, _, r_val) = validate(setup, validation, &val_all, &fin);
+    let val2: Vec<Vec<bool>> = out_val
+        .iter()
+        .zip(&r_val)
+        .map(|(o, r)| still(o, r))
+        .collect();
+    if id2 == out_id && val2 == out_val {
+        return Ok(d);
+    }
+    Ok(select_with_outliers(&inputs, &id2, &val2)?.0)
+}
+
+/// What every pass of the selection shares.
+struct Inputs<'a> {
+    setup: &'a CapballSetup,
+    ident: &'a CapballRun,
+    validation: &'a [CapballRun],
+    drift: Option<&'a DriftRecord>,
+    opt: &'a Options,
+    base: &'a crate::capball::Identification,
+    baseline: &'a ModelFit,
+    p0: &'a DVector<f64>,
+}
+
+/// The forward selection with the poses flagged in `out_id` / `out_val` left out, and the
+/// report it gives.
+fn select_with_outliers(
+    inp: &Inputs,
+    out_id: &[bool],
+    out_val: &[Vec<bool>],
+) -> Result<(CapballDiagnosis, ModelFit), CapballError> {
+    let Inputs {
+        setup,
+        ident,
+        validation,
+        drift,
+        opt,
+        base,
+        baseline,
+        p0,
+    } = *inp;
+    let keep = row_mask(out_id);
     let val_keep: Vec<Vec<bool>> = out_val.iter().map(|o| row_mask(o)).collect();
     // All runs on one clock, for the evidence (information criterion) and the effect's
     // parameters: the reversed A of the validation run separates a drift from the A angle.
@@ -231,20 +295,17 @@ pub fn diagnose(
         joint_keep: &joint_keep,
         keep: &keep,
         val_keep: &val_keep,
-        out_id: &out_id,
-        out_val: &out_val,
+        out_id,
+        out_val,
         opt,
         record_period: periods.from_record,
     };
-    let start = fit_terms(setup, ident, &keep, Vec::new(), &p0).ok_or(CapballError::Singular {
+    let singular = || CapballError::Singular {
         condition: base.condition_number,
         worst: "?".into(),
-    })?;
-    let start_joint =
-        fit_terms(setup, &joint, &joint_keep, Vec::new(), &p0).ok_or(CapballError::Singular {
-            condition: base.condition_number,
-            worst: "?".into(),
-        })?;
+    };
+    let start = fit_terms(setup, ident, &keep, Vec::new(), p0).ok_or_else(singular)?;
+    let start_joint = fit_terms(setup, &joint, &joint_keep, Vec::new(), p0).ok_or_else(singular)?;
     let (mut fin, mut steps) = forward_select(&ctx, start.clone(), start_joint.clone(), &periods)?;
     // A cyclic drift whose period the runs cannot bound also fits a steady drift plus
     // whatever else is unmodelled early in the selection: when a steady drift does at least as
@@ -256,9 +317,8 @@ pub fn diagnose(
         };
         (fin, steps) = forward_select(&ctx, start.clone(), start_joint, &no_cyclic)?;
     }
-    Ok(report::assemble(
-        &ctx, &base, &baseline, &start, &fin, &steps, &periods,
-    ))
+    let d = report::assemble(&ctx, base, baseline, &start, &fin, &steps, &periods);
+    Ok((d, fin))
 }
 
 /// The periods tried for a cyclic drift: from a drift record when one is given (its best

@@ -15,18 +15,8 @@ const RUN: &str = concat!(
     "/../metrology/tests/data/psi_ecmc_iso230.csv"
 );
 
-fn metrolog(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "metrolog {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
+mod cli_common;
+use cli_common::metrolog;
 
 #[test]
 fn plan_writes_a_trajectory_the_daemon_reads_and_a_program() {

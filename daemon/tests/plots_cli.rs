@@ -7,7 +7,6 @@
 //! directory for a look. Charts are a build feature: run with `--features plot` (CI does).
 
 use std::path::PathBuf;
-use std::process::Command;
 
 use regex::Regex;
 
@@ -20,18 +19,8 @@ const ESS_B02: &str = concat!(
     "/../metrology/tests/data/real/ess_target_b02_x.csv"
 );
 
-fn metrolog(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "metrolog {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
+mod cli_common;
+use cli_common::metrolog;
 
 #[derive(Debug, Clone)]
 struct Txt {

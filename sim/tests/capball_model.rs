@@ -137,3 +137,85 @@ fn small_errors_are_recovered_to_1e_6_relative() {
         );
     }
 }
+
+/// The demo's CapBall sequence as `metrolog demo` measures it, without running the program in
+/// real time: the per-pose truth (with the cooling cycle) at the middle of each settled dwell,
+/// plus a per-visit scatter of the demo's size drawn here (not by the simulator), split into
+/// runs where A turns back, diagnosed as the demo report does. The demo report prints the same
+/// comparison from a real run; this keeps it in CI without a 60 s timing-dependent test.
+#[test]
+fn demo_capball_diagnosis_finds_the_cooling_cycle() {
+    use metrology::capball::CapballRecord;
+    use metrology::capball_diagnosis::{self, Options, runs_from_records};
+    use rand_distr::{Distribution, Normal};
+
+    let sc = Scenario::demo();
+    let truth = truth_of(&sc);
+    let cb = capball_poses(&truth);
+    let noise = Normal::new(0.0, sc.capball.truth.pose_noise_um).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(20261124);
+    let t0 = cb[0].eval_s;
+    let a: Vec<f64> = cb.iter().map(|t| t.a_deg).collect();
+    let runs = metrolog_analysis::capball::runs_by_a_direction(&a);
+    let records: Vec<CapballRecord> = cb
+        .iter()
+        .zip(&runs)
+        .map(|(t, &run)| CapballRecord {
+            run,
+            pose_index: t.pose as u32,
+            time_s: Some((t.eval_s - t0) * sc.time_scale),
+            pose: pose_of(t),
+            e_um: t.capball_e_um.map(|v| v + noise.sample(&mut rng)),
+        })
+        .collect();
+    assert_eq!(
+        runs.last(),
+        Some(&2),
+        "identification and one validation run (A reversed)"
+    );
+    let (ident, validation) = runs_from_records(&records).unwrap();
+    let poses: Vec<Pose> = ident.poses.clone();
+    let setup =
+        CapballSetup::with_ball_from_poses(CapballSetup::paper_default().machine, &poses).unwrap();
+    let d = capball_diagnosis::diagnose(&setup, &ident, &validation, None, &Options::default())
+        .unwrap();
+    let found: Vec<&str> = d
+        .report
+        .findings
+        .iter()
+        .map(|f| f.effect.as_str())
+        .collect();
+    assert_eq!(found, ["cyclic_drift"], "{:#?}", d.report.findings);
+    let f = &d.report.findings[0];
+    let want = sc.capball.truth.cyclic_drift.clone().unwrap();
+    let num = |k: &str| f.params[k].as_f64().unwrap();
+    let period = num("period_s");
+    eprintln!(
+        "period {period:.1} s (truth {}), amplitudes {:?} (truth {:?}), validation RMS {:.3} → {:.3} µm",
+        want.period_s,
+        f.params["amplitude_um"],
+        want.amplitude_um,
+        f.heldout_rms_before_um,
+        f.heldout_rms_after_um
+    );
+    assert!(
+        (period - want.period_s).abs() < 0.05 * want.period_s,
+        "{period}"
+    );
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        let a = f.params["amplitude_um"][axis].as_f64().unwrap();
+        assert!((a - want.amplitude_um[k]).abs() < 0.3, "amplitude {k}: {a}");
+    }
+    assert!(f.heldout_rms_after_um < 0.5 * f.heldout_rms_before_um);
+    // The 14 parameters once the drift is modelled: within 4 of their baseline σ of the truth.
+    let want_p = sc.capball.truth.errors().to_vector();
+    for k in 0..N_PARAMS {
+        let (got, u) = (d.params_extended[k], d.baseline.std_uncertainty[k]);
+        assert!(
+            (got - want_p[k]).abs() < 4.0 * u,
+            "{}: {got} ± {u} vs truth {}",
+            PARAM_NAMES[k],
+            want_p[k]
+        );
+    }
+}

@@ -28,7 +28,8 @@ use drivers::Instrument;
 use metrolog_log::topics::{Decoded, EnvironmentMsg, LogMessage, PoseMsg, decode_message};
 use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use metrolog_log::{
-    CONFIG_ATTACHMENT, LogError, RUN_METADATA, ReadSummary, TRAJECTORY_ATTACHMENT, read_log,
+    CONFIG_ATTACHMENT, LogError, RUN_METADATA, ReadSummary, TRAJECTORY_ATTACHMENT,
+    read_log_progress,
 };
 use metrology::steady::PoseStatus;
 
@@ -98,13 +99,33 @@ pub struct LogContents {
 }
 
 impl LogContents {
-    /// Reads `path` (the intact prefix of a damaged file; see [`read_log`]).
+    /// Reads `path` (the intact prefix of a damaged file; see [`metrolog_log::read_log`]).
     pub fn read(path: &Path) -> Result<LogContents, AnalysisError> {
+        LogContents::read_progress(path, |_, _| {})
+    }
+
+    /// [`LogContents::read`], calling `progress(bytes_read, file_bytes)` as it goes (a progress
+    /// bar for an 8-hour log of gigabytes).
+    pub fn read_progress(
+        path: &Path,
+        progress: impl FnMut(u64, u64),
+    ) -> Result<LogContents, AnalysisError> {
         let mut c = LogContents {
             path: path.to_path_buf(),
             ..LogContents::default()
         };
-        let summary = read_log(path, |item| match item {
+        let summary = read_log_progress(path, progress, |item| {
+            c.take(item);
+            std::ops::ControlFlow::Continue(())
+        })?;
+        c.summary = summary;
+        Ok(c)
+    }
+
+    /// One record of the log into the contents.
+    fn take(&mut self, item: metrolog_log::LogItem<'_>) {
+        let c = self;
+        match item {
             metrolog_log::LogItem::Message {
                 topic,
                 encoding,
@@ -137,9 +158,7 @@ impl LogContents {
                     c.run_metadata = map.clone();
                 }
             }
-        })?;
-        c.summary = summary;
-        Ok(c)
+        }
     }
 
     /// The trajectory: `override_path` if given, else the log's attachment.

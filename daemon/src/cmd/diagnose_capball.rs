@@ -30,7 +30,8 @@ pub fn is_capball_csv(path: &Path) -> bool {
 pub fn load(path: &Path) -> anyhow::Result<(Vec<CapballRecord>, Machine, Vec<String>)> {
     let mut notes = Vec::new();
     if metrolog_analysis::is_mcap(path) {
-        let cb = metrolog_analysis::capball_from_log(path)
+        let cb = super::progress::read_contents(path, "reading")
+            .and_then(|log| metrolog_analysis::capball::capball_from_contents_auto(&log))
             .with_context(|| format!("reading the CapBall poses of {}", path.display()))?;
         for (pose, status) in &cb.skipped {
             notes.push(format!("CapBall pose {pose} skipped ({status})"));

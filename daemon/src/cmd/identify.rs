@@ -134,7 +134,8 @@ fn read(p: &Path) -> anyhow::Result<String> {
 /// ball, see [`metrolog_analysis::capball`]).
 fn load_capball(p: &Path, machine: &Machine) -> anyhow::Result<Vec<capball::CapballRecord>> {
     if metrolog_analysis::is_mcap(p) {
-        let cb = metrolog_analysis::capball::capball_from_log_with(p, machine)
+        let cb = super::progress::read_contents(p, "reading")
+            .and_then(|log| metrolog_analysis::capball::capball_from_contents(&log, machine))
             .with_context(|| {
                 format!(
                     "reading the CapBall poses of {} (identify capball reads a run's MCAP log or a CSV dataset)",
@@ -188,7 +189,8 @@ fn run_capball(a: CapballArgs) -> anyhow::Result<()> {
     let mut machine = machine_from(&a.machine)?;
     let recs = if metrolog_analysis::is_mcap(&a.data) && a.machine.is_none() {
         // No machine given: the log's poses choose the kinematic convention.
-        let cb = metrolog_analysis::capball_from_log(&a.data)
+        let cb = super::progress::read_contents(&a.data, "reading")
+            .and_then(|log| metrolog_analysis::capball::capball_from_contents_auto(&log))
             .with_context(|| {
                 format!(
                     "reading the CapBall poses of {} (identify capball reads a run's MCAP log or a CSV dataset)",

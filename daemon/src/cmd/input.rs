@@ -19,7 +19,8 @@ pub fn load_positioning_with(
     opts: &metrolog_analysis::PositioningOptions,
 ) -> anyhow::Result<PositioningData> {
     if metrolog_analysis::is_mcap(path) {
-        return metrolog_analysis::positioning_from_log(path, opts)
+        return super::progress::read_contents(path, "reading")
+            .and_then(|log| metrolog_analysis::positioning::positioning_from_contents(&log, opts))
             .with_context(|| format!("reading the positioning run of {}", path.display()));
     }
     PositioningData::from_csv_path(path).with_context(|| format!("reading {}", path.display()))

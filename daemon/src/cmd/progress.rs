@@ -32,3 +32,12 @@ impl Drop for Progress {
         self.0.finish_and_clear();
     }
 }
+
+/// What the analyses need of the log at `path`, read with a progress bar labelled `label`.
+pub fn read_contents(
+    path: &std::path::Path,
+    label: &str,
+) -> Result<metrolog_analysis::LogContents, metrolog_analysis::AnalysisError> {
+    let bar = Progress::new(label);
+    metrolog_analysis::LogContents::read_progress(path, |d, t| bar.update(d, t))
+}

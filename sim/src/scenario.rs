@@ -840,6 +840,20 @@ impl Scenario {
                 self.batch_ms
             ));
         }
+        self.validate_program()?;
+        self.validate_axis_and_environment()?;
+        self.validate_devices()?;
+        self.validate_capball_truth()?;
+        self.validate_capball_effects()?;
+        if !finite_pos(self.psd.sum_pa) {
+            return bad("psd.sum_pa must be > 0".into());
+        }
+        self.validate_faults()
+    }
+
+    /// The pose table and the program's times.
+    fn validate_program(&self) -> Result<(), ScenarioError> {
+        let bad = |m: String| Err(ScenarioError::Invalid(m));
         let p = &self.program;
         if p.poses.is_empty() {
             return bad("program.poses is empty: give at least one pose".into());
@@ -876,6 +890,13 @@ impl Scenario {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Ringing, material sensors and the axis model.
+    fn validate_axis_and_environment(&self) -> Result<(), ScenarioError> {
+        let bad = |m: String| Err(ScenarioError::Invalid(m));
+        let finite_pos = |v: f64| v.is_finite() && v > 0.0;
         if !(finite_pos(self.ringing.decay_s) && self.ringing.frequency_hz >= 0.0) {
             return bad("ringing.decay_s must be > 0 and ringing.frequency_hz ≥ 0".into());
         }
@@ -895,6 +916,13 @@ impl Scenario {
         if !(a.noise_um.is_finite() && a.noise_um >= 0.0) {
             return bad("axis.noise_um must be ≥ 0".into());
         }
+        Ok(())
+    }
+
+    /// Identities, CapBall sensor directions and polynomials.
+    fn validate_devices(&self) -> Result<(), ScenarioError> {
+        let bad = |m: String| Err(ScenarioError::Invalid(m));
+        let finite_pos = |v: f64| v.is_finite() && v > 0.0;
         for (name, id) in [
             ("interferometer", &self.interferometer.identity),
             ("capball", &self.capball.identity),
@@ -928,6 +956,12 @@ impl Scenario {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// The CapBall's 14 parameters and its linear drift.
+    fn validate_capball_truth(&self) -> Result<(), ScenarioError> {
+        let bad = |m: String| Err(ScenarioError::Invalid(m));
         let truth = self.capball.truth.errors().to_vector();
         for (name, v) in metrology::capball::PARAM_NAMES.iter().zip(truth) {
             // The sensors read ±100 µm: errors beyond a millimetre are a typo (mm for µm).
@@ -947,10 +981,12 @@ impl Scenario {
         {
             return bad("capball.truth.drift_um_per_h must be finite numbers".into());
         }
-        self.validate_capball_effects()?;
-        if !finite_pos(self.psd.sum_pa) {
-            return bad("psd.sum_pa must be > 0".into());
-        }
+        Ok(())
+    }
+
+    /// Fault rates, unplugs and beam interruptions.
+    fn validate_faults(&self) -> Result<(), ScenarioError> {
+        let bad = |m: String| Err(ScenarioError::Invalid(m));
         for (name, f) in [
             ("interferometer", &self.faults.interferometer),
             ("capball", &self.faults.capball),

@@ -178,7 +178,12 @@ fn score(d: &Dataset, r: &CapballDiagnosisReport, t: &mut Tally) {
 
 fn sweep(per_class: usize, seed0: u64) -> Vec<(Class, bool, Tally)> {
     let mut out = Vec::new();
+    // CAPBALL_CLASS=<name as in the table> sweeps one class only.
+    let only = std::env::var("CAPBALL_CLASS").ok();
     for class in Class::ALL {
+        if only.as_deref().is_some_and(|c| c != class.name()) {
+            continue;
+        }
         for record in [false, true] {
             if record && class != Class::Cyclic {
                 continue;
@@ -348,14 +353,12 @@ fn sweep_per_class() {
         .unwrap_or(100);
     let rows = sweep(n, 1);
     print_table(&rows);
-    let none = rows
-        .iter()
-        .find(|r| r.0 == Class::None)
-        .map(|r| &r.2)
-        .expect("none row");
-    assert!(
-        none.extra as f64 <= 0.02 * none.n as f64,
-        "false alarms {}",
-        none.extra
-    );
+    // The clean class's false alarms (absent when CAPBALL_CLASS picks another class).
+    if let Some(none) = rows.iter().find(|r| r.0 == Class::None).map(|r| &r.2) {
+        assert!(
+            none.extra as f64 <= 0.02 * none.n as f64,
+            "false alarms {}",
+            none.extra
+        );
+    }
 }

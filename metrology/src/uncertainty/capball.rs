@@ -393,7 +393,10 @@ impl TrialSource for CapballMc {
             for t in 0..nb {
                 s.phase[t] = fast.random::<f64>() * std::f64::consts::TAU;
             }
-            for e in s.noise.columns_mut(0, nb).iter_mut() {
+            // The first nb columns are contiguous (column-major): a plain slice loop, not
+            // the matrix view's strided iterator (which cost as much as the draws).
+            let rows = s.noise.nrows();
+            for e in &mut s.noise.as_mut_slice()[..rows * nb] {
                 *e = StandardNormal.sample(&mut fast);
             }
             let mut proj = s.proj.columns_mut(0, nb);

@@ -22,6 +22,7 @@ use serde::Serialize;
 
 use super::UncertaintyError;
 use super::mc::{McResult, TrialSource};
+use super::normals::FastNormals;
 
 /// One harmonic of a periodic drift: `cos_um·cos(kωt) + sin_um·sin(kωt)` per direction x, y, z.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -374,12 +375,14 @@ impl TrialSource for CapballMc {
         }
     }
 
-    /// Trials of a block draw from a fast generator (xoshiro256++, `SmallRng`) seeded from the
-    /// block's ChaCha8 stream: as reproducible as before (the block's seed fixes everything)
-    /// and the 2421 normals per trial no longer dominate the cost. Each batch is one matrix
+    /// Trials of a block draw from fast generators seeded from the block's ChaCha8 stream (the
+    /// block's seed fixes everything): the normals four at a time ([`FastNormals`]), the start
+    /// phases from xoshiro256++ (`SmallRng`). See docs/methods.md, "Speed of the CapBall
+    /// Monte Carlo". Each batch is one matrix
     /// product: the per-point normals by σ-scaled J⁺ (2421 → 14), or in the reduced form the
     /// 14 normals by the root of J⁺ΣJ⁺ᵀ.
     fn fill(&self, rng: &mut ChaCha8Rng, s: &mut CapballScratch, out: &mut [f64]) {
+        let mut normals = FastNormals::from_rng(rng);
         let mut fast = rand::rngs::SmallRng::from_rng(rng);
         let n_out = self.p_hat.len();
         let n_trials = out.len() / n_out;
@@ -393,12 +396,9 @@ impl TrialSource for CapballMc {
             for t in 0..nb {
                 s.phase[t] = fast.random::<f64>() * std::f64::consts::TAU;
             }
-            // The first nb columns are contiguous (column-major): a plain slice loop, not
-            // the matrix view's strided iterator (which cost as much as the draws).
+            // The first nb columns are contiguous (column-major): one bulk fill.
             let rows = s.noise.nrows();
-            for e in &mut s.noise.as_mut_slice()[..rows * nb] {
-                *e = StandardNormal.sample(&mut fast);
-            }
+            normals.fill(&mut s.noise.as_mut_slice()[..rows * nb]);
             let mut proj = s.proj.columns_mut(0, nb);
             proj.gemm(1.0, project, &s.noise.columns(0, nb), 0.0);
             for t in 0..nb {

@@ -57,43 +57,54 @@ fn numpy_rate(trials: usize, reduced: bool) -> Result<f64, String> {
         .ok_or_else(|| format!("unexpected output: {text}"))
 }
 
-/// Where a per-point trial spends its time: 2421 normals from each generator, one projection.
+/// Where a per-point trial spends its time: its 2421 normals from each generator (ChaCha8 and
+/// xoshiro256++ one at a time through `rand_distr`, and `FastNormals`, the one used), and its
+/// share of the batched projection (σ-scaled J⁺ times 50 trials' normals).
 fn parts() -> Option<()> {
+    use metrology::uncertainty::normals::FastNormals;
     use rand::rngs::SmallRng;
     use rand_distr::{Distribution, StandardNormal};
-    let n = 2421 * 500 * 20;
-    let mut acc = 0.0;
+    let (rows, batch, reps) = (2421, 50, 200);
+    let mut buf = vec![0.0; rows * batch];
+    let per_trial = |t0: f64, t1: f64| (t1 - t0) / (reps * batch) as f64 * 1e6;
+    let mut chacha = ChaCha8Rng::seed_from_u64(1);
     let t0 = thread_cpu_s()?;
-    let mut rng = ChaCha8Rng::seed_from_u64(1);
-    for _ in 0..n {
-        let z: f64 = StandardNormal.sample(&mut rng);
-        acc += z;
+    for _ in 0..reps {
+        buf.iter_mut()
+            .for_each(|e| *e = StandardNormal.sample(&mut chacha));
     }
     let t1 = thread_cpu_s()?;
-    let mut rng = SmallRng::seed_from_u64(1);
-    for _ in 0..n {
-        let z: f64 = StandardNormal.sample(&mut rng);
-        acc += z;
+    let mut small = SmallRng::seed_from_u64(1);
+    for _ in 0..reps {
+        buf.iter_mut()
+            .for_each(|e| *e = StandardNormal.sample(&mut small));
     }
     let t2 = thread_cpu_s()?;
+    let mut fast = FastNormals::from_rng(&mut chacha);
+    for _ in 0..reps {
+        fast.fill(&mut buf);
+    }
+    let t3 = thread_cpu_s()?;
     let case = Paper001Case::paper001();
     let model = case
         .monte_carlo_model(&case.p_true, &case.cyclic_sources())
         .ok()?;
     let pinv = model.pseudo_inverse().clone();
-    let e = nalgebra::DMatrix::<f64>::from_element(2421, 50, 0.5);
-    let mut p = nalgebra::DMatrix::<f64>::zeros(14, 50);
-    let t3 = thread_cpu_s()?;
-    for _ in 0..200 {
+    let e = nalgebra::DMatrix::<f64>::from_column_slice(rows, batch, &buf);
+    let mut p = nalgebra::DMatrix::<f64>::zeros(14, batch);
+    let t4 = thread_cpu_s()?;
+    for _ in 0..reps {
         p.gemm(1.0, &pinv, &e, 0.0);
     }
-    let t4 = thread_cpu_s()?;
+    let t5 = thread_cpu_s()?;
     println!(
-        "parts per trial: normals chacha8 {:.2} µs, smallrng {:.2} µs, gemm {:.2} µs ({acc:.1}, {})",
-        (t1 - t0) / (n / 2421) as f64 * 1e6,
-        (t2 - t1) / (n / 2421) as f64 * 1e6,
-        (t4 - t3) / (200.0 * 50.0) * 1e6,
-        p[(0, 0)]
+        "parts per per-point trial (µs): normals rand_distr+chacha8 {:.2}, rand_distr+xoshiro \
+         {:.2}, FastNormals {:.2}; projection {:.2} ({:.3})",
+        per_trial(t0, t1),
+        per_trial(t1, t2),
+        per_trial(t2, t3),
+        per_trial(t4, t5),
+        p[(0, 0)] + buf[0]
     );
     Some(())
 }

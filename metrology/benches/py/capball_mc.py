@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""NumPy reference for the CapBall Monte Carlo benchmark (benches/uncertainty.rs).
+"""NumPy reference for the CapBall Monte Carlo benchmark (benches/capball_vs_numpy.rs).
 
 The same computation per trial: 2421 normal draws (807 poses x 3 directions) scaled by the
 per-row standard deviation, one 14 x 2421 projection by the pseudo-inverse, plus the cyclic

@@ -8,20 +8,22 @@
 //!
 //! Why the cyclic drift costs almost nothing per trial: the drift is a Fourier series in time,
 //! so `J⁺·d(φ) = Σ_k cos(kφ)·A_k + sin(kφ)·B_k` with the 14-vectors `A_k`, `B_k` computed once.
-//! The per-point noise is generated in full (2421 normals per trial for 807 poses) and
-//! projected in batches with one matrix product.
+//! The per-point noise is generated in full (2421 normals per trial for 807 poses); a batch of
+//! trials, noise, drift and p̂ together, is one matrix product (docs/methods.md, "Speed of the
+//! CapBall Monte Carlo").
 //!
 //! Any Jacobian plugs in ([`CapballMc::new`] takes `J` as a matrix); [`Paper001Case`] uses the
 //! machine's own (`crate::capball`, the WCAYFXZT machine of paper 001).
 
 use nalgebra::DMatrix;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution as _, StandardNormal};
 use serde::Serialize;
 
 use super::UncertaintyError;
 use super::mc::{McResult, TrialSource};
+use super::normals::FastNormals;
 
 /// One harmonic of a periodic drift: `cos_um·cos(kωt) + sin_um·sin(kωt)` per direction x, y, z.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -185,27 +187,47 @@ pub struct CapballMc {
     p_hat: Vec<f64>,
     /// J⁺ (n_params × 3·n_poses).
     pinv: DMatrix<f64>,
-    /// J⁺ with column r scaled by σ_r: the per-point path projects unit normals with it, so no
-    /// trial scales its 2421 draws.
-    pinv_sigma: DMatrix<f64>,
     /// Standard deviation of the per-point normal noise for each row of ΔE.
     sigma: Vec<f64>,
     /// (order k, A_k, B_k): the cyclic drift's projection.
-    drift_terms: Vec<(f64, Vec<f64>, Vec<f64>)>,
-    /// When set, the per-point noise is drawn directly in parameter space: a square root `L`
-    /// of its covariance `J⁺·diag(σ²)·J⁺ᵀ`, so one trial needs n_params normals instead of
-    /// 3·n_poses. Exact (same distribution) because the per-point noise is Gaussian and the
-    /// identification linear.
-    reduced: Option<DMatrix<f64>>,
+    drift_terms: Vec<(u32, Vec<f64>, Vec<f64>)>,
+    /// The whole trial as one product, `p = M·v` for a batch of columns v:
+    /// `M = [N | 0 | A_1 B_1 … A_m B_m | p̂]`, `v = [z; z′; cos k₁φ; sin k₁φ; …; 1]`. N projects
+    /// the unit normals z: σ-scaled J⁺ (per point), or in the reduced form a square root of
+    /// J⁺ΣJ⁺ᵀ. The zero columns take the normals z′ that pad z to a multiple of 4 (the
+    /// generator's lane width) and the two whose direction is the start phase φ.
+    project: DMatrix<f64>,
+    /// Normals drawn per trial (z and z′): a multiple of 4.
+    n_fill: usize,
+    /// True when the per-point noise is drawn directly in parameter space: n_params normals per
+    /// trial instead of 3·n_poses. Exact (same distribution) because the per-point noise is
+    /// Gaussian and the identification linear.
+    reduced: bool,
 }
 
-/// Worker scratch: the normals of a batch, their projection, the start phases.
+/// Worker scratch: the columns v of a batch and the harmonics of one start phase.
 pub struct CapballScratch {
-    noise: DMatrix<f64>,
-    proj: DMatrix<f64>,
-    phase: Vec<f64>,
-    /// cos(kφ), sin(kφ) for k = 0..=max order (recurrence from one sin_cos).
+    v: DMatrix<f64>,
+    /// cos(kφ), sin(kφ) for k = 0..=max order (angle-addition recurrence).
     harm: Vec<(f64, f64)>,
+}
+
+/// `[noise | 0 | A_1 B_1 … | p̂]` (see `CapballMc::project`) and the number of normals per trial.
+fn trial_matrix(
+    noise: &DMatrix<f64>,
+    drift_terms: &[(u32, Vec<f64>, Vec<f64>)],
+    p_hat: &[f64],
+) -> (DMatrix<f64>, usize) {
+    let n_fill = (noise.ncols() + 2).div_ceil(4) * 4;
+    let cols = n_fill + 2 * drift_terms.len() + 1;
+    let mut m = DMatrix::zeros(noise.nrows(), cols);
+    m.columns_mut(0, noise.ncols()).copy_from(noise);
+    for (j, (_, a, b)) in drift_terms.iter().enumerate() {
+        m.column_mut(n_fill + 2 * j).copy_from_slice(a);
+        m.column_mut(n_fill + 2 * j + 1).copy_from_slice(b);
+    }
+    m.column_mut(cols - 1).copy_from_slice(p_hat);
+    (m, n_fill)
 }
 
 /// Moore–Penrose pseudo-inverse of a full-column-rank `J` by SVD.
@@ -299,23 +321,24 @@ impl CapballMc {
                 }
                 let pa = &pinv * u;
                 let pb = &pinv * v;
-                drift_terms.push((k, pa.as_slice().to_vec(), pb.as_slice().to_vec()));
+                drift_terms.push((h.order, pa.as_slice().to_vec(), pb.as_slice().to_vec()));
             }
         }
+        // σ folded into J⁺'s columns: the trials project unit normals.
+        let mut pinv_sigma = pinv.clone();
+        for (c, sd) in sigma.iter().enumerate() {
+            pinv_sigma.column_mut(c).scale_mut(*sd);
+        }
+        let (project, n_fill) = trial_matrix(&pinv_sigma, &drift_terms, p_hat);
         Ok(CapballMc {
             names: names.to_vec(),
             p_hat: p_hat.to_vec(),
-            pinv_sigma: {
-                let mut m = pinv.clone();
-                for (c, sd) in sigma.iter().enumerate() {
-                    m.column_mut(c).scale_mut(*sd);
-                }
-                m
-            },
             pinv,
             sigma,
             drift_terms,
-            reduced: None,
+            project,
+            n_fill,
+            reduced: false,
         })
     }
 
@@ -332,7 +355,8 @@ impl CapballMc {
         let eig = cov.symmetric_eigen();
         let sqrt_vals = eig.eigenvalues.map(|v| v.max(0.0).sqrt());
         let l = &eig.eigenvectors * nalgebra::DMatrix::from_diagonal(&sqrt_vals);
-        self.reduced = Some(l);
+        (self.project, self.n_fill) = trial_matrix(&l, &self.drift_terms, &self.p_hat);
+        self.reduced = true;
         self
     }
 
@@ -354,79 +378,67 @@ impl TrialSource for CapballMc {
     }
 
     fn scratch(&self) -> CapballScratch {
-        // The reduced path draws a whole block's normals at once (n_params × BLOCK_TRIALS); the
-        // per-point path batches BATCH trials (2421 × BATCH stays in cache).
-        let (rows, cols) = match &self.reduced {
-            Some(_) => (self.p_hat.len(), super::mc::BLOCK_TRIALS),
-            None => (self.sigma.len(), BATCH),
+        // The reduced path takes a whole block in one product (23 × BLOCK_TRIALS); the
+        // per-point path BATCH trials (2431 × BATCH).
+        let cols = if self.reduced {
+            super::mc::BLOCK_TRIALS
+        } else {
+            BATCH
         };
-        let max_order = self
-            .drift_terms
-            .iter()
-            .map(|t| t.0 as usize)
-            .max()
-            .unwrap_or(0);
+        let max_order = self.drift_terms.iter().map(|t| t.0).max().unwrap_or(0);
         CapballScratch {
-            noise: DMatrix::zeros(rows, cols),
-            proj: DMatrix::zeros(self.p_hat.len(), cols),
-            phase: vec![0.0; cols],
-            harm: vec![(1.0, 0.0); max_order + 1],
+            v: DMatrix::zeros(self.project.ncols(), cols),
+            harm: vec![(1.0, 0.0); max_order as usize + 1],
         }
     }
 
-    /// Trials of a block draw from a fast generator (xoshiro256++, `SmallRng`) seeded from the
-    /// block's ChaCha8 stream: as reproducible as before (the block's seed fixes everything)
-    /// and the 2421 normals per trial no longer dominate the cost. Each batch is one matrix
-    /// product: the per-point normals by σ-scaled J⁺ (2421 → 14), or in the reduced form the
-    /// 14 normals by the root of J⁺ΣJ⁺ᵀ.
+    /// Trials of a block draw their normals four at a time ([`FastNormals`]) from generators
+    /// seeded from the block's ChaCha8 stream (the block's seed fixes everything). A batch of
+    /// trials is one matrix product written straight into `out` (trial-major is column-major
+    /// n_outputs × n_trials). See docs/methods.md, "Speed of the CapBall Monte Carlo".
     fn fill(&self, rng: &mut ChaCha8Rng, s: &mut CapballScratch, out: &mut [f64]) {
-        let mut fast = rand::rngs::SmallRng::from_rng(rng);
+        let mut normals = FastNormals::from_rng(rng);
         let n_out = self.p_hat.len();
         let n_trials = out.len() / n_out;
-        let (project, batch) = match &self.reduced {
-            Some(l) => (l, s.noise.ncols()),
-            None => (&self.pinv_sigma, BATCH),
-        };
+        let (rows, batch) = s.v.shape();
         let mut done = 0;
         while done < n_trials {
             let nb = batch.min(n_trials - done);
-            for t in 0..nb {
-                s.phase[t] = fast.random::<f64>() * std::f64::consts::TAU;
+            for v in s.v.as_mut_slice()[..rows * nb].chunks_exact_mut(rows) {
+                self.trial_column(&mut normals, &mut s.harm, v);
             }
-            for e in s.noise.columns_mut(0, nb).iter_mut() {
-                *e = StandardNormal.sample(&mut fast);
-            }
-            let mut proj = s.proj.columns_mut(0, nb);
-            proj.gemm(1.0, project, &s.noise.columns(0, nb), 0.0);
-            for t in 0..nb {
-                let y = &mut out[(done + t) * n_out..(done + t + 1) * n_out];
-                for ((yj, pj), p) in y.iter_mut().zip(proj.column(t).iter()).zip(&self.p_hat) {
-                    *yj = p + pj;
-                }
-                self.add_drift(s.phase[t], &mut s.harm, y);
-            }
+            let mut y = nalgebra::DMatrixViewMut::from_slice(
+                &mut out[done * n_out..(done + nb) * n_out],
+                n_out,
+                nb,
+            );
+            y.gemm(1.0, &self.project, &s.v.columns(0, nb), 0.0);
             done += nb;
         }
     }
 }
 
 impl CapballMc {
-    /// Adds the cyclic drift's projection for start phase `phase`: Σ cos(kφ)·A_k + sin(kφ)·B_k,
-    /// the harmonics' cos/sin by the angle-addition recurrence from one sin_cos.
-    fn add_drift(&self, phase: f64, harm: &mut [(f64, f64)], y: &mut [f64]) {
-        if self.drift_terms.is_empty() {
-            return;
-        }
-        let (s1, c1) = phase.sin_cos();
+    /// One trial's column v (see `CapballMc::project`): the normals, then cos(kφ), sin(kφ) of a
+    /// uniform start phase φ, then 1. φ is the direction of the last two normals (uniform on
+    /// the circle for independent normals), which spares a sin_cos per trial; the harmonics
+    /// follow by the angle-addition recurrence.
+    fn trial_column(&self, normals: &mut FastNormals, harm: &mut [(f64, f64)], v: &mut [f64]) {
+        let n = self.n_fill;
+        normals.fill(&mut v[..n]);
+        let (a, b) = (v[n - 2], v[n - 1]);
+        let r = (a * a + b * b).sqrt();
+        let (c1, s1) = if r > 0.0 { (a / r, b / r) } else { (1.0, 0.0) };
         for k in 1..harm.len() {
             let (c, s) = harm[k - 1];
             harm[k] = (c * c1 - s * s1, s * c1 + c * s1);
         }
-        for (k, a, b) in &self.drift_terms {
-            let (cs, sn) = harm[*k as usize];
-            for ((yj, aj), bj) in y.iter_mut().zip(a).zip(b) {
-                *yj += cs * aj + sn * bj;
-            }
+        let rest = &mut v[n..];
+        for (j, (k, _, _)) in self.drift_terms.iter().enumerate() {
+            (rest[2 * j], rest[2 * j + 1]) = harm[*k as usize];
+        }
+        if let Some(one) = rest.last_mut() {
+            *one = 1.0;
         }
     }
 }

@@ -10,6 +10,7 @@
 //! - [`budget`]: budgets written as TOML files with the model as expressions ([`expr`]).
 //! - [`capball`]: the CapBall link-error Monte Carlo of paper 001 with the statistical and the
 //!   cyclic drift models.
+//! - [`normals`]: standard normal deviates four at a time (the per-point CapBall trials).
 //! - [`length`]: the LI-80 length measurement budget (ISO/TR 230-9 style).
 //! - [`psd`]: the Monte Carlo of the PSD frame's 13 errors (paper 003 Table 4).
 //!
@@ -44,6 +45,7 @@ pub mod expr;
 pub mod gum;
 pub mod length;
 pub mod mc;
+pub mod normals;
 pub mod psd;
 pub mod psd_budget;
 

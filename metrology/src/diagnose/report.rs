@@ -388,14 +388,26 @@ struct TargetScatter {
     dof_all: f64,
 }
 
-fn target_scatter(obs: &Obs, fin: &FinalFit) -> TargetScatter {
+/// `trim`: each target's largest squared residual left out (and one degree of freedom).
+fn target_scatter(obs: &Obs, fin: &FinalFit, trim: bool) -> TargetScatter {
     let m = obs.n_targets;
     let mut ss_t = vec![0.0; m];
+    let mut max_t = vec![0.0_f64; m];
     let mut n_t = vec![0usize; m];
     for j in 0..obs.len() {
         if fin.eval[j] {
-            ss_t[obs.target[j]] += fin.resid[j] * fin.resid[j];
+            let r2 = fin.resid[j] * fin.resid[j];
+            ss_t[obs.target[j]] += r2;
+            max_t[obs.target[j]] = max_t[obs.target[j]].max(r2);
             n_t[obs.target[j]] += 1;
+        }
+    }
+    if trim {
+        for t in 0..m {
+            if n_t[t] > 0 {
+                ss_t[t] -= max_t[t];
+                n_t[t] -= 1;
+            }
         }
     }
     let dof_t: Vec<f64> = (0..m)
@@ -409,6 +421,24 @@ fn target_scatter(obs: &Obs, fin: &FinalFit) -> TargetScatter {
     }
 }
 
+/// Evidence (BIC decrease) for target `t` having its own, larger variance, and the ratio of
+/// its standard deviation to the others'.
+fn anomaly_evidence(sc: &TargetScatter, t: usize, ln_n: f64) -> Option<(f64, f64)> {
+    let (ss_all, dof_all) = (sc.ss_all, sc.dof_all);
+    let dk = sc.dof_t[t];
+    let dr = dof_all - dk;
+    if dof_all <= 2.0 || ss_all <= 0.0 || dk < 2.0 || dr < 2.0 || sc.ss_t[t] <= 0.0 {
+        return None;
+    }
+    let (vk, vr) = (sc.ss_t[t] / dk, (ss_all - sc.ss_t[t]) / dr);
+    if vk <= vr {
+        return None;
+    }
+    // Profile log-likelihood ratio of separate vs common variance (×2).
+    let lr = dof_all * (ss_all / dof_all).ln() - dk * vk.ln() - dr * vr.ln();
+    Some(((vk / vr).sqrt(), lr - 2.0 * ln_n))
+}
+
 /// Local anomaly: one target with its own variance (module docs).
 pub(super) fn local_anomaly(
     obs: &Obs,
@@ -417,29 +447,25 @@ pub(super) fn local_anomaly(
     opt: &Options,
 ) -> Option<Anomaly> {
     let ln_n = (obs.len() as f64).ln();
-    let sc = target_scatter(obs, fin);
+    let sc = target_scatter(obs, fin, false);
     let (ss_all, dof_all) = (sc.ss_all, sc.dof_all);
     let mut best: Option<(usize, f64, f64)> = None;
-    if dof_all > 2.0 && ss_all > 0.0 {
-        for t in 0..obs.n_targets {
-            let dk = sc.dof_t[t];
-            let dr = dof_all - dk;
-            if dk < 2.0 || dr < 2.0 || sc.ss_t[t] <= 0.0 {
-                continue;
-            }
-            let (vk, vr) = (sc.ss_t[t] / dk, (ss_all - sc.ss_t[t]) / dr);
-            if vk <= vr {
-                continue;
-            }
-            // Profile log-likelihood ratio of separate vs common variance (×2).
-            let lr = dof_all * (ss_all / dof_all).ln() - dk * vk.ln() - dr * vr.ln();
-            let dbic = -lr + 2.0 * ln_n;
-            if -dbic >= opt.min_bic_gain && best.is_none_or(|a| -dbic > a.2) {
-                best = Some((t, (vk / vr).sqrt(), -dbic));
-            }
+    for t in 0..obs.n_targets {
+        if let Some((ratio, sig)) = anomaly_evidence(&sc, t, ln_n)
+            && sig >= opt.min_bic_gain
+            && best.is_none_or(|a| sig > a.2)
+        {
+            best = Some((t, ratio, sig));
         }
     }
     let (t, ratio, sig) = best?;
+    // A scatter of its own is a property of the target's readings, not of one of them: the
+    // evidence must survive leaving out every target's largest residual (one draw from the
+    // tail of heavy-tailed noise can otherwise make an ordinary target look scattered).
+    let trimmed = target_scatter(obs, fin, true);
+    if anomaly_evidence(&trimmed, t, ln_n).is_none_or(|(_, s)| s < opt.min_bic_gain) {
+        return None;
+    }
     let (e_before, e_after) = anomaly_heldout_gain(obs, fin, t);
     // Ratio uncertainty from the F distribution's log-variance: u(ln v) ≈ √(2/dof).
     let dk = sc.dof_t[t].max(1.0);

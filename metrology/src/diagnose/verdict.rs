@@ -7,7 +7,7 @@
 
 use std::collections::BTreeMap;
 
-use statrs::distribution::{ContinuousCDF, Normal};
+use statrs::distribution::{ContinuousCDF, DiscreteCDF, Normal, Poisson};
 
 use super::Finding;
 use super::fit::{FinalFit, Obs, heldout_rms};
@@ -18,6 +18,11 @@ use super::search::lag1_correlation;
 const UNEXPLAINED_RATIO: f64 = 3.0;
 /// More flagged readings than this share are not isolated outliers.
 const MAX_OUTLIER_SHARE: f64 = 0.10;
+/// Readings this many robust scales off their trend are far: isolated events, not the tail.
+const FAR: f64 = 6.5;
+/// Level of the test for more readings between 3 and [`FAR`] robust scales than normal noise
+/// gives.
+const HEAVY_TAIL_ALPHA: f64 = 0.01;
 /// A mean effect that gains less than this share of the held-out error is not reported next
 /// to an `unexplained` finding (it only stretches over structure it does not explain).
 const MIN_GAIN_WHEN_UNEXPLAINED: f64 = 0.10;
@@ -48,16 +53,17 @@ pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
     let rms_left_um = (kept.iter().map(|r| r * r).sum::<f64>() / kept.len().max(1) as f64).sqrt();
     let n = obs.len();
     let n_out = fin.out.iter().filter(|o| **o).count();
-    // Tails: readings between 3 and 4.5 robust scales from their trend, compared with what
-    // normal noise gives; a continuum there means the flagged ones are its tail.
+    // Tails: readings between 3 and 6.5 robust scales from their trend (flagged or not),
+    // compared with what normal noise gives; a continuum there means the flagged ones are its
+    // tail. Isolated events (8–15 σ is typical of a beam interruption) fall beyond it.
     let scale = robust_scale(&mut fin.resid.clone());
     let n_mid = fin
         .resid
         .iter()
-        .filter(|r| (3.0 * scale..4.5 * scale).contains(&r.abs()))
+        .filter(|r| (3.0 * scale..FAR * scale).contains(&r.abs()))
         .count() as f64;
     let p_mid = Normal::new(0.0, 1.0)
-        .map(|d| 2.0 * (d.cdf(-3.0) - d.cdf(-4.5)))
+        .map(|d| 2.0 * (d.cdf(-3.0) - d.cdf(-FAR)))
         .unwrap_or(0.0027);
     let expected = n as f64 * p_mid;
     // And the kurtosis of the readings inside the bound: 3 for normal noise, with a sampling
@@ -69,14 +75,20 @@ pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
     let m2 = inside.iter().map(|r| r * r).sum::<f64>() / inside.len().max(1) as f64;
     let m4 = inside.iter().map(|r| r.powi(4)).sum::<f64>() / inside.len().max(1) as f64;
     let kurtosis = if m2 > 0.0 { m4 / (m2 * m2) } else { 3.0 };
-    // Isolated outliers are far off (8–15 σ is typical of a beam interruption); flagged
-    // readings that all stay below 6.5 robust scales are the tail of the noise.
+    // Flagged readings that all stay below 6.5 robust scales are the tail of the noise.
     let n_far = (0..n)
-        .filter(|&j| fin.out[j] && fin.resid[j].abs() >= 6.5 * scale)
+        .filter(|&j| fin.out[j] && fin.resid[j].abs() >= FAR * scale)
         .count();
+    // How likely is at least this many readings in the zone under normal noise (Poisson with
+    // the normal expectation)? A tail that continues into the bulk is heavy.
+    let p_mid_excess = if n_mid >= 1.0 {
+        Poisson::new(expected.max(1e-9)).map_or(1.0, |d| 1.0 - d.cdf(n_mid as u64 - 1))
+    } else {
+        1.0
+    };
     let heavy_tails = n_out > 0
         && (n_far == 0
-            || n_mid > expected + 3.0 * expected.sqrt() + 2.0
+            || p_mid_excess < HEAVY_TAIL_ALPHA
             || kurtosis > 3.0 + 3.0 * (24.0 / inside.len().max(1) as f64).sqrt());
     Residue {
         rho,

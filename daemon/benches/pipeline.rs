@@ -149,11 +149,14 @@ fn topic_sizes(path: &Path, samples: f64) {
     let opts = metrolog_log::LogOptions::default();
     // topic → (messages, samples, pieces of at most a chunk, compressed bytes, raw bytes)
     let mut topics: BTreeMap<String, (u64, u64, Vec<u8>, u64, u64)> = BTreeMap::new();
+    // Every message in file order, for the zstd level and chunk size comparison.
+    let mut all = Vec::new();
     let compress = |piece: &[u8]| {
         zstd::bulk::compress(piece, opts.zstd_level as i32).map_or(0, |c| c.len() as u64)
     };
     metrolog_log::read_log(path, |item| {
         if let metrolog_log::LogItem::Message { topic, data, .. } = item {
+            all.extend_from_slice(data);
             let t = topics.entry(topic.to_string()).or_default();
             t.0 += 1;
             t.1 += metrolog_log::raw::Batch::decode(topic, data)
@@ -191,6 +194,21 @@ fn topic_sizes(path: &Path, samples: f64) {
         "    rest (index, summary, attachments, chunk headers): {:.2} B per sample of the run",
         (file as f64 - sum as f64) / samples
     );
+    // The writer's zstd level and chunk size: every message compressed in pieces of a chunk.
+    for (level, chunk) in [(1, 4 << 20), (3, 1 << 20), (3, 4 << 20), (3, 16 << 20), (6, 4 << 20)] {
+        let t0 = Instant::now();
+        let z: u64 = all
+            .chunks(chunk)
+            .map(|p| zstd::bulk::compress(p, level).map_or(0, |c| c.len() as u64))
+            .sum();
+        let s = t0.elapsed().as_secs_f64();
+        println!(
+            "    zstd level {level}, chunks of {} MB: {:.2} B per sample of the run, {:.3} µs per sample to compress (wall time of this process)",
+            chunk >> 20,
+            z as f64 / samples,
+            1e6 * s / samples
+        );
+    }
 }
 
 fn tv(t: libc::timeval) -> f64 {

@@ -195,7 +195,13 @@ fn topic_sizes(path: &Path, samples: f64) {
         (file as f64 - sum as f64) / samples
     );
     // The writer's zstd level and chunk size: every message compressed in pieces of a chunk.
-    for (level, chunk) in [(1, 4 << 20), (3, 1 << 20), (3, 4 << 20), (3, 16 << 20), (6, 4 << 20)] {
+    for (level, chunk) in [
+        (1, 4 << 20),
+        (3, 1 << 20),
+        (3, 4 << 20),
+        (3, 16 << 20),
+        (6, 4 << 20),
+    ] {
         let t0 = Instant::now();
         let z: u64 = all
             .chunks(chunk)

@@ -108,7 +108,11 @@ fn every_channel_opens_in_the_viewers_and_decodes_to_what_was_written() {
         // integers, which come as strings (longs: String); times relative to `time`
         // {seconds, nanos}.
         assert_eq!(h["seq_delta"][0], s.seq.to_string(), "{topic}");
-        assert_eq!(h["device_t_us_delta"][0], s.device_t_us.to_string(), "{topic}");
+        assert_eq!(
+            h["device_t_us_delta"][0],
+            s.device_t_us.to_string(),
+            "{topic}"
+        );
         assert_eq!(h["time_delta_ns"][0], "0", "{topic}");
         let ft = &h["time"];
         let ns = ft["seconds"].as_str().unwrap().parse::<u64>().unwrap() * 1_000_000_000
@@ -138,7 +142,10 @@ fn every_channel_opens_in_the_viewers_and_decodes_to_what_was_written() {
                         _ => unreachable!(),
                     })
                     .collect();
-                for (k, name) in ["mean_ex_um", "mean_ey_um", "mean_ez_um"].iter().enumerate() {
+                for (k, name) in ["mean_ex_um", "mean_ey_um", "mean_ez_um"]
+                    .iter()
+                    .enumerate()
+                {
                     let want = valid.iter().map(|e| e[k]).sum::<f64>() / valid.len() as f64;
                     let got = first[*name].as_f64().unwrap();
                     assert!((got - want).abs() < 1e-9, "{name}: {got} vs {want}");

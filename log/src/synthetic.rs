@@ -259,8 +259,10 @@ impl SyntheticEvents<'_> {
                     let code = (0.8 * x / 10.0 * protocol::cb3::CODE_FULL_SCALE
                         / protocol::cb3::VOLTS_FULL_SCALE)
                         .round();
-                    code.clamp(-protocol::cb3::CODE_FULL_SCALE, protocol::cb3::CODE_MAX as f64)
-                        as i32
+                    code.clamp(
+                        -protocol::cb3::CODE_FULL_SCALE,
+                        protocol::cb3::CODE_MAX as f64,
+                    ) as i32
                 });
                 let c = cal.convert(codes);
                 let (v, d, e) = (c.volts, c.d_um, c.e_um);

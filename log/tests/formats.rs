@@ -152,8 +152,12 @@ fn format1_calibration() -> protocol::convert::CapBallCalibration {
         .map(|l| l.split(',').map(|x| x.trim().parse().unwrap()).collect())
         .collect();
     CapBallCalibration {
-        poly: [[10.0, 0.02, -0.001], [10.0, -0.015, 0.0], [10.0, 0.01, 0.0005]]
-            .map(|c| CapBallPoly { c }),
+        poly: [
+            [10.0, 0.02, -0.001],
+            [10.0, -0.015, 0.0],
+            [10.0, 0.01, 0.0005],
+        ]
+        .map(|c| CapBallPoly { c }),
         transform: CapBallTransform {
             t: std::array::from_fn(|r| std::array::from_fn(|k| rows[r][k])),
         },
@@ -190,7 +194,9 @@ fn format_3_holds_the_same_run_with_capball_codes() {
         if let LogItem::Message { topic, data, .. } = item
             && topic == "/capball/sample"
         {
-            let b = metrolog_log::raw::Batch::decode(topic, data).unwrap().unwrap();
+            let b = metrolog_log::raw::Batch::decode(topic, data)
+                .unwrap()
+                .unwrap();
             let metrolog_log::raw::Batch::Format3(metrolog_log::raw::v3::Batch::Capball(b)) = b
             else {
                 panic!("not a format-3 CapBall batch")
@@ -256,6 +262,10 @@ fn regenerate_fixtures() {
         _ => {}
     })
     .unwrap();
-    assert_eq!(w.capball_batches()[1], 0, "CapBall batches written as doubles");
+    assert_eq!(
+        w.capball_batches()[1],
+        0,
+        "CapBall batches written as doubles"
+    );
     w.finish().unwrap();
 }

@@ -373,7 +373,15 @@ mod tests {
         assert_eq!(code_volts(-(1 << 23)), -10.0);
         assert_eq!(code_volts(CODE_MAX), 10.0 - 10.0 / 8_388_608.0);
         let between = (code_volts(1) + code_volts(2)) / 2.0;
-        for v in [between, -0.0, f64::NAN, 10.0, -10.000_001, f64::INFINITY, 1.0 / 3.0] {
+        for v in [
+            between,
+            -0.0,
+            f64::NAN,
+            10.0,
+            -10.000_001,
+            f64::INFINITY,
+            1.0 / 3.0,
+        ] {
             assert_eq!(volts_code(v), None, "{v}");
         }
     }

@@ -207,7 +207,12 @@ fn batch(
     columns: &[(&str, Type)],
     extra: Vec<FieldDescriptorProto>,
 ) -> DescriptorProto {
-    let mut fields = vec![single("header", 2, Type::Message, Some(".metrolog.SampleHeader"))];
+    let mut fields = vec![single(
+        "header",
+        2,
+        Type::Message,
+        Some(".metrolog.SampleHeader"),
+    )];
     fields.extend(
         columns
             .iter()
@@ -486,7 +491,11 @@ mod tests {
             .enumerate()
             .map(|(k, &c)| {
                 let v = cal.convert(c);
-                let flags = if c.iter().any(|x| x.abs() >= max) { 0b101 } else { 0 };
+                let flags = if c.iter().any(|x| x.abs() >= max) {
+                    0b101
+                } else {
+                    0
+                };
                 sample(
                     Instrument::Capball,
                     SampleValues::Capball {
@@ -507,9 +516,8 @@ mod tests {
         let samples = capball_samples(&cal);
         let (buf, got) = round_trip(&samples, Some(cal));
         assert_eq!(bits(&got), bits(&samples));
-        let Batch::Format3(v3::Batch::Capball(b)) = Batch::decode(CAPBALL_TOPIC, &buf)
-            .unwrap()
-            .unwrap()
+        let Batch::Format3(v3::Batch::Capball(b)) =
+            Batch::decode(CAPBALL_TOPIC, &buf).unwrap().unwrap()
         else {
             panic!("not a CapBall batch")
         };
@@ -530,7 +538,12 @@ mod tests {
         assert!((b.mean_ex_um - mean).abs() <= 1e-12 * mean.abs().max(1.0));
         // Codes and calibration are smaller than nine doubles a sample, even for 7 samples.
         let (doubles, _) = round_trip(&samples, None);
-        assert!(buf.len() < doubles.len(), "{} ≥ {}", buf.len(), doubles.len());
+        assert!(
+            buf.len() < doubles.len(),
+            "{} ≥ {}",
+            buf.len(),
+            doubles.len()
+        );
     }
 
     /// One value the calibration does not reproduce (one ulp off, or volts between two
@@ -599,7 +612,9 @@ mod tests {
             sum_pa: vec![3.0],
             head_c: vec![4.0],
         };
-        let b = Batch::decode(PSD_TOPIC, &m.encode_to_vec()).unwrap().unwrap();
+        let b = Batch::decode(PSD_TOPIC, &m.encode_to_vec())
+            .unwrap()
+            .unwrap();
         assert!(matches!(b, Batch::Format2(_)));
         let s = b.samples().unwrap();
         assert_eq!((s[0].seq, s[0].fitted_ns, s[0].host_ns), (7, 9, 10));

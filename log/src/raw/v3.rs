@@ -223,7 +223,10 @@ impl SampleHeader {
             undelta(&self.seq_delta, 0),
             undelta(&self.device_t_us_delta, 0),
             undelta(&self.time_delta_ns, base(&self.time, "time")?),
-            undelta(&self.host_time_delta_ns, base(&self.host_time, "host_time")?),
+            undelta(
+                &self.host_time_delta_ns,
+                base(&self.host_time, "host_time")?,
+            ),
         ))
     }
 }
@@ -231,7 +234,9 @@ impl SampleHeader {
 /// A value column of `len` entries where `n` are expected.
 fn check_len(topic: &str, n: usize, lens: &[usize]) -> Result<(), String> {
     match lens.iter().find(|&&l| l != n) {
-        Some(bad) => Err(format!("a {topic} batch has columns of {n} and {bad} samples")),
+        Some(bad) => Err(format!(
+            "a {topic} batch has columns of {n} and {bad} samples"
+        )),
         None => Ok(()),
     }
 }
@@ -355,7 +360,8 @@ fn reproduced_codes(cal: &CapBallCalibration, s: &Sample) -> Option<[i32; 3]> {
         volts_code(volts[2])?,
     ];
     let v = cal.convert(codes);
-    let same = |a: &[f64; 3], b: &[f64; 3]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+    let same =
+        |a: &[f64; 3], b: &[f64; 3]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
     (same(&v.d_um, d_um) && same(&v.e_um, e_um)).then_some(codes)
 }
 

@@ -169,6 +169,10 @@ impl Batch {
         self.header().map_or(0, |h| h.seq.len())
     }
 
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
     /// Decodes a format-2 message of a raw topic; `Ok(None)` for another topic.
     pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, String> {
         let e = |e: prost::DecodeError| e.to_string();

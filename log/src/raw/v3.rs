@@ -478,8 +478,10 @@ impl CapballBatch {
     }
 }
 
-/// A decoded format-3 batch of one raw topic.
+/// A decoded format-3 batch of one raw topic (one per message read: the size of the
+/// variants does not matter).
 #[derive(Debug, Clone, PartialEq)]
+#[allow(clippy::large_enum_variant)]
 pub enum Batch {
     Position(PositionBatch),
     Environment(EnvironmentBatch),
@@ -521,6 +523,10 @@ impl Batch {
     /// Samples in the batch, as its header says.
     pub fn len(&self) -> usize {
         self.header().map_or(0, SampleHeader::len)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 
     /// The samples back, in order. A batch whose columns differ in length is an error.

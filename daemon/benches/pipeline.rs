@@ -130,7 +130,91 @@ async fn run(program_s: f64) {
         "  last sample of a pose window to its /pose record: at most {latency_ms:.1} ms (target < 50 ms)"
     );
     println!("  log: {}", logs_size(&logs));
+    if let Some(log) = std::fs::read_dir(&logs)
+        .ok()
+        .and_then(|mut rd| rd.next())
+        .and_then(|e| e.ok())
+    {
+        topic_sizes(&log.path(), samples);
+    }
     println!("  daemon's last line: {}", last.trim());
+}
+
+/// Bytes per sample on disk, and per raw topic: each topic's messages compressed alone with
+/// the writer's zstd level in pieces of the writer's chunk size (the file mixes topics in its
+/// chunks, so the topics' sum differs a little from the file; the rest is the index, the
+/// summary and the JSON topics).
+fn topic_sizes(path: &Path, samples: f64) {
+    use std::collections::BTreeMap;
+    let opts = metrolog_log::LogOptions::default();
+    // topic → (messages, samples, pieces of at most a chunk, compressed bytes, raw bytes)
+    let mut topics: BTreeMap<String, (u64, u64, Vec<u8>, u64, u64)> = BTreeMap::new();
+    // Every message in file order, for the zstd level and chunk size comparison.
+    let mut all = Vec::new();
+    let compress = |piece: &[u8]| {
+        zstd::bulk::compress(piece, opts.zstd_level as i32).map_or(0, |c| c.len() as u64)
+    };
+    metrolog_log::read_log(path, |item| {
+        if let metrolog_log::LogItem::Message { topic, data, .. } = item {
+            all.extend_from_slice(data);
+            let t = topics.entry(topic.to_string()).or_default();
+            t.0 += 1;
+            t.1 += metrolog_log::raw::Batch::decode(topic, data)
+                .ok()
+                .flatten()
+                .map_or(0, |b| b.len() as u64);
+            t.2.extend_from_slice(data);
+            t.4 += data.len() as u64;
+            if t.2.len() as u64 >= opts.chunk_size {
+                t.3 += compress(&t.2);
+                t.2.clear();
+            }
+        }
+    })
+    .unwrap();
+    let file = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    println!(
+        "  bytes per sample: {:.2} on disk ({} B / {samples} samples)",
+        file as f64 / samples,
+        file
+    );
+    let mut sum = 0;
+    for (topic, (msgs, n, rest, mut z, raw)) in topics {
+        z += compress(&rest);
+        sum += z;
+        let per = |b: u64| if n > 0 { b as f64 / n as f64 } else { f64::NAN };
+        println!(
+            "    {topic:<30} {msgs:>7} msgs {n:>9} samples  raw {:>6.2} B/sample  zstd {:>6.2} B/sample of the topic, {:>5.2} B per sample of the run",
+            per(raw),
+            per(z),
+            z as f64 / samples
+        );
+    }
+    println!(
+        "    rest (index, summary, attachments, chunk headers): {:.2} B per sample of the run",
+        (file as f64 - sum as f64) / samples
+    );
+    // The writer's zstd level and chunk size: every message compressed in pieces of a chunk.
+    for (level, chunk) in [
+        (1, 4 << 20),
+        (3, 1 << 20),
+        (3, 4 << 20),
+        (3, 16 << 20),
+        (6, 4 << 20),
+    ] {
+        let t0 = Instant::now();
+        let z: u64 = all
+            .chunks(chunk)
+            .map(|p| zstd::bulk::compress(p, level).map_or(0, |c| c.len() as u64))
+            .sum();
+        let s = t0.elapsed().as_secs_f64();
+        println!(
+            "    zstd level {level}, chunks of {} MB: {:.2} B per sample of the run, {:.3} µs per sample to compress (wall time of this process)",
+            chunk >> 20,
+            z as f64 / samples,
+            1e6 * s / samples
+        );
+    }
 }
 
 fn tv(t: libc::timeval) -> f64 {

@@ -1,6 +1,6 @@
 //! Old logs keep working: `info`, `replay` and the analyses' reader take the golden logs of
-//! both formats (`log/tests/data/`), replay reproduces their pose values exactly, and replay
-//! of a format-1 log writes a format-2 log whose channels the viewers open.
+//! every format (`log/tests/data/`), replay reproduces their pose values exactly, and replay
+//! of a format-1 log writes a log of the current format.
 
 use std::path::{Path, PathBuf};
 
@@ -15,9 +15,9 @@ fn data(name: &str) -> PathBuf {
 }
 
 #[test]
-fn info_replay_and_analysis_read_both_formats() {
+fn info_replay_and_analysis_read_every_format() {
     let mut replayed = Vec::new();
-    for name in ["format1.mcap", "format2.mcap"] {
+    for name in ["format1.mcap", "format2.mcap", "format3.mcap"] {
         let info = inspect(&data(name)).unwrap();
         assert!(info.read.clean_close, "{name}");
         assert_eq!(info.undecodable, 0, "{name}");
@@ -42,10 +42,11 @@ fn info_replay_and_analysis_read_both_formats() {
         v.iter().map(|(_, p)| p.clone()).collect()
     };
     assert_eq!(poses(&replayed[0]), poses(&replayed[1]));
+    assert_eq!(poses(&replayed[0]), poses(&replayed[2]));
 }
 
 #[test]
-fn replay_converts_a_format_1_log_to_format_2() {
+fn replay_converts_a_format_1_log_to_the_current_format() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("converted.mcap");
     let opts = ReplayOptions {
@@ -55,7 +56,7 @@ fn replay_converts_a_format_1_log_to_format_2() {
     let r = replay(&data("format1.mcap"), &opts).unwrap();
     assert!(r.reproduces_log());
     let meta = metrolog_log::read_run_metadata(&out).unwrap().unwrap();
-    assert_eq!(meta[metrolog_log::LOG_FORMAT_KEY], "2");
+    assert_eq!(meta[metrolog_log::LOG_FORMAT_KEY], "3");
     let again = replay(&out, &ReplayOptions::default()).unwrap();
     assert!(again.reproduces_log());
     assert_eq!(again.logged.len(), 6);

@@ -35,10 +35,19 @@ with open(sys.argv[1], "rb") as f:
                 desc = pool.FindMessageTypeByName(schema.name)
                 cls = classes[schema.id] = message_factory.GetMessageClass(desc)
             batch = cls.FromString(message.data)
-            n = len(batch.header.seq)
-            for field in batch.DESCRIPTOR.fields:
-                if field.name not in ("header", "material_c") and len(getattr(batch, field.name)) != n:
-                    errors.append(f"{channel.topic}: column {field.name} is not {n} long")
+            # Format 3: the header says how many samples; every repeated column has one entry
+            # per sample (a CapBall batch holds either the code columns or the nine doubles).
+            n = batch.header.count
+            # (repeated fields are the containers with a length)
+            columns = [(f.name, getattr(m, f.name)) for m in (batch, batch.header)
+                       for f in m.DESCRIPTOR.fields
+                       if hasattr(getattr(m, f.name), "__len__") and f.name != "material_c"]
+            for name, col in columns:
+                empty_ok = channel.topic == "/capball/sample" and len(col) == 0
+                if len(col) != n and not empty_ok:
+                    errors.append(f"{channel.topic}: column {name} is not {n} long")
+            if channel.topic == "/capball/sample" and len(batch.code_1_delta) != n and len(batch.ex_um) != n:
+                errors.append(f"{channel.topic}: neither codes nor values")
             counts[channel.topic] = counts.get(channel.topic, 0) + n
             batches[channel.topic] = batches.get(channel.topic, 0) + 1
             continue

@@ -104,22 +104,52 @@ fn every_channel_opens_in_the_viewers_and_decodes_to_what_was_written() {
         let first = &info["first"];
         let s = ss[0];
         let h = &first["header"];
-        // 64-bit integers come as strings (longs: String), times as {seconds, nanos}.
-        assert_eq!(h["seq"][0], s.seq.to_string(), "{topic}");
-        assert_eq!(h["device_t_us"][0], s.device_t_us.to_string(), "{topic}");
-        let ft = &h["fitted_time"][0];
+        // Format 3: differences from the previous sample (the first from 0) as 64-bit
+        // integers, which come as strings (longs: String); times relative to `time`
+        // {seconds, nanos}.
+        assert_eq!(h["seq_delta"][0], s.seq.to_string(), "{topic}");
+        assert_eq!(
+            h["device_t_us_delta"][0],
+            s.device_t_us.to_string(),
+            "{topic}"
+        );
+        assert_eq!(h["time_delta_ns"][0], "0", "{topic}");
+        let ft = &h["time"];
         let ns = ft["seconds"].as_str().unwrap().parse::<u64>().unwrap() * 1_000_000_000
             + ft["nanos"].as_u64().unwrap();
         assert_eq!(ns, s.fitted_ns, "{topic}");
         assert_eq!(h["valid"][0], s.valid, "{topic}");
+        let count = h["count"].as_u64().unwrap() as usize;
         let f = |k: &str| first[k][0].as_f64().unwrap();
         match &s.values {
             SampleValues::Position { position_um, .. } => {
                 assert_eq!(f("position_um"), *position_um)
             }
             SampleValues::Environment { air_c, .. } => assert_eq!(f("air_c"), *air_c),
-            SampleValues::Capball { e_um, .. } => {
-                assert_eq!([f("ex_um"), f("ey_um"), f("ez_um")], *e_um)
+            SampleValues::Capball { volts, .. } => {
+                // The ADC codes: volts = code · 10 / 2^23 (instruments.md §2), computed here.
+                for (k, v) in volts.iter().enumerate() {
+                    let code = first[format!("code_{}_delta", k + 1)][0].as_i64().unwrap();
+                    assert_eq!(code as f64 * 10.0 / 8_388_608.0, *v, "{topic} channel {k}");
+                }
+                assert!(first["calibration"]["poly"].as_array().unwrap().len() == 9);
+                // The batch's mean error, what a viewer plots against log time.
+                let valid: Vec<[f64; 3]> = ss[..count]
+                    .iter()
+                    .filter(|s| s.valid)
+                    .map(|s| match &s.values {
+                        SampleValues::Capball { e_um, .. } => *e_um,
+                        _ => unreachable!(),
+                    })
+                    .collect();
+                for (k, name) in ["mean_ex_um", "mean_ey_um", "mean_ez_um"]
+                    .iter()
+                    .enumerate()
+                {
+                    let want = valid.iter().map(|e| e[k]).sum::<f64>() / valid.len() as f64;
+                    let got = first[*name].as_f64().unwrap();
+                    assert!((got - want).abs() < 1e-9, "{name}: {got} vs {want}");
+                }
             }
             SampleValues::Psd { y_um, .. } => assert_eq!(f("y_um"), *y_um),
         }

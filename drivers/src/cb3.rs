@@ -10,7 +10,7 @@
 use std::time::Duration;
 
 use protocol::cb3::{Decoder, Frame};
-use protocol::convert::{CapBallPoly, CapBallTransform};
+use protocol::convert::{CapBallCalibration, CapBallPoly, CapBallTransform};
 
 use crate::sample_path::{FrameConverter, Reading, SamplePath};
 use crate::serial_driver::{SerialDriver, SerialSession, idle_timeout, is_ok};
@@ -28,10 +28,19 @@ pub struct Cb3Config {
     pub transform: [[f64; 4]; 4],
 }
 
+impl Cb3Config {
+    /// The conversion of every sample (the log stores it with the codes).
+    pub fn calibration(&self) -> CapBallCalibration {
+        CapBallCalibration {
+            poly: self.poly.map(|c| CapBallPoly { c }),
+            transform: CapBallTransform { t: self.transform },
+        }
+    }
+}
+
 /// CB-3 frames to readings: volts → distance changes → machine-frame error.
 struct Cb3Frames {
-    poly: [CapBallPoly; 3],
-    transform: CapBallTransform,
+    cal: CapBallCalibration,
 }
 
 impl FrameConverter for Cb3Frames {
@@ -45,17 +54,15 @@ impl FrameConverter for Cb3Frames {
         match frame {
             Frame::Text(t) => out(Reading::Answer(t)),
             Frame::Sample(f) => {
-                let volts = f.volts();
-                let d_um: [f64; 3] = std::array::from_fn(|i| self.poly[i].distance_um(volts[i]));
-                let e_um = self.transform.apply(d_um);
+                let v = self.cal.convert(f.ch);
                 out(Reading::Data {
                     raw_seq: f.seq as u64,
                     raw_t_us: f.t_us as u64,
                     valid: f.flags & 0b111 == 0,
                     values: SampleValues::Capball {
-                        volts,
-                        d_um,
-                        e_um,
+                        volts: v.volts,
+                        d_um: v.d_um,
+                        e_um: v.e_um,
                         flags: f.flags,
                     },
                 });
@@ -102,8 +109,7 @@ pub fn spawn_cb3(
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
     let frames = Cb3Frames {
-        poly: cfg.poly.map(|c| CapBallPoly { c }),
-        transform: CapBallTransform { t: cfg.transform },
+        cal: cfg.calibration(),
     };
     let path = SamplePath::new(
         frames,

@@ -70,10 +70,14 @@ pub const TRAJECTORY_ATTACHMENT: &str = "trajectory.csv";
 /// Name of the attachment holding the run's config file.
 pub const CONFIG_ATTACHMENT: &str = "metrolog.toml";
 /// Key of the log format version in the run metadata: absent in format 1 (one JSON message
-/// per raw sample), `2` since raw samples are protobuf batches (docs/log-format.md).
+/// per raw sample), `2` for protobuf batches, `3` for compact batches (CB-3 as ADC codes,
+/// per-sample times as differences; docs/log-format.md).
 pub const LOG_FORMAT_KEY: &str = "log_format";
 /// The format this crate writes.
-pub const LOG_FORMAT: u32 = 2;
+pub const LOG_FORMAT: u32 = 3;
+/// Key of the CapBall calibration (JSON of `protocol::convert::CapBallCalibration`) in the run
+/// metadata; every CapBall batch of format 3 carries it too.
+pub const CAPBALL_CALIBRATION_KEY: &str = "capball_calibration";
 /// Key of the detector settings (JSON of [`DetectorSettings`]) in the run metadata.
 pub const DETECTOR_KEY: &str = "detector";
 
@@ -147,6 +151,9 @@ pub struct RunMetadata {
     pub detector: DetectorSettings,
     /// Instrument identities known at start (`*IDN?` answers), by instrument name.
     pub instruments: BTreeMap<String, String>,
+    /// The CapBall calibration the CB-3 driver converts with: the writer stores CB-3 samples
+    /// as ADC codes when it reproduces them (docs/log-format.md); `None` stores doubles.
+    pub capball: Option<protocol::convert::CapBallCalibration>,
     /// Anything else worth keeping (operator, config path, ...).
     pub extra: BTreeMap<String, String>,
 }
@@ -163,6 +170,12 @@ impl RunMetadata {
             DETECTOR_KEY.into(),
             serde_json::to_string(&self.detector).unwrap_or_default(),
         );
+        if let Some(c) = &self.capball {
+            m.insert(
+                CAPBALL_CALIBRATION_KEY.into(),
+                serde_json::to_string(c).unwrap_or_default(),
+            );
+        }
         for (k, v) in &self.instruments {
             m.insert(format!("instrument.{k}"), v.clone());
         }
@@ -178,6 +191,13 @@ impl RunMetadata {
                 "start_time_ns" => r.started_ns = v.parse().unwrap_or(0),
                 "start_time" | "metrolog_version" | LOG_FORMAT_KEY => {
                     r.extra.insert(k.clone(), v.clone());
+                }
+                CAPBALL_CALIBRATION_KEY => {
+                    r.capball =
+                        Some(serde_json::from_str(v).map_err(|e| LogError::BadMetadata {
+                            key: CAPBALL_CALIBRATION_KEY.into(),
+                            reason: e.to_string(),
+                        })?)
                 }
                 DETECTOR_KEY => {
                     r.detector = serde_json::from_str(v).map_err(|e| LogError::BadMetadata {

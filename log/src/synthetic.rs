@@ -55,6 +55,20 @@ impl SyntheticRun {
         self.targets_mm.len() as f64 * (self.move_s + self.dwell_s) + 0.5
     }
 
+    /// The calibration the synthetic CB-3 samples are converted with (10 µm/V sensors, the
+    /// machine error 1.25 × the sensor distances); a log of the run stores it.
+    pub fn capball_calibration() -> protocol::convert::CapBallCalibration {
+        use protocol::convert::{CapBallCalibration, CapBallPoly, CapBallTransform};
+        let mut t = CapBallTransform::IDENTITY;
+        for (i, row) in t.t.iter_mut().take(3).enumerate() {
+            row[i] = 1.25;
+        }
+        CapBallCalibration {
+            poly: [CapBallPoly::NOMINAL; 3],
+            transform: t,
+        }
+    }
+
     /// The machine error seen by the CapBall at pose k (µm), and by the PSD (µm).
     pub fn capball_error_um(k: usize) -> [f64; 3] {
         [0.5 * k as f64, -0.25 * k as f64, 0.1]
@@ -238,8 +252,20 @@ impl SyntheticEvents<'_> {
                 for (c, ec) in e.iter_mut().enumerate() {
                     *ec = e0[c] + moving_err + 0.5 * ring + noise * self.gauss();
                 }
-                let d = [e[0] * 0.8, e[1] * 0.8, e[2] * 0.8];
-                let v = [d[0] / 50.0 + 5.0, d[1] / 50.0 + 5.0, d[2] / 50.0 + 5.0];
+                // As the CB-3 driver does: ADC codes converted with the calibration (the
+                // codes of the sensor distances d = 0.8·e).
+                let cal = SyntheticRun::capball_calibration();
+                let codes = e.map(|x| {
+                    let code = (0.8 * x / 10.0 * protocol::cb3::CODE_FULL_SCALE
+                        / protocol::cb3::VOLTS_FULL_SCALE)
+                        .round();
+                    code.clamp(
+                        -protocol::cb3::CODE_FULL_SCALE,
+                        protocol::cb3::CODE_MAX as f64,
+                    ) as i32
+                });
+                let c = cal.convert(codes);
+                let (v, d, e) = (c.volts, c.d_um, c.e_um);
                 (
                     Instrument::Capball,
                     SampleValues::Capball {

@@ -678,7 +678,7 @@ pub enum LogMessage {
 }
 
 /// Decodes a message of one of metrolog's topics, JSON (old and current logs) or protobuf
-/// (raw batches); `log_ns` is the message's log time, the host time of an old JSON sample.
+/// (raw batches of format 2 or 3); `log_ns` is the message's log time, the host time of an old JSON sample.
 /// `Ok(None)` for a topic it does not know.
 pub fn decode_message(
     topic: &str,

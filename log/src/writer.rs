@@ -20,7 +20,7 @@ use drivers::{Sample, Trigger};
 use mcap::records::{MessageHeader, Metadata};
 use mcap::{Attachment, Compression, McapError, WriteOptions};
 
-use super::raw::{self, Batch};
+use super::raw::{self, Builder};
 use super::topics::{self, PoseMsg, StatusMsg, TopicMessage, TriggerMsg};
 use super::{LogError, RUN_METADATA, RunMetadata};
 
@@ -141,8 +141,8 @@ pub struct LogWriter {
     opts: LogOptions,
     /// The first write error: after it, every write returns it again.
     failed: Option<(String, &'static str)>,
-    /// Open raw batches, by `raw::RAW_TOPICS` index, with the host time of their first sample.
-    pending: [Option<(Batch, u64)>; 4],
+    /// Open raw batches, by `raw::RAW_TOPICS` index.
+    pending: [Builder; 4],
     /// Encoding buffer, reused.
     buf: Vec<u8>,
     samples: u64,
@@ -237,7 +237,7 @@ impl LogWriter {
             last_flush: Instant::now(),
             opts,
             failed: None,
-            pending: Default::default(),
+            pending: std::array::from_fn(|_| Builder::new(meta.capball)),
             buf: Vec::with_capacity(64 << 10),
             samples: 0,
             tap: None,
@@ -415,14 +415,12 @@ impl LogWriter {
             .iter()
             .position(|(t, _)| *t == topic)
             .unwrap_or(0);
-        let (batch, first_ns) = self.pending[i].get_or_insert_with(|| (Batch::for_sample(s), 0));
-        if batch.is_empty() {
-            *first_ns = s.host_ns;
-        }
+        let batch = &mut self.pending[i];
         batch.push(s);
         self.samples += 1;
+        let first_ns = batch.first_host_ns().unwrap_or(s.host_ns);
         let full = batch.len() >= self.opts.batch_max
-            || s.host_ns.saturating_sub(*first_ns) >= self.opts.batch_interval.as_nanos() as u64;
+            || s.host_ns.saturating_sub(first_ns) >= self.opts.batch_interval.as_nanos() as u64;
         if full {
             self.write_batch(i)?;
             self.flush_if_due()?;
@@ -431,17 +429,13 @@ impl LogWriter {
     }
 
     fn write_batch(&mut self, i: usize) -> Result<(), LogError> {
-        let Some((batch, first_ns)) = self.pending[i].as_mut() else {
+        let batch = &mut self.pending[i];
+        let (Some(topic), Some(log_ns)) = (batch.topic(), batch.first_host_ns()) else {
             return Ok(());
         };
-        if batch.is_empty() {
-            return Ok(());
-        }
-        let (topic, log_ns) = (batch.topic(), *first_ns);
         let mut buf = std::mem::take(&mut self.buf);
         buf.clear();
         batch.encode(&mut buf);
-        batch.clear();
         let r = self.write_message(topic, log_ns, &buf);
         self.buf = buf;
         r
@@ -450,16 +444,24 @@ impl LogWriter {
     /// Writes every open raw batch, oldest first.
     fn write_batches(&mut self) -> Result<(), LogError> {
         let mut open: Vec<(u64, usize)> = (0..self.pending.len())
-            .filter_map(|i| match &self.pending[i] {
-                Some((b, t)) if !b.is_empty() => Some((*t, i)),
-                _ => None,
-            })
+            .filter_map(|i| self.pending[i].first_host_ns().map(|t| (t, i)))
             .collect();
         open.sort_unstable();
         for (_, i) in open {
             self.write_batch(i)?;
         }
         Ok(())
+    }
+
+    /// CapBall batches written as ADC codes and as doubles (when the run's calibration did
+    /// not reproduce their samples; docs/log-format.md).
+    pub fn capball_batches(&self) -> [u64; 2] {
+        let mut n = [0; 2];
+        for b in &self.pending {
+            n[0] += b.capball_batches[0];
+            n[1] += b.capball_batches[1];
+        }
+        n
     }
 
     pub fn write_trigger(&mut self, t: &Trigger) -> Result<(), LogError> {

@@ -132,18 +132,105 @@ fn damaged_logs_give_their_prefix_and_recover_into_valid_files() {
     }
 }
 
-/// Regenerates `format2.mcap`, `truncated.mcap` and `torn-chunk.mcap` from `format1.mcap`
-/// with this version's writer (what `metrolog replay format1.mcap -o format2.mcap` writes,
-/// without re-running the detectors: the logged pose values are copied).
+/// The CapBall calibration of the run in `format1.mcap`: `poly` as in its config attachment
+/// (`[capball] poly = [[10.0, 0.02, -0.001], [10.0, -0.015, 0.0], [10.0, 0.01, 0.0005]]`),
+/// the transform from its `capball-transform.csv` attachment.
+fn format1_calibration() -> protocol::convert::CapBallCalibration {
+    use protocol::convert::{CapBallCalibration, CapBallPoly, CapBallTransform};
+    let mut csv = String::new();
+    read_log(&data("format1.mcap"), |item| {
+        if let LogItem::Attachment { name, data, .. } = item
+            && name == "capball-transform.csv"
+        {
+            csv = String::from_utf8(data.to_vec()).unwrap();
+        }
+    })
+    .unwrap();
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| l.split(',').map(|x| x.trim().parse().unwrap()).collect())
+        .collect();
+    CapBallCalibration {
+        poly: [
+            [10.0, 0.02, -0.001],
+            [10.0, -0.015, 0.0],
+            [10.0, 0.01, 0.0005],
+        ]
+        .map(|c| CapBallPoly { c }),
+        transform: CapBallTransform {
+            t: std::array::from_fn(|r| std::array::from_fn(|k| rows[r][k])),
+        },
+    }
+}
+
+#[test]
+fn format_3_holds_the_same_run_with_capball_codes() {
+    let f1 = read(&data("format1.mcap"));
+    let f3 = read(&data("format3.mcap"));
+    assert!(f3.summary.clean_close);
+    assert_eq!(f1.samples.len(), f3.samples.len());
+    let by_topic = |v: &[Sample]| {
+        let mut m: BTreeMap<&str, Vec<String>> = BTreeMap::new();
+        for s in v {
+            m.entry(metrolog_log::raw::topic_of(s))
+                .or_default()
+                .push(format!("{s:?}"));
+        }
+        m
+    };
+    assert!(
+        by_topic(&f1.samples) == by_topic(&f3.samples),
+        "samples differ"
+    );
+    assert_eq!(f1.poses, f3.poses);
+    let m3 = read_run_metadata(&data("format3.mcap")).unwrap().unwrap();
+    assert_eq!(m3.get(LOG_FORMAT_KEY).map(String::as_str), Some("3"));
+    let meta = metrolog_log::RunMetadata::from_map(&m3).unwrap();
+    assert_eq!(meta.capball, Some(format1_calibration()));
+    // Every CapBall batch holds ADC codes and the calibration, none the nine doubles.
+    let mut capball = 0;
+    read_log(&data("format3.mcap"), |item| {
+        if let LogItem::Message { topic, data, .. } = item
+            && topic == "/capball/sample"
+        {
+            let b = metrolog_log::raw::Batch::decode(topic, data)
+                .unwrap()
+                .unwrap();
+            let metrolog_log::raw::Batch::Format3(metrolog_log::raw::v3::Batch::Capball(b)) = b
+            else {
+                panic!("not a format-3 CapBall batch")
+            };
+            assert!(b.calibration.is_some() && b.volts_1.is_empty());
+            capball += 1;
+        }
+    })
+    .unwrap();
+    assert_eq!(capball, 57);
+    // Pinned: the size of the fixture (format 2 of the same run is larger).
+    let size = |n: &str| std::fs::metadata(data(n)).unwrap().len();
+    assert!(size("format3.mcap") < size("format2.mcap"));
+}
+
+/// Regenerates `format3.mcap` from `format1.mcap` with this version's writer (what
+/// `metrolog replay format1.mcap -o format3.mcap` writes, without re-running the detectors:
+/// the logged pose values are copied), with the run's CapBall calibration from its attachments.
+/// `format2.mcap` and the damaged logs made from it were written the same way by the writer of
+/// format 2 and are kept as they are.
 /// Run: `cargo test -p metrolog-log --test formats -- --ignored regenerate`.
 #[test]
 #[ignore = "rewrites the fixtures"]
 fn regenerate_fixtures() {
     use metrolog_log::{LogOptions, LogWriter, RUN_METADATA, RunMetadata};
     let src = data("format1.mcap");
-    let dst = data("format2.mcap");
+    let dst = data("format3.mcap");
     let _ = std::fs::remove_file(&dst);
-    let meta = RunMetadata::from_map(&read_run_metadata(&src).unwrap().unwrap()).unwrap();
+    let mut meta = RunMetadata::from_map(&read_run_metadata(&src).unwrap().unwrap()).unwrap();
+    meta.capball = Some(format1_calibration());
+    meta.extra.insert(
+        "fixture".into(),
+        "format-3 golden log: format1.mcap rewritten by the format-3 writer".into(),
+    );
     let opts = LogOptions {
         chunk_size: 64 << 10,
         ..LogOptions::default()
@@ -175,33 +262,10 @@ fn regenerate_fixtures() {
         _ => {}
     })
     .unwrap();
+    assert_eq!(
+        w.capball_batches()[1],
+        0,
+        "CapBall batches written as doubles"
+    );
     w.finish().unwrap();
-    let full = std::fs::read(&dst).unwrap();
-    std::fs::write(data("truncated.mcap"), &full[..full.len() * 6 / 10]).unwrap();
-    // The fourth chunk record (opcode 0x06) and 16 zeroed bytes in its middle.
-    let mut torn = full.clone();
-    let chunks: Vec<usize> = chunk_offsets(&full);
-    let (a, b) = (chunks[3], chunks[4]);
-    let mid = (a + b) / 2;
-    torn[mid..mid + 16].fill(0);
-    std::fs::write(data("torn-chunk.mcap"), torn).unwrap();
-}
-
-/// Offsets of the chunk records, walking the top-level records after the magic.
-fn chunk_offsets(file: &[u8]) -> Vec<usize> {
-    let mut at = 8;
-    let mut out = Vec::new();
-    while at + 9 <= file.len() {
-        let op = file[at];
-        let len = u64::from_le_bytes(file[at + 1..at + 9].try_into().unwrap()) as usize;
-        if op == 0x06 {
-            out.push(at);
-        }
-        if op == 0x02 {
-            break; // footer
-        }
-        at += 9 + len;
-    }
-    out.push(at);
-    out
 }

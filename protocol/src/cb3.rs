@@ -43,11 +43,32 @@ pub struct SampleFrame {
     pub flags: u8,
 }
 
+/// Volts of a 24-bit code: code · 10.0 / 8388608.
+///
+/// Exact in f64: |code · 10| < 2^27 is an integer f64 holds exactly, and dividing by 2^23 only
+/// changes the exponent. So every code has its own volts value and [`volts_code`] gives the
+/// code back (the log stores codes and recomputes volts with this function,
+/// docs/log-format.md).
+#[inline]
+pub fn code_volts(code: i32) -> f64 {
+    f64::from(code) * VOLTS_FULL_SCALE / CODE_FULL_SCALE
+}
+
+/// The 24-bit code whose [`code_volts`] is `volts`, bit for bit; `None` for any other value
+/// (between two codes, out of range, NaN, `-0.0`).
+pub fn volts_code(volts: f64) -> Option<i32> {
+    let c = volts * CODE_FULL_SCALE / VOLTS_FULL_SCALE;
+    if !(c >= -CODE_FULL_SCALE && c <= CODE_MAX as f64) {
+        return None;
+    }
+    let code = c as i32;
+    (code_volts(code).to_bits() == volts.to_bits()).then_some(code)
+}
+
 impl SampleFrame {
-    /// Volts of channel `i`: code · 10.0 / 8388608.
+    /// Volts of channel `i`: [`code_volts`].
     pub fn volts(&self) -> [f64; 3] {
-        self.ch
-            .map(|c| f64::from(c) * VOLTS_FULL_SCALE / CODE_FULL_SCALE)
+        self.ch.map(code_volts)
     }
     /// Over-range flag of channel `i` (0-2).
     pub fn over_range(&self, i: usize) -> bool {
@@ -334,6 +355,35 @@ mod tests {
         assert_eq!(v[0], -10.0 / 8_388_608.0);
         assert_eq!(v[2], -10.0);
         assert!(s.over_range(0) && !s.over_range(1) && s.over_range(2) && !s.over_range(3));
+    }
+
+    /// Every 24-bit code → volts → the same code, and volts are exactly code · 10 / 2^23
+    /// (checked with integer arithmetic: volts · 2^23 is an integer equal to code · 10).
+    #[test]
+    fn volts_and_codes_convert_exactly_both_ways() {
+        for code in -(1 << 23)..(1 << 23) {
+            let v = code_volts(code);
+            assert_eq!(volts_code(v), Some(code), "code {code}");
+            if code % 4099 == 0 || code.abs() >= CODE_MAX - 2 {
+                let scaled = v * 8_388_608.0;
+                assert_eq!(scaled.fract(), 0.0, "code {code}");
+                assert_eq!(scaled as i64, i64::from(code) * 10, "code {code}");
+            }
+        }
+        assert_eq!(code_volts(-(1 << 23)), -10.0);
+        assert_eq!(code_volts(CODE_MAX), 10.0 - 10.0 / 8_388_608.0);
+        let between = (code_volts(1) + code_volts(2)) / 2.0;
+        for v in [
+            between,
+            -0.0,
+            f64::NAN,
+            10.0,
+            -10.000_001,
+            f64::INFINITY,
+            1.0 / 3.0,
+        ] {
+            assert_eq!(volts_code(v), None, "{v}");
+        }
     }
 
     #[test]

@@ -200,18 +200,49 @@ impl CapBallTransform {
     }
 }
 
+/// The calibration of a CapBall: the polynomial of each sensor and the cube-calibration
+/// transform. The CB-3 driver converts every sample with it, and a log stores it with the raw
+/// codes so a reader recomputes the same values bit for bit (docs/log-format.md).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CapBallCalibration {
+    pub poly: [CapBallPoly; 3],
+    pub transform: CapBallTransform,
+}
+
+/// What one CB-3 sample converts to: volts, sensor distance changes (µm) and the
+/// machine-frame error (µm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CapBallValues {
+    pub volts: [f64; 3],
+    pub d_um: [f64; 3],
+    pub e_um: [f64; 3],
+}
+
+impl CapBallCalibration {
+    /// Codes → volts → sensor distances → machine-frame volumetric error.
+    #[inline]
+    pub fn convert(&self, codes: [i32; 3]) -> CapBallValues {
+        let volts = codes.map(crate::cb3::code_volts);
+        let d_um: [f64; 3] = std::array::from_fn(|i| self.poly[i].distance_um(volts[i]));
+        CapBallValues {
+            volts,
+            d_um,
+            e_um: self.transform.apply(d_um),
+        }
+    }
+}
+
 /// Volts → sensor distances → machine-frame volumetric error, µm, for one CB-3 sample.
 pub fn capball_volumetric_um(
     s: &SampleFrame,
     polys: &[CapBallPoly; 3],
     t: &CapBallTransform,
 ) -> [f64; 3] {
-    let v = s.volts();
-    t.apply([
-        polys[0].distance_um(v[0]),
-        polys[1].distance_um(v[1]),
-        polys[2].distance_um(v[2]),
-    ])
+    let cal = CapBallCalibration {
+        poly: *polys,
+        transform: *t,
+    };
+    cal.convert(s.ch).e_um
 }
 
 // ---------------------------------------------------------------------------------------------

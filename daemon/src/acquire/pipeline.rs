@@ -652,6 +652,8 @@ pub fn open_log(
         started_ns: now,
         detector: settings.clone(),
         instruments: BTreeMap::new(),
+        // The log stores CB-3 samples as ADC codes with this calibration (docs/log-format.md).
+        capball: cfg.capball.as_ref().map(|c| c.driver.calibration()),
         extra,
     };
     let mut writer = metrolog_log::LogWriter::create_in_dir(

@@ -141,7 +141,8 @@ async function main(file) {
           t.problems.push(`numbers beyond 2^53 at ${bad.slice(0, 3).join(", ")}`);
         }
       } else if (msg.header) {
-        t.samples += msg.header.seq.length;
+        // Format 3 says how many samples a batch holds; format 2 has one seq per sample.
+        t.samples += msg.header.count !== undefined ? msg.header.count : msg.header.seq.length;
       }
       if (t.first === null) t.first = msg;
     }

@@ -25,6 +25,7 @@ pub fn meta(run: &SyntheticRun) -> RunMetadata {
         machine: "test-mill".into(),
         started_ns: run.start_ns,
         detector: DetectorSettings::default(),
+        capball: Some(SyntheticRun::capball_calibration()),
         ..RunMetadata::default()
     };
     m.instruments

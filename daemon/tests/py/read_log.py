@@ -38,7 +38,10 @@ def protobuf_samples(schema, data, classes):
             pool.Add(fd)
         cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
         classes[schema.id] = cls
-    return len(cls.FromString(data).header.seq)
+    header = cls.FromString(data).header
+    # Format 3 says how many samples a batch holds; format 2 has one seq per sample.
+    count = getattr(header, "count", None)
+    return count if count is not None else len(header.seq)
 
 
 def main(path):

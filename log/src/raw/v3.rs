@@ -1,0 +1,641 @@
+//! Format 3 of the raw topics (docs/log-format.md): per-sample header columns as packed
+//! differences, the CB-3 as ADC codes plus the calibration that converts them.
+//!
+//! Difference columns (`*_delta`) hold, per sample, the value minus the previous sample's
+//! value (wrapping, so any `u64`/`i64` comes back exactly); the first entry is the value
+//! itself, except for the two time columns, whose first entry is 0 and whose base is the
+//! `Timestamp` in the header (no integer beyond 2^53 reaches a JavaScript viewer).
+
+use drivers::{Instrument, Sample, SampleValues};
+use prost::Message;
+use prost_types::Timestamp;
+use protocol::cb3::volts_code;
+use protocol::convert::{CapBallCalibration, CapBallPoly, CapBallTransform};
+
+use super::v2::{timestamp, timestamp_ns};
+use super::{CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC};
+
+/// Per-sample columns common to every raw batch. Tag 1 of a batch is never used in format 3
+/// (it is format 2's header; `raw::Batch::decode` tells the formats apart by it).
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct SampleHeader {
+    /// Samples in the batch.
+    #[prost(uint32, tag = "1")]
+    pub count: u32,
+    /// Fitted time (device time on the host axis) of the first sample.
+    #[prost(message, optional, tag = "2")]
+    pub time: Option<Timestamp>,
+    /// Host arrival time of the first sample.
+    #[prost(message, optional, tag = "3")]
+    pub host_time: Option<Timestamp>,
+    #[prost(sint64, repeated, tag = "4")]
+    pub seq_delta: Vec<i64>,
+    #[prost(sint64, repeated, tag = "5")]
+    pub device_t_us_delta: Vec<i64>,
+    /// Fitted time minus the previous sample's, ns (first entry 0: `time`).
+    #[prost(sint64, repeated, tag = "6")]
+    pub time_delta_ns: Vec<i64>,
+    /// Host arrival time minus the previous sample's, ns (first entry 0: `host_time`).
+    #[prost(sint64, repeated, tag = "7")]
+    pub host_time_delta_ns: Vec<i64>,
+    #[prost(bool, repeated, tag = "8")]
+    pub valid: Vec<bool>,
+}
+
+/// `/interferometer/position`: LI-80 `$POS` records.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct PositionBatch {
+    #[prost(message, optional, tag = "2")]
+    pub header: Option<SampleHeader>,
+    #[prost(sint64, repeated, tag = "3")]
+    pub raw_nm_delta: Vec<i64>,
+    #[prost(double, repeated, tag = "4")]
+    pub position_um: Vec<f64>,
+    #[prost(uint32, repeated, tag = "5")]
+    pub sig: Vec<u32>,
+    #[prost(uint32, repeated, tag = "6")]
+    pub flags: Vec<u32>,
+}
+
+/// `/interferometer/environment`: LI-80 `$ENV` records; `material_c` holds the material
+/// temperatures of all samples one after the other, `material_count[i]` of sample `i`.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct EnvironmentBatch {
+    #[prost(message, optional, tag = "2")]
+    pub header: Option<SampleHeader>,
+    #[prost(double, repeated, tag = "3")]
+    pub air_c: Vec<f64>,
+    #[prost(double, repeated, tag = "4")]
+    pub air_pa: Vec<f64>,
+    #[prost(double, repeated, tag = "5")]
+    pub rh_pct: Vec<f64>,
+    #[prost(double, repeated, tag = "6")]
+    pub n_air: Vec<f64>,
+    #[prost(double, repeated, tag = "7")]
+    pub material_c: Vec<f64>,
+    #[prost(uint32, repeated, tag = "8")]
+    pub material_count: Vec<u32>,
+}
+
+/// The CapBall calibration of a batch: `poly` = c1, c2, c3 of sensor 1, then 2, then 3;
+/// `transform` = the 4×4 matrix row by row (`protocol::convert::CapBallCalibration`).
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct CapballCalibration {
+    #[prost(double, repeated, tag = "1")]
+    pub poly: Vec<f64>,
+    #[prost(double, repeated, tag = "2")]
+    pub transform: Vec<f64>,
+}
+
+/// `/capball/sample`: CB-3 samples as the wire carried them — the three 24-bit ADC codes
+/// (differences) and the flags — with the calibration that turns them into volts, distances
+/// and the machine-frame error (`CapBallCalibration::convert`, the driver's conversion). The
+/// batch means of the error are for viewers. When the calibration does not reproduce a
+/// sample of the batch bit for bit (no calibration known, or values that did not come from a
+/// CB-3 frame), the batch stores the nine doubles of every sample instead of codes and
+/// calibration.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct CapballBatch {
+    #[prost(message, optional, tag = "2")]
+    pub header: Option<SampleHeader>,
+    #[prost(sint32, repeated, tag = "3")]
+    pub code_1_delta: Vec<i32>,
+    #[prost(sint32, repeated, tag = "4")]
+    pub code_2_delta: Vec<i32>,
+    #[prost(sint32, repeated, tag = "5")]
+    pub code_3_delta: Vec<i32>,
+    #[prost(uint32, repeated, tag = "6")]
+    pub flags: Vec<u32>,
+    #[prost(message, optional, tag = "7")]
+    pub calibration: Option<CapballCalibration>,
+    /// Mean machine-frame error of the batch's valid samples, µm (NaN when none is valid).
+    #[prost(double, tag = "8")]
+    pub mean_ex_um: f64,
+    #[prost(double, tag = "9")]
+    pub mean_ey_um: f64,
+    #[prost(double, tag = "10")]
+    pub mean_ez_um: f64,
+    #[prost(double, repeated, tag = "11")]
+    pub volts_1: Vec<f64>,
+    #[prost(double, repeated, tag = "12")]
+    pub volts_2: Vec<f64>,
+    #[prost(double, repeated, tag = "13")]
+    pub volts_3: Vec<f64>,
+    #[prost(double, repeated, tag = "14")]
+    pub d1_um: Vec<f64>,
+    #[prost(double, repeated, tag = "15")]
+    pub d2_um: Vec<f64>,
+    #[prost(double, repeated, tag = "16")]
+    pub d3_um: Vec<f64>,
+    #[prost(double, repeated, tag = "17")]
+    pub ex_um: Vec<f64>,
+    #[prost(double, repeated, tag = "18")]
+    pub ey_um: Vec<f64>,
+    #[prost(double, repeated, tag = "19")]
+    pub ez_um: Vec<f64>,
+}
+
+/// `/psd/sample`: PSD-2 samples.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct PsdBatch {
+    #[prost(message, optional, tag = "2")]
+    pub header: Option<SampleHeader>,
+    #[prost(double, repeated, tag = "3")]
+    pub x_um: Vec<f64>,
+    #[prost(double, repeated, tag = "4")]
+    pub y_um: Vec<f64>,
+    #[prost(double, repeated, tag = "5")]
+    pub sum_pa: Vec<f64>,
+    #[prost(double, repeated, tag = "6")]
+    pub head_c: Vec<f64>,
+}
+
+/// `x - prev` as the difference column stores it (wrapping: exact for any value).
+#[inline]
+fn delta(x: u64, prev: u64) -> i64 {
+    x.wrapping_sub(prev) as i64
+}
+
+/// A difference column back to its values (`first`: the value before the first entry).
+fn undelta(d: &[i64], first: u64) -> Vec<u64> {
+    let mut v = first;
+    d.iter()
+        .map(|&x| {
+            v = v.wrapping_add(x as u64);
+            v
+        })
+        .collect()
+}
+
+impl SampleHeader {
+    fn of(samples: &[Sample]) -> SampleHeader {
+        let n = samples.len();
+        let first = samples.first();
+        let mut h = SampleHeader {
+            count: n as u32,
+            time: first.map(|s| timestamp(s.fitted_ns)),
+            host_time: first.map(|s| timestamp(s.host_ns)),
+            seq_delta: Vec::with_capacity(n),
+            device_t_us_delta: Vec::with_capacity(n),
+            time_delta_ns: Vec::with_capacity(n),
+            host_time_delta_ns: Vec::with_capacity(n),
+            valid: Vec::with_capacity(n),
+        };
+        let (mut seq, mut dev) = (0, 0);
+        let (mut fit, mut host) = first.map_or((0, 0), |s| (s.fitted_ns, s.host_ns));
+        for s in samples {
+            h.seq_delta.push(delta(s.seq, seq));
+            h.device_t_us_delta.push(delta(s.device_t_us, dev));
+            h.time_delta_ns.push(delta(s.fitted_ns, fit));
+            h.host_time_delta_ns.push(delta(s.host_ns, host));
+            h.valid.push(s.valid);
+            (seq, dev, fit, host) = (s.seq, s.device_t_us, s.fitted_ns, s.host_ns);
+        }
+        h
+    }
+
+    fn len(&self) -> usize {
+        self.count as usize
+    }
+
+    /// (seq, device_t_us, fitted_ns, host_ns, valid) of every sample.
+    #[allow(clippy::type_complexity)]
+    fn columns(&self) -> Result<(Vec<u64>, Vec<u64>, Vec<u64>, Vec<u64>), String> {
+        let n = self.len();
+        let lens = [
+            self.seq_delta.len(),
+            self.device_t_us_delta.len(),
+            self.time_delta_ns.len(),
+            self.host_time_delta_ns.len(),
+            self.valid.len(),
+        ];
+        if let Some(bad) = lens.iter().find(|&&l| l != n) {
+            return Err(format!(
+                "a batch header of {n} samples has a column of {bad}"
+            ));
+        }
+        let base = |t: &Option<Timestamp>, what: &str| match t {
+            Some(t) => timestamp_ns(t),
+            None if n == 0 => Ok(0),
+            None => Err(format!("a batch header without its {what}")),
+        };
+        Ok((
+            undelta(&self.seq_delta, 0),
+            undelta(&self.device_t_us_delta, 0),
+            undelta(&self.time_delta_ns, base(&self.time, "time")?),
+            undelta(
+                &self.host_time_delta_ns,
+                base(&self.host_time, "host_time")?,
+            ),
+        ))
+    }
+}
+
+/// A value column of `len` entries where `n` are expected.
+fn check_len(topic: &str, n: usize, lens: &[usize]) -> Result<(), String> {
+    match lens.iter().find(|&&l| l != n) {
+        Some(bad) => Err(format!(
+            "a {topic} batch has columns of {n} and {bad} samples"
+        )),
+        None => Ok(()),
+    }
+}
+
+impl PositionBatch {
+    pub fn from_samples(samples: &[Sample]) -> PositionBatch {
+        let mut b = PositionBatch {
+            header: Some(SampleHeader::of(samples)),
+            ..Default::default()
+        };
+        let mut prev = 0i64;
+        for s in samples {
+            if let SampleValues::Position {
+                raw_nm,
+                position_um,
+                sig,
+                flags,
+            } = s.values
+            {
+                b.raw_nm_delta.push(raw_nm.wrapping_sub(prev));
+                prev = raw_nm;
+                b.position_um.push(position_um);
+                b.sig.push(u32::from(sig));
+                b.flags.push(flags);
+            }
+        }
+        b
+    }
+}
+
+impl EnvironmentBatch {
+    pub fn from_samples(samples: &[Sample]) -> EnvironmentBatch {
+        let mut b = EnvironmentBatch {
+            header: Some(SampleHeader::of(samples)),
+            ..Default::default()
+        };
+        for s in samples {
+            if let SampleValues::Environment {
+                air_c,
+                air_pa,
+                rh_pct,
+                material_c,
+                n_air,
+            } = &s.values
+            {
+                b.air_c.push(*air_c);
+                b.air_pa.push(*air_pa);
+                b.rh_pct.push(*rh_pct);
+                b.n_air.push(*n_air);
+                b.material_c.extend_from_slice(material_c);
+                b.material_count.push(material_c.len() as u32);
+            }
+        }
+        b
+    }
+}
+
+impl PsdBatch {
+    pub fn from_samples(samples: &[Sample]) -> PsdBatch {
+        let mut b = PsdBatch {
+            header: Some(SampleHeader::of(samples)),
+            ..Default::default()
+        };
+        for s in samples {
+            if let SampleValues::Psd {
+                x_um,
+                y_um,
+                sum_pa,
+                head_c,
+            } = s.values
+            {
+                b.x_um.push(x_um);
+                b.y_um.push(y_um);
+                b.sum_pa.push(sum_pa);
+                b.head_c.push(head_c);
+            }
+        }
+        b
+    }
+}
+
+impl CapballCalibration {
+    pub fn of(c: &CapBallCalibration) -> CapballCalibration {
+        CapballCalibration {
+            poly: c.poly.iter().flat_map(|p| p.c).collect(),
+            transform: c.transform.t.iter().flatten().copied().collect(),
+        }
+    }
+
+    pub fn to_calibration(&self) -> Result<CapBallCalibration, String> {
+        if self.poly.len() != 9 || self.transform.len() != 16 {
+            return Err(format!(
+                "a CapBall calibration of {} polynomial coefficients and {} transform entries (9 and 16 expected)",
+                self.poly.len(),
+                self.transform.len()
+            ));
+        }
+        Ok(CapBallCalibration {
+            poly: std::array::from_fn(|i| CapBallPoly {
+                c: std::array::from_fn(|k| self.poly[3 * i + k]),
+            }),
+            transform: CapBallTransform {
+                t: std::array::from_fn(|r| std::array::from_fn(|k| self.transform[4 * r + k])),
+            },
+        })
+    }
+}
+
+/// The codes of a CapBall sample if `cal` reproduces its volts, distances and error bit for
+/// bit.
+fn reproduced_codes(cal: &CapBallCalibration, s: &Sample) -> Option<[i32; 3]> {
+    let SampleValues::Capball {
+        volts, d_um, e_um, ..
+    } = &s.values
+    else {
+        return None;
+    };
+    let codes = [
+        volts_code(volts[0])?,
+        volts_code(volts[1])?,
+        volts_code(volts[2])?,
+    ];
+    let v = cal.convert(codes);
+    let same =
+        |a: &[f64; 3], b: &[f64; 3]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+    (same(&v.d_um, d_um) && same(&v.e_um, e_um)).then_some(codes)
+}
+
+impl CapballBatch {
+    /// The batch of `samples`: as codes when `cal` reproduces every one of them, as doubles
+    /// otherwise.
+    pub fn from_samples(samples: &[Sample], cal: Option<&CapBallCalibration>) -> CapballBatch {
+        let mut b = CapballBatch {
+            header: Some(SampleHeader::of(samples)),
+            ..Default::default()
+        };
+        let (mut sum, mut valid) = ([0.0; 3], 0usize);
+        for s in samples {
+            if let SampleValues::Capball { e_um, flags, .. } = &s.values {
+                b.flags.push(u32::from(*flags));
+                if s.valid {
+                    valid += 1;
+                    sum.iter_mut().zip(e_um).for_each(|(a, x)| *a += x);
+                }
+            }
+        }
+        let mean = sum.map(|x| x / valid as f64);
+        [b.mean_ex_um, b.mean_ey_um, b.mean_ez_um] = mean;
+        if let Some(cal) = cal
+            && b.push_codes(samples, cal)
+        {
+            b.calibration = Some(CapballCalibration::of(cal));
+            return b;
+        }
+        for s in samples {
+            if let SampleValues::Capball {
+                volts, d_um, e_um, ..
+            } = &s.values
+            {
+                let cols = [
+                    &mut b.volts_1,
+                    &mut b.volts_2,
+                    &mut b.volts_3,
+                    &mut b.d1_um,
+                    &mut b.d2_um,
+                    &mut b.d3_um,
+                    &mut b.ex_um,
+                    &mut b.ey_um,
+                    &mut b.ez_um,
+                ];
+                let vals = volts.iter().chain(d_um).chain(e_um);
+                cols.into_iter().zip(vals).for_each(|(c, x)| c.push(*x));
+            }
+        }
+        b
+    }
+
+    /// Fills the code columns; false (and the columns empty) when a sample is not reproduced.
+    fn push_codes(&mut self, samples: &[Sample], cal: &CapBallCalibration) -> bool {
+        let mut prev = [0i32; 3];
+        for s in samples {
+            let Some(codes) = reproduced_codes(cal, s) else {
+                self.code_1_delta.clear();
+                self.code_2_delta.clear();
+                self.code_3_delta.clear();
+                return false;
+            };
+            // Codes are 24-bit: their differences fit an i32.
+            self.code_1_delta.push(codes[0] - prev[0]);
+            self.code_2_delta.push(codes[1] - prev[1]);
+            self.code_3_delta.push(codes[2] - prev[2]);
+            prev = codes;
+        }
+        true
+    }
+
+    /// (volts, d_um, e_um) of every sample.
+    #[allow(clippy::type_complexity)]
+    fn values(&self, n: usize) -> Result<Vec<([f64; 3], [f64; 3], [f64; 3])>, String> {
+        let t = CAPBALL_TOPIC;
+        if let Some(c) = &self.calibration {
+            let cal = c.to_calibration()?;
+            let codes = [&self.code_1_delta, &self.code_2_delta, &self.code_3_delta];
+            check_len(t, n, &codes.map(|c| c.len()))?;
+            let mut acc = [0i64; 3];
+            return (0..n)
+                .map(|i| {
+                    let mut code = [0i32; 3];
+                    for k in 0..3 {
+                        acc[k] += i64::from(codes[k][i]);
+                        code[k] = i32::try_from(acc[k])
+                            .ok()
+                            .filter(|c| (-(1 << 23)..(1 << 23)).contains(c))
+                            .ok_or_else(|| format!("a CapBall code of {} is not 24-bit", acc[k]))?;
+                    }
+                    let v = cal.convert(code);
+                    Ok((v.volts, v.d_um, v.e_um))
+                })
+                .collect();
+        }
+        let cols = [
+            &self.volts_1,
+            &self.volts_2,
+            &self.volts_3,
+            &self.d1_um,
+            &self.d2_um,
+            &self.d3_um,
+            &self.ex_um,
+            &self.ey_um,
+            &self.ez_um,
+        ];
+        check_len(t, n, &cols.map(|c| c.len()))?;
+        Ok((0..n)
+            .map(|i| {
+                let c = |k: usize| [cols[k][i], cols[k + 1][i], cols[k + 2][i]];
+                (c(0), c(3), c(6))
+            })
+            .collect())
+    }
+}
+
+/// A decoded format-3 batch of one raw topic (one per message read: the size of the
+/// variants does not matter).
+#[derive(Debug, Clone, PartialEq)]
+#[allow(clippy::large_enum_variant)]
+pub enum Batch {
+    Position(PositionBatch),
+    Environment(EnvironmentBatch),
+    Capball(CapballBatch),
+    Psd(PsdBatch),
+}
+
+impl Batch {
+    /// Decodes a format-3 message of a raw topic; `Ok(None)` for another topic.
+    pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, String> {
+        let e = |e: prost::DecodeError| e.to_string();
+        Ok(Some(match topic {
+            POSITION_TOPIC => Batch::Position(PositionBatch::decode(data).map_err(e)?),
+            ENVIRONMENT_TOPIC => Batch::Environment(EnvironmentBatch::decode(data).map_err(e)?),
+            CAPBALL_TOPIC => Batch::Capball(CapballBatch::decode(data).map_err(e)?),
+            PSD_TOPIC => Batch::Psd(PsdBatch::decode(data).map_err(e)?),
+            _ => return Ok(None),
+        }))
+    }
+
+    pub fn topic(&self) -> &'static str {
+        match self {
+            Batch::Position(_) => POSITION_TOPIC,
+            Batch::Environment(_) => ENVIRONMENT_TOPIC,
+            Batch::Capball(_) => CAPBALL_TOPIC,
+            Batch::Psd(_) => PSD_TOPIC,
+        }
+    }
+
+    fn header(&self) -> Option<&SampleHeader> {
+        match self {
+            Batch::Position(b) => b.header.as_ref(),
+            Batch::Environment(b) => b.header.as_ref(),
+            Batch::Capball(b) => b.header.as_ref(),
+            Batch::Psd(b) => b.header.as_ref(),
+        }
+    }
+
+    /// Samples in the batch, as its header says.
+    pub fn len(&self) -> usize {
+        self.header().map_or(0, SampleHeader::len)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The samples back, in order. A batch whose columns differ in length is an error.
+    pub fn samples(&self) -> Result<Vec<Sample>, String> {
+        let Some(h) = self.header() else {
+            return Ok(Vec::new());
+        };
+        let n = h.len();
+        let (seq, dev, fitted, host) = h.columns()?;
+        let topic = self.topic();
+        let values: Vec<(Instrument, SampleValues)> = match self {
+            Batch::Position(b) => {
+                check_len(topic, n, &[b.raw_nm_delta.len(), b.position_um.len()])?;
+                check_len(topic, n, &[b.sig.len(), b.flags.len()])?;
+                let mut raw = 0i64;
+                (0..n)
+                    .map(|i| {
+                        raw = raw.wrapping_add(b.raw_nm_delta[i]);
+                        let sig = u8::try_from(b.sig[i]).map_err(|_| "sig above 255")?;
+                        Ok((
+                            Instrument::Interferometer,
+                            SampleValues::Position {
+                                raw_nm: raw,
+                                position_um: b.position_um[i],
+                                sig,
+                                flags: b.flags[i],
+                            },
+                        ))
+                    })
+                    .collect::<Result<_, &str>>()?
+            }
+            Batch::Environment(b) => {
+                check_len(topic, n, &[b.air_c.len(), b.air_pa.len(), b.rh_pct.len()])?;
+                check_len(topic, n, &[b.n_air.len(), b.material_count.len()])?;
+                let total: u64 = b.material_count.iter().map(|&c| u64::from(c)).sum();
+                if total != b.material_c.len() as u64 {
+                    return Err(format!(
+                        "material_count adds up to {total}, material_c has {}",
+                        b.material_c.len()
+                    ));
+                }
+                let mut at = 0usize;
+                (0..n)
+                    .map(|i| {
+                        let k = b.material_count[i] as usize;
+                        let material_c = b.material_c[at..at + k].to_vec();
+                        at += k;
+                        (
+                            Instrument::Interferometer,
+                            SampleValues::Environment {
+                                air_c: b.air_c[i],
+                                air_pa: b.air_pa[i],
+                                rh_pct: b.rh_pct[i],
+                                material_c,
+                                n_air: b.n_air[i],
+                            },
+                        )
+                    })
+                    .collect()
+            }
+            Batch::Capball(b) => {
+                check_len(topic, n, &[b.flags.len()])?;
+                let v = b.values(n)?;
+                (0..n)
+                    .map(|i| {
+                        let flags = u8::try_from(b.flags[i]).map_err(|_| "flags above 255")?;
+                        let (volts, d_um, e_um) = v[i];
+                        Ok((
+                            Instrument::Capball,
+                            SampleValues::Capball {
+                                volts,
+                                d_um,
+                                e_um,
+                                flags,
+                            },
+                        ))
+                    })
+                    .collect::<Result<_, &str>>()?
+            }
+            Batch::Psd(b) => {
+                check_len(topic, n, &[b.x_um.len(), b.y_um.len()])?;
+                check_len(topic, n, &[b.sum_pa.len(), b.head_c.len()])?;
+                (0..n)
+                    .map(|i| {
+                        (
+                            Instrument::Psd,
+                            SampleValues::Psd {
+                                x_um: b.x_um[i],
+                                y_um: b.y_um[i],
+                                sum_pa: b.sum_pa[i],
+                                head_c: b.head_c[i],
+                            },
+                        )
+                    })
+                    .collect()
+            }
+        };
+        Ok(values
+            .into_iter()
+            .enumerate()
+            .map(|(i, (instrument, values))| Sample {
+                instrument,
+                seq: seq[i],
+                device_t_us: dev[i],
+                host_ns: host[i],
+                fitted_ns: fitted[i],
+                valid: h.valid[i],
+                values,
+            })
+            .collect())
+    }
+}

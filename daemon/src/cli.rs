@@ -51,6 +51,12 @@ pub enum Command {
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
+    if !matches!(
+        cli.command,
+        Command::Run(_) | Command::Demo(_) | Command::Sim(_)
+    ) {
+        stop_quietly_on_closed_pipe();
+    }
     match cli.command {
         Command::Run(a) => cmd::run::run(a),
         Command::Demo(a) => cmd::demo::run(a),
@@ -67,5 +73,17 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Plan(c) => cmd::plan::run(c),
         Command::Compensate(c) => cmd::compensate::run(c),
         Command::Report(a) => cmd::report::run(a),
+    }
+}
+
+/// A report command piped into `head` ends quietly when the reader goes, as Unix tools do,
+/// instead of panicking in `println!` (Rust ignores SIGPIPE by default). Not for `run`, `demo`
+/// and `sim`: the acquisition and the live view must see a closed socket as an error, never be
+/// killed by it.
+fn stop_quietly_on_closed_pipe() {
+    // SAFETY: called before any other thread exists in these commands; SIG_DFL for SIGPIPE
+    // is the default disposition of every Unix process.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }

@@ -84,3 +84,23 @@ fn recover_command_repairs_a_truncated_log() {
     assert!(info.read.clean_close && info.read.error.is_none());
     assert!(info.topics["/capball/sample"].samples > 0);
 }
+
+/// `metrolog info LOG | head -1`: the reader goes before the report is written. The command
+/// must end as Unix tools do (killed by SIGPIPE, nothing on stderr), not panic in `println!`.
+#[test]
+fn info_into_a_closed_pipe_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .arg("info")
+        .arg(data("format3.mcap"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{:?} {err}", out.status);
+}

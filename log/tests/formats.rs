@@ -63,15 +63,6 @@ fn both_formats_hold_the_same_run() {
     assert_eq!(f1.samples.len(), f2.samples.len());
     // Per topic, sample for sample, bit for bit (the debug text shows NaN and -0.0 exactly);
     // across topics format 2 groups samples into batches.
-    let by_topic = |v: &[Sample]| {
-        let mut m: BTreeMap<&str, Vec<String>> = BTreeMap::new();
-        for s in v {
-            m.entry(metrolog_log::raw::topic_of(s))
-                .or_default()
-                .push(format!("{s:?}"));
-        }
-        m
-    };
     assert!(
         by_topic(&f1.samples) == by_topic(&f2.samples),
         "samples differ"
@@ -170,15 +161,6 @@ fn format_3_holds_the_same_run_with_capball_codes() {
     let f3 = read(&data("format3.mcap"));
     assert!(f3.summary.clean_close);
     assert_eq!(f1.samples.len(), f3.samples.len());
-    let by_topic = |v: &[Sample]| {
-        let mut m: BTreeMap<&str, Vec<String>> = BTreeMap::new();
-        for s in v {
-            m.entry(metrolog_log::raw::topic_of(s))
-                .or_default()
-                .push(format!("{s:?}"));
-        }
-        m
-    };
     assert!(
         by_topic(&f1.samples) == by_topic(&f3.samples),
         "samples differ"
@@ -268,4 +250,15 @@ fn regenerate_fixtures() {
         "CapBall batches written as doubles"
     );
     w.finish().unwrap();
+}
+
+/// Samples per topic as their debug text (which shows NaN and -0.0 exactly), in order.
+fn by_topic(v: &[Sample]) -> BTreeMap<&'static str, Vec<String>> {
+    let mut m: BTreeMap<&'static str, Vec<String>> = BTreeMap::new();
+    for s in v {
+        m.entry(metrolog_log::raw::topic_of(s))
+            .or_default()
+            .push(format!("{s:?}"));
+    }
+    m
 }

@@ -143,7 +143,13 @@ fn main() {
         .unwrap_or(60);
     let base = held();
     println!("bytes held before writing: {base}");
-    report("1x rates (li80 1 kHz, cb3 1 kHz, psd 100 Hz)", &write_hour(minutes, 1.0));
+    report(
+        "1x rates (li80 1 kHz, cb3 1 kHz, psd 100 Hz)",
+        &write_hour(minutes, 1.0),
+    );
     report("4x rates", &write_hour(minutes, 4.0));
-    println!("bytes held after both files were finished: {}", held() - base);
+    println!(
+        "bytes held after both files were finished: {}",
+        held() - base
+    );
 }

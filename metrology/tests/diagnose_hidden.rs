@@ -304,6 +304,10 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth) {
 struct Tally {
     runs: usize,
     detected: usize,
+    /// Every expected effect named, or given as one the data cannot tell from a named one.
+    detected_alt: usize,
+    /// Runs with a finding the data cannot tell from another effect.
+    with_alt: usize,
     any_finding: usize,
     wrong: usize,
     params: usize,
@@ -319,6 +323,10 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
             let d = diagnose(&data, &Options::default()).expect("diagnose");
             let f = &d.report.findings;
             let named = |e: &str| f.iter().any(|x| x.effect == e);
+            let rival = |e: &str| {
+                f.iter()
+                    .any(|x| x.effect == e || x.alternatives.iter().any(|a| a.effect == e))
+            };
             let mut t = Tally {
                 runs: 1,
                 ..Default::default()
@@ -328,6 +336,12 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
             } else {
                 expect.iter().all(|e| named(e))
             });
+            t.detected_alt = usize::from(if expect.is_empty() {
+                f.is_empty()
+            } else {
+                expect.iter().all(|e| rival(e))
+            });
+            t.with_alt = usize::from(f.iter().any(|x| !x.alternatives.is_empty()));
             t.any_finding = usize::from(!f.is_empty());
             t.wrong = usize::from(f.iter().any(|x| !expect.contains(&x.effect.as_str())));
             for (e, p, v) in &truth {
@@ -344,7 +358,15 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
                     data.n_targets(),
                     data.n_cycles(),
                     f.iter()
-                        .map(|x| (&x.effect, x.significance, &x.params))
+                        .map(|x| (
+                            &x.effect,
+                            x.significance,
+                            &x.params,
+                            x.alternatives
+                                .iter()
+                                .map(|a| (&a.effect, a.delta_bic))
+                                .collect::<Vec<_>>()
+                        ))
                         .collect::<Vec<_>>()
                 );
             }
@@ -353,6 +375,8 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
         .reduce(Tally::default, |a, b| Tally {
             runs: a.runs + b.runs,
             detected: a.detected + b.detected,
+            detected_alt: a.detected_alt + b.detected_alt,
+            with_alt: a.with_alt + b.with_alt,
             any_finding: a.any_finding + b.any_finding,
             wrong: a.wrong + b.wrong,
             params: a.params + b.params,
@@ -379,18 +403,20 @@ fn table_200_per_class() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(200);
     println!(
-        "| class | runs | detection (no effect: no finding) | other effect named | params within 2u |"
+        "| class | runs | detection (no effect: no finding) | named or indistinguishable from a named one | runs with an indistinguishable alternative | other effect named | params within 2u |"
     );
-    println!("|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|");
     for (class, expect) in CLASSES {
         if only.as_deref().is_some_and(|o| o != class) {
             continue;
         }
         let t = run_class(class, expect, per, 1);
         println!(
-            "| {class} | {} | {} | {} | {} |",
+            "| {class} | {} | {} | {} | {} | {} | {} |",
             t.runs,
             pct(t.detected, t.runs),
+            pct(t.detected_alt, t.runs),
+            pct(t.with_alt, t.runs),
             pct(t.wrong, t.runs),
             pct(t.params_ok, t.params)
         );

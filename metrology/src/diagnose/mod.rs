@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use crate::axis_model::{AxisModel, Effect};
 use crate::positioning_data::PositioningData;
 
+mod alternatives;
 mod family;
 mod fit;
 mod model;
@@ -89,6 +90,22 @@ pub struct Finding {
     pub heldout_rms_after_um: f64,
     /// The physical cause a metrologist would check.
     pub cause: String,
+    /// Other effects that explain the run about as well in this one's place: the data cannot
+    /// tell them apart (BIC within 6; within 2 for one with more parameters).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<Alternative>,
+}
+
+/// An effect the data cannot tell from a finding's (`Finding::alternatives`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Alternative {
+    pub effect: String,
+    /// Its parameters fitted in the finding's place, the rest of the model kept.
+    pub params: BTreeMap<String, f64>,
+    pub params_u: BTreeMap<String, f64>,
+    /// Its BIC minus the finding's (under 6, or 2 with more parameters; negative: it fits
+    /// better but was not selected first).
+    pub delta_bic: f64,
 }
 
 /// How closely a model reproduces the measured per-target statistics when simulated over the
@@ -179,15 +196,26 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
 
     // Outliers: a first screen around the group medians, refined after each step.
     let mut out = flag_outliers(&obs, &group_median_residuals(&obs), opt.outlier_alpha, m);
-    let steps = search::forward_select(&obs, opt, use_temp, &mut out, &mut notes);
+    let mut steps = search::forward_select(&obs, opt, use_temp, &mut out, &mut notes);
+    if steps.len() > 1 {
+        let cols = all_cols(&steps.iter().map(|s| s.sel.clone()).collect::<Vec<_>>());
+        let fin0 = settle(&obs, opt, out.clone(), cols);
+        alternatives::refine(&obs, opt, use_temp, &mut steps, &fin0);
+    }
     let cols = all_cols(&steps.iter().map(|s| s.sel.clone()).collect::<Vec<_>>());
     let fin = settle(&obs, opt, out, cols);
 
     // Mean effects: parameters from the final joint fit.
+    let rivals = alternatives::rivals(&obs, opt, use_temp, &steps, &fin);
     let mut found = Vec::new();
     let mut col0 = 0;
-    for st in &steps {
-        found.push(report::mean_finding(&obs, data, &fin, st, col0));
+    for (st, rv) in steps.iter().zip(&rivals) {
+        let (mut f, e) = report::mean_finding(&obs, data, &fin, st, col0);
+        for r in rv {
+            f.alternatives.push(rival_finding(&obs, data, opt, &fin, r));
+        }
+        note_alternatives(&mut f);
+        found.push((f, e));
         col0 += st.sel.cols.len();
     }
     let anomaly = report::local_anomaly(&obs, data, &fin, opt);
@@ -275,6 +303,38 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         residuals_um: fin.resid,
         outlier: fin.out,
     })
+}
+
+/// A rival fitted in a finding's place, the rest of the model kept.
+fn rival_finding(
+    obs: &Obs,
+    data: &PositioningData,
+    opt: &Options,
+    fin: &FinalFit,
+    r: &alternatives::Rival,
+) -> Alternative {
+    let mut cols = r.step.before_cols.clone();
+    cols.extend(r.step.sel.cols.iter().cloned());
+    let fin_r = settle(obs, opt, fin.out.clone(), cols);
+    let (f, _) = report::mean_finding(obs, data, &fin_r, &r.step, r.step.before_cols.len());
+    Alternative {
+        effect: f.effect,
+        params: f.params,
+        params_u: f.params_u,
+        delta_bic: r.delta_bic,
+    }
+}
+
+/// Says in the finding's cause which effects the data cannot tell it from.
+fn note_alternatives(f: &mut Finding) {
+    for a in &f.alternatives {
+        f.cause.push_str(&format!(
+            " The data cannot tell it from {} (BIC {:+.1}): {}.",
+            a.effect,
+            a.delta_bic,
+            alternatives::tell_apart(&f.effect, &a.effect)
+        ));
+    }
 }
 
 /// Caveats about the input: missing readings, no real times.

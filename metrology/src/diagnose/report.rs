@@ -88,6 +88,7 @@ pub(super) fn mean_finding(
         heldout_rms_before_um: before,
         heldout_rms_after_um: after,
         cause,
+        alternatives: Vec::new(),
     };
     (finding, effect)
 }
@@ -488,6 +489,7 @@ pub(super) fn local_anomaly(
              heat source near that position; inspect the axis there",
             t + 1
         ),
+        alternatives: Vec::new(),
     };
     let dk = sc.dof_t[t];
     Some(Anomaly {
@@ -591,6 +593,7 @@ pub(super) fn outlier_finding(
              average: a beam interruption, air turbulence or a vibration during the reading; \
              repeat those points"
         ),
+        alternatives: Vec::new(),
     };
     let effect = Effect::Outliers {
         rate: n_out as f64 / n as f64,

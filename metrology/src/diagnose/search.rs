@@ -35,7 +35,7 @@ pub(super) fn candidate_rss(
 }
 
 /// RSS of y on baseline + `p`'s columns + `cols`.
-fn cols_rss(obs: &Obs, p: &Projector, y_perp: &[f64], cols: &[Vec<f64>]) -> f64 {
+pub(super) fn cols_rss(obs: &Obs, p: &Projector, y_perp: &[f64], cols: &[Vec<f64>]) -> f64 {
     let cp: Vec<Vec<f64>> = cols.iter().map(|c| p.residualize(obs, c)).collect();
     let k = cp.len();
     let mut a = DMatrix::zeros(k, k);
@@ -338,6 +338,20 @@ fn candidates(
 ) -> Vec<(Family, Candidate, f64)> {
     let ln_n = (obs.len() as f64).ln();
     let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
+    families(obs, use_temp)
+        .into_iter()
+        .filter(|f| selected.iter().all(|s| s.family.slot() != f.slot()))
+        .filter_map(|fam| {
+            let c = search(obs, p, y_perp, fam)?;
+            let dbic = n_eff * (c.rss / rss0).ln() + fam.n_params(obs) as f64 * ln_n;
+            Some((fam, c, dbic))
+        })
+        .collect()
+}
+
+/// The mean effects the run can show: a scale change only when the positions vary, its
+/// temperature form only with material temperatures.
+pub(super) fn families(obs: &Obs, use_temp: bool) -> Vec<Family> {
     let mut fams = vec![
         Family::Linear,
         Family::Warmup,
@@ -352,14 +366,7 @@ fn candidates(
             fams.push(Family::ThermalTemp);
         }
     }
-    fams.into_iter()
-        .filter(|f| selected.iter().all(|s| s.family.slot() != f.slot()))
-        .filter_map(|fam| {
-            let c = search(obs, p, y_perp, fam)?;
-            let dbic = n_eff * (c.rss / rss0).ln() + fam.n_params(obs) as f64 * ln_n;
-            Some((fam, c, dbic))
-        })
-        .collect()
+    fams
 }
 
 /// Lag-1 correlation of residuals in time order (rows with weight > 0).
@@ -408,7 +415,7 @@ fn discounted_gain(
 /// columns' variation within each direction is left once they are centred within their
 /// (target, direction) groups (the reference is per direction, so that an effect that differs
 /// by direction by definition, like `reversal_drift`, is measured on its variation in time).
-fn absorbed_by_baseline(obs: &Obs, p: &Projector, cols: &[Vec<f64>]) -> bool {
+pub(super) fn absorbed_by_baseline(obs: &Obs, p: &Projector, cols: &[Vec<f64>]) -> bool {
     let (mut kept, mut total) = (0.0, 0.0);
     for c in cols {
         let (mut s, mut n) = ([0.0; 2], [0.0; 2]);

@@ -141,6 +141,7 @@ pub(super) fn unexplained_finding(obs: &Obs, fin: &FinalFit, res: &Residue) -> F
              repeat the run",
             res.rms_left_um, res.sigma_short_um
         ),
+        alternatives: Vec::new(),
     }
 }
 

@@ -1,0 +1,205 @@
+//! Which other effect of the vocabulary would explain a run about as well as a selected one.
+//!
+//! The forward selection names the effect with the lowest BIC, but a short run often cannot
+//! tell effects over time apart: on 5 cycles a warm-up with a long time constant is nearly a
+//! straight line, and a step or a drift looks like offsets per cycle. For each selected effect
+//! every other effect is put in its place (the rest of the model kept, its parameter searched
+//! afresh); one that would itself be reported (the same evidence threshold, not absorbed by the
+//! baseline, a held-out gain) and whose BIC is within [`MARGIN`] of the selected one is a
+//! rival: the report names it, with its parameters, and says the data cannot tell them apart.
+//! A rival with more parameters must come within [`MARGIN_RICHER`]: one whose better fit only
+//! pays for its extra parameters shows no more than that they are not supported.
+
+use super::Options;
+use super::family::Family;
+use super::fit::{FinalFit, Obs, Projector, dotw, heldout_rms};
+use super::search::{
+    Selected, Step, absorbed_by_baseline, cols_rss, families, lag1_correlation, search,
+    theta_uncertainty,
+};
+
+/// BIC difference below which two effects are not told apart: under 6 is at most "positive"
+/// evidence on the Kass–Raftery scale, short of "strong".
+pub(super) const MARGIN: f64 = 6.0;
+
+/// The same for a rival with more parameters than the selected effect: under 2 is "not worth
+/// more than a bare mention" for the simpler one, i.e. the richer one's better fit has some
+/// support beyond what its extra parameters cost.
+pub(super) const MARGIN_RICHER: f64 = 2.0;
+
+/// An effect that explains the run about as well as a selected one, in its place.
+pub(super) struct Rival {
+    /// The rival as a step of a model holding the other selected effects.
+    pub(super) step: Step,
+    /// Its BIC minus the selected effect's (negative: the rival fits slightly better).
+    pub(super) delta_bic: f64,
+}
+
+/// The rivals of each selected step (same order as `steps`).
+pub(super) fn rivals(
+    obs: &Obs,
+    opt: &Options,
+    use_temp: bool,
+    steps: &[Step],
+    fin: &FinalFit,
+) -> Vec<Vec<Rival>> {
+    let ctx = Context::new(obs, opt, fin);
+    (0..steps.len())
+        .map(|i| {
+            families(obs, use_temp)
+                .into_iter()
+                .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+                .filter_map(|g| ctx.in_place(steps, i, g))
+                .filter(|r| {
+                    let richer =
+                        r.step.sel.family.n_params(obs) > steps[i].sel.family.n_params(obs);
+                    r.delta_bic < if richer { MARGIN_RICHER } else { MARGIN }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// BIC decrease a replacement must bring in [`refine`].
+const REFINE_MIN: f64 = 2.0;
+
+/// Backfitting after the forward selection: each selected effect is searched afresh with the
+/// others in the model (its parameter was found before they were), and replaced by another
+/// effect of the vocabulary where that lowers the BIC by more than [`REFINE_MIN`] (a warm-up
+/// that the first effect's biased period left looking like a step). Repeated until nothing
+/// changes (at most three rounds); `before_cols` are rebuilt in selection order.
+pub(super) fn refine(obs: &Obs, opt: &Options, use_temp: bool, steps: &mut [Step], fin: &FinalFit) {
+    let ctx = Context::new(obs, opt, fin);
+    for _ in 0..3 {
+        let mut changed = false;
+        for i in 0..steps.len() {
+            let best = families(obs, use_temp)
+                .into_iter()
+                .filter(|g| {
+                    steps
+                        .iter()
+                        .enumerate()
+                        .all(|(k, s)| k == i || s.sel.family.slot() != g.slot())
+                })
+                .filter_map(|g| ctx.in_place(steps, i, g))
+                .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+            if let Some(r) = best.filter(|r| r.delta_bic < -REFINE_MIN) {
+                steps[i].sel = r.step.sel;
+                steps[i].u_theta = r.step.u_theta;
+                steps[i].significance = r.step.significance;
+                steps[i].alpha_temp = false;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    let mut before = Vec::new();
+    for s in steps.iter_mut() {
+        s.before_cols = before.clone();
+        before.extend(s.sel.cols.iter().cloned());
+    }
+}
+
+struct Context<'a> {
+    obs: &'a Obs,
+    opt: &'a Options,
+    fin: &'a FinalFit,
+    /// Share of the likelihood ratio counted with correlated noise ((1 − ρ)/(1 + ρ)).
+    discount: f64,
+    n_eff: f64,
+    ln_n: f64,
+}
+
+impl<'a> Context<'a> {
+    fn new(obs: &'a Obs, opt: &'a Options, fin: &'a FinalFit) -> Self {
+        let rho = lag1_correlation(obs, &fin.w, &fin.resid).clamp(0.0, 0.95);
+        Context {
+            obs,
+            opt,
+            fin,
+            discount: (1.0 - rho) / (1.0 + rho),
+            n_eff: fin.w.iter().filter(|w| **w > 0.0).count() as f64,
+            ln_n: (obs.len() as f64).ln(),
+        }
+    }
+
+    /// `g` in place of step `i`, its parameter searched with the others in the model, when
+    /// it would be reported there (the evidence threshold, not absorbed by the baseline, a
+    /// held-out gain).
+    fn in_place(&self, steps: &[Step], i: usize, g: Family) -> Option<Rival> {
+        let (obs, fin) = (self.obs, self.fin);
+        let others: Vec<Vec<f64>> = steps
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| *k != i)
+            .flat_map(|(_, s)| s.sel.cols.iter().cloned())
+            .collect();
+        let p = Projector::new(obs, &fin.w, &others);
+        let y_perp = p.residualize(obs, &obs.y);
+        let rss0 = dotw(&y_perp, &y_perp, &fin.w);
+        let sel = &steps[i].sel;
+        let rss_sel = cols_rss(obs, &p, &y_perp, &sel.cols);
+        let c = search(obs, &p, &y_perp, g)?;
+        if c.rss <= 0.0 || rss_sel <= 0.0 {
+            return None;
+        }
+        let gain =
+            self.discount * self.n_eff * (rss0 / c.rss).ln() - g.n_params(obs) as f64 * self.ln_n;
+        let delta_bic = self.discount * self.n_eff * (c.rss / rss_sel).ln()
+            + (g.n_params(obs) as f64 - sel.family.n_params(obs) as f64) * self.ln_n;
+        if gain < self.opt.min_bic_gain {
+            return None;
+        }
+        let cols = g.columns(obs, c.theta);
+        let by_position = matches!(g, Family::Thermal | Family::ThermalTemp);
+        if !by_position && absorbed_by_baseline(obs, &p, &cols) {
+            return None;
+        }
+        let mut with = others.clone();
+        with.extend(cols.iter().cloned());
+        let ho = if g == Family::CycleOffsets {
+            &obs.with_diagonal_folds()
+        } else {
+            obs
+        };
+        if heldout_rms(ho, &fin.w, &with, &fin.eval) >= heldout_rms(ho, &fin.w, &others, &fin.eval)
+        {
+            return None;
+        }
+        let dof = (self.n_eff - (obs.n_groups + with.len()) as f64).max(1.0);
+        let u_theta = theta_uncertainty(obs, &p, &y_perp, g, &c, c.rss / dof);
+        Some(Rival {
+            step: Step {
+                sel: Selected {
+                    family: g,
+                    theta: c.theta,
+                    cols,
+                },
+                significance: gain,
+                u_theta,
+                before_cols: others,
+                alpha_temp: false,
+            },
+            delta_bic,
+        })
+    }
+}
+
+/// What would tell two effects over time apart, for the report's sentence.
+pub(super) fn tell_apart(a: &str, b: &str) -> &'static str {
+    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
+    if pair("exponential_warmup", "linear_drift") {
+        "a warm-up levels off and a linear drift does not: a longer run, or a temperature record \
+         of the axis, shows which"
+    } else if pair("step", "cycle_offsets") || pair("linear_drift", "cycle_offsets") {
+        "offsets per cycle change from one cycle to the next at random; more cycles, or the \
+         machine's log of re-datums and interruptions, show which"
+    } else if pair("step", "linear_drift") || pair("step", "exponential_warmup") {
+        "a step happens between two readings; the machine's log at that time (a re-datum, a \
+         bumped optic) or a repeat of the run shows which"
+    } else {
+        "a longer run or more cycles would tell them apart"
+    }
+}

@@ -442,3 +442,37 @@ fn every_class_small_sample() {
     }
     assert!(failures.is_empty(), "classes missed: {failures:?}");
 }
+
+/// On 5 targets × 5 cycles a warm-up with a long time constant is nearly a straight line: the
+/// tool must then name the warm-up or say that the data cannot tell it from the effect it
+/// names, in the finding's cause. Without the alternatives this class scored 70 % (the table).
+#[test]
+fn iso_min_warmup_is_named_or_given_as_indistinguishable() {
+    let t = run_class("iso_min_warmup", &["exponential_warmup"], 40, 5);
+    assert!(
+        t.detected_alt >= 32 && t.detected_alt > t.detected,
+        "{t:?}"
+    );
+    let with_rival = (0..40)
+        .map(|k| random_case(5 + 7919 * k + 14, "iso_min_warmup").0)
+        .map(|d| diagnose(&d, &Options::default()).expect("diagnose"))
+        .flat_map(|d| d.report.findings)
+        .find(|f| !f.alternatives.is_empty())
+        .expect("a finding with an alternative");
+    for a in &with_rival.alternatives {
+        assert!(
+            with_rival
+                .cause
+                .contains(&format!("cannot tell it from {}", a.effect))
+                && a.delta_bic < 6.0,
+            "{with_rival:?}"
+        );
+    }
+}
+
+/// Alternatives are not clutter: a clear linear drift on a long run rarely gets one.
+#[test]
+fn a_long_linear_drift_rarely_gets_an_alternative() {
+    let t = run_class("linear_drift", &["linear_drift"], 40, 5);
+    assert!(t.detected >= 36 && t.with_alt <= 6, "{t:?}");
+}

@@ -67,9 +67,31 @@ const REFINE_MIN: f64 = 2.0;
 /// others in the model (its parameter was found before they were), and replaced by another
 /// effect of the vocabulary where that lowers the BIC by more than [`REFINE_MIN`] (a warm-up
 /// that the first effect's biased period left looking like a step). Repeated until nothing
-/// changes (at most three rounds); `before_cols` are rebuilt in selection order.
-pub(super) fn refine(obs: &Obs, opt: &Options, use_temp: bool, steps: &mut [Step], fin: &FinalFit) {
+/// changes (at most three rounds); `before_cols` are rebuilt in selection order. First, offsets
+/// per cycle are split into two smooth effects where those explain the run better
+/// ([`Context::split_offsets`]).
+pub(super) fn refine(
+    obs: &Obs,
+    opt: &Options,
+    use_temp: bool,
+    steps: &mut Vec<Step>,
+    fin: &FinalFit,
+) {
     let ctx = Context::new(obs, opt, fin);
+    if let Some(i) = steps
+        .iter()
+        .position(|s| s.sel.family == Family::CycleOffsets)
+    {
+        let fams: Vec<Family> = families(obs, use_temp)
+            .into_iter()
+            .filter(|g| *g != Family::CycleOffsets)
+            .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+            .collect();
+        if let Some([a, b]) = ctx.split_offsets(steps, i, &fams) {
+            steps[i] = a;
+            steps.insert(i + 1, b);
+        }
+    }
     for _ in 0..3 {
         let mut changed = false;
         for i in 0..steps.len() {
@@ -129,26 +151,73 @@ impl<'a> Context<'a> {
     /// it would be reported there (the evidence threshold, not absorbed by the baseline, a
     /// held-out gain).
     fn in_place(&self, steps: &[Step], i: usize, g: Family) -> Option<Rival> {
+        let others = cols_except(steps, &[i]);
+        let sel = &steps[i].sel;
+        let (step, rss) = self.fit_in(&others, g)?;
+        let p = Projector::new(self.obs, &self.fin.w, &others);
+        let y_perp = p.residualize(self.obs, &self.obs.y);
+        let rss_sel = cols_rss(self.obs, &p, &y_perp, &sel.cols);
+        if rss_sel <= 0.0 {
+            return None;
+        }
+        let delta_bic = self.discount * self.n_eff * (rss / rss_sel).ln()
+            + (g.n_params(self.obs) as f64 - sel.family.n_params(self.obs) as f64) * self.ln_n;
+        Some(Rival { step, delta_bic })
+    }
+
+    /// Two smooth effects in place of the offsets per cycle of step `i` (a step and a drift
+    /// together shift each cycle by its own amount), each searched with the other in the model
+    /// (one round of backfitting), when both would be reported and together they lower the
+    /// BIC by more than [`REFINE_MIN`]: the pair of the lowest BIC.
+    fn split_offsets(&self, steps: &[Step], i: usize, fams: &[Family]) -> Option<[Step; 2]> {
+        let obs = self.obs;
+        let others = cols_except(steps, &[i]);
+        let p = Projector::new(obs, &self.fin.w, &others);
+        let y_perp = p.residualize(obs, &obs.y);
+        let rss_off = cols_rss(obs, &p, &y_perp, &steps[i].sel.cols);
+        let p_off = steps[i].sel.family.n_params(obs) as f64;
+        let mut best: Option<([Step; 2], f64)> = None;
+        for (a, &g1) in fams.iter().enumerate() {
+            for &g2 in &fams[a + 1..] {
+                // Alone, g1 need not be reportable: a step up and a drift down can cancel.
+                let Some(c1) = search(obs, &p, &y_perp, g1) else {
+                    continue;
+                };
+                let s1 = Selected {
+                    family: g1,
+                    theta: c1.theta,
+                    cols: g1.columns(obs, c1.theta),
+                };
+                let Some((s2, _)) = self.fit_in(&[&others[..], &s1.cols[..]].concat(), g2) else {
+                    continue;
+                };
+                let Some((s1, rss)) = self.fit_in(&[&others[..], &s2.sel.cols[..]].concat(), g1)
+                else {
+                    continue;
+                };
+                let k = (g1.n_params(obs) + g2.n_params(obs)) as f64;
+                let d = self.discount * self.n_eff * (rss / rss_off).ln() + (k - p_off) * self.ln_n;
+                if d < -REFINE_MIN && best.as_ref().is_none_or(|b| d < b.1) {
+                    best = Some(([s1, s2], d));
+                }
+            }
+        }
+        best.map(|b| b.0)
+    }
+
+    /// `g` searched with `base` in the model, when it would be reported there; the step and
+    /// the RSS with it.
+    fn fit_in(&self, base: &[Vec<f64>], g: Family) -> Option<(Step, f64)> {
         let (obs, fin) = (self.obs, self.fin);
-        let others: Vec<Vec<f64>> = steps
-            .iter()
-            .enumerate()
-            .filter(|(k, _)| *k != i)
-            .flat_map(|(_, s)| s.sel.cols.iter().cloned())
-            .collect();
-        let p = Projector::new(obs, &fin.w, &others);
+        let p = Projector::new(obs, &fin.w, base);
         let y_perp = p.residualize(obs, &obs.y);
         let rss0 = dotw(&y_perp, &y_perp, &fin.w);
-        let sel = &steps[i].sel;
-        let rss_sel = cols_rss(obs, &p, &y_perp, &sel.cols);
         let c = search(obs, &p, &y_perp, g)?;
-        if c.rss <= 0.0 || rss_sel <= 0.0 {
+        if c.rss <= 0.0 {
             return None;
         }
         let gain =
             self.discount * self.n_eff * (rss0 / c.rss).ln() - g.n_params(obs) as f64 * self.ln_n;
-        let delta_bic = self.discount * self.n_eff * (c.rss / rss_sel).ln()
-            + (g.n_params(obs) as f64 - sel.family.n_params(obs) as f64) * self.ln_n;
         if gain < self.opt.min_bic_gain {
             return None;
         }
@@ -157,34 +226,40 @@ impl<'a> Context<'a> {
         if !by_position && absorbed_by_baseline(obs, &p, &cols) {
             return None;
         }
-        let mut with = others.clone();
-        with.extend(cols.iter().cloned());
+        let with = [base, &cols[..]].concat();
         let ho = if g == Family::CycleOffsets {
             &obs.with_diagonal_folds()
         } else {
             obs
         };
-        if heldout_rms(ho, &fin.w, &with, &fin.eval) >= heldout_rms(ho, &fin.w, &others, &fin.eval)
-        {
+        if heldout_rms(ho, &fin.w, &with, &fin.eval) >= heldout_rms(ho, &fin.w, base, &fin.eval) {
             return None;
         }
         let dof = (self.n_eff - (obs.n_groups + with.len()) as f64).max(1.0);
         let u_theta = theta_uncertainty(obs, &p, &y_perp, g, &c, c.rss / dof);
-        Some(Rival {
-            step: Step {
-                sel: Selected {
-                    family: g,
-                    theta: c.theta,
-                    cols,
-                },
-                significance: gain,
-                u_theta,
-                before_cols: others,
-                alpha_temp: false,
+        let step = Step {
+            sel: Selected {
+                family: g,
+                theta: c.theta,
+                cols,
             },
-            delta_bic,
-        })
+            significance: gain,
+            u_theta,
+            before_cols: base.to_vec(),
+            alpha_temp: false,
+        };
+        Some((step, c.rss))
     }
+}
+
+/// The columns of every step but those listed.
+fn cols_except(steps: &[Step], skip: &[usize]) -> Vec<Vec<f64>> {
+    steps
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !skip.contains(k))
+        .flat_map(|(_, s)| s.sel.cols.iter().cloned())
+        .collect()
 }
 
 /// What would tell two effects over time apart, for the report's sentence.

@@ -197,7 +197,7 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     // Outliers: a first screen around the group medians, refined after each step.
     let mut out = flag_outliers(&obs, &group_median_residuals(&obs), opt.outlier_alpha, m);
     let mut steps = search::forward_select(&obs, opt, use_temp, &mut out, &mut notes);
-    if steps.len() > 1 {
+    if !steps.is_empty() {
         let cols = all_cols(&steps.iter().map(|s| s.sel.clone()).collect::<Vec<_>>());
         let fin0 = settle(&obs, opt, out.clone(), cols);
         alternatives::refine(&obs, opt, use_temp, &mut steps, &fin0);

@@ -308,6 +308,10 @@ struct Tally {
     detected_alt: usize,
     /// Runs with a finding the data cannot tell from another effect.
     with_alt: usize,
+    /// Runs naming an effect not hidden that points at the machine (a drift, warm-up, cycle,
+    /// scale change, reversal change or noisy target), not at the measuring set-up (a step,
+    /// offsets per cycle, outliers or `unexplained`).
+    machine_wrong: usize,
     any_finding: usize,
     wrong: usize,
     params: usize,
@@ -342,6 +346,13 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
                 expect.iter().all(|e| rival(e))
             });
             t.with_alt = usize::from(f.iter().any(|x| !x.alternatives.is_empty()));
+            t.machine_wrong = usize::from(f.iter().any(|x| {
+                !expect.contains(&x.effect.as_str())
+                    && !matches!(
+                        x.effect.as_str(),
+                        "step" | "cycle_offsets" | "outliers" | "unexplained"
+                    )
+            }));
             t.any_finding = usize::from(!f.is_empty());
             t.wrong = usize::from(f.iter().any(|x| !expect.contains(&x.effect.as_str())));
             for (e, p, v) in &truth {
@@ -377,6 +388,7 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
             detected: a.detected + b.detected,
             detected_alt: a.detected_alt + b.detected_alt,
             with_alt: a.with_alt + b.with_alt,
+            machine_wrong: a.machine_wrong + b.machine_wrong,
             any_finding: a.any_finding + b.any_finding,
             wrong: a.wrong + b.wrong,
             params: a.params + b.params,
@@ -403,21 +415,22 @@ fn table_200_per_class() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(200);
     println!(
-        "| class | runs | detection (no effect: no finding) | named or indistinguishable from a named one | runs with an indistinguishable alternative | other effect named | params within 2u |"
+        "| class | runs | detection (no effect: no finding) | named or indistinguishable from a named one | runs with an indistinguishable alternative | other effect named | of which a machine cause | params within 2u |"
     );
-    println!("|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|");
     for (class, expect) in CLASSES {
         if only.as_deref().is_some_and(|o| o != class) {
             continue;
         }
         let t = run_class(class, expect, per, 1);
         println!(
-            "| {class} | {} | {} | {} | {} | {} | {} |",
+            "| {class} | {} | {} | {} | {} | {} | {} | {} |",
             t.runs,
             pct(t.detected, t.runs),
             pct(t.detected_alt, t.runs),
             pct(t.with_alt, t.runs),
             pct(t.wrong, t.runs),
+            pct(t.machine_wrong, t.runs),
             pct(t.params_ok, t.params)
         );
     }
@@ -487,4 +500,13 @@ fn one_dataset() {
     let (data, truth) = random_case(seed, &class);
     let d = diagnose(&data, &Options::default()).unwrap();
     eprintln!("truth {truth:?}\nreport {:#?}", d.report);
+}
+
+/// An erratic reference (jumps that stay) is `unexplained`, and the jumps are not dressed up
+/// as a machine cause: a cycle or drift fitted through them is demoted to a note. Without that
+/// rule a machine cause is named in 14 of these 100 runs (18 % of the table's 200).
+#[test]
+fn an_erratic_reference_gets_no_machine_cause() {
+    let t = run_class("erratic_reference", &["unexplained"], 100, 1);
+    assert!(t.detected >= 90 && t.machine_wrong <= 8, "{t:?}");
 }

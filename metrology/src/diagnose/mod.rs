@@ -248,14 +248,14 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         _ => {}
     }
     if unexplained {
-        let weak = verdict::weak_next_to_unexplained(
+        let demoted = verdict::demoted_next_to_unexplained(
             &found.iter().map(|f| f.0.clone()).collect::<Vec<_>>(),
+            res.rms_left_um,
         );
-        for &i in weak.iter().rev() {
+        for &(i, why) in demoted.iter().rev() {
             let (f, _) = found.remove(i);
             notes.push(format!(
-                "{} would lower the held-out error only from {:.2} to {:.2} µm: not reported, \
-                 it would stretch over structure it does not explain",
+                "{} would lower the held-out error from {:.2} to {:.2} µm: not reported, {why}",
                 f.effect, f.heldout_rms_before_um, f.heldout_rms_after_um
             ));
         }

@@ -26,6 +26,8 @@ const HEAVY_TAIL_ALPHA: f64 = 0.01;
 /// A mean effect that gains less than this share of the held-out error is not reported next
 /// to an `unexplained` finding (it only stretches over structure it does not explain).
 const MIN_GAIN_WHEN_UNEXPLAINED: f64 = 0.10;
+/// A machine effect next to `unexplained` must explain this many times the RMS left.
+const MACHINE_DOMINANCE: f64 = 3.0;
 
 /// What is left after the fit, read against the short-term noise.
 pub(super) struct Residue {
@@ -145,13 +147,36 @@ pub(super) fn unexplained_finding(obs: &Obs, fin: &FinalFit, res: &Residue) -> F
     }
 }
 
-/// Mean-effect findings too weak to report next to `unexplained` (indices into `findings`).
-pub(super) fn weak_next_to_unexplained(findings: &[Finding]) -> Vec<usize> {
+/// Findings not to report next to `unexplained` (indices into `findings`), with why:
+/// - a mean effect that gains less than [`MIN_GAIN_WHEN_UNEXPLAINED`] of the held-out error
+///   only stretches over structure it does not explain;
+/// - a machine effect (a drift, warm-up, cycle, scale change, reversal change or one noisy
+///   target) must explain more than [`MACHINE_DOMINANCE`] × the RMS left unexplained: a
+///   reference that jumps and stays at each level also shifts the mean path, and a fitted
+///   cycle or drift through its jumps would name a machine cause for a measuring-system
+///   fault. A step or offsets per cycle already name the measuring system and stay.
+pub(super) fn demoted_next_to_unexplained(
+    findings: &[Finding],
+    rms_left_um: f64,
+) -> Vec<(usize, &'static str)> {
     (0..findings.len())
-        .filter(|&i| {
+        .filter_map(|i| {
             let f = &findings[i];
-            let gain = 1.0 - f.heldout_rms_after_um / f.heldout_rms_before_um.max(1e-300);
-            f.effect != "local_anomaly" && gain < MIN_GAIN_WHEN_UNEXPLAINED
+            let (b, a) = (f.heldout_rms_before_um, f.heldout_rms_after_um);
+            let gain = 1.0 - a / b.max(1e-300);
+            let explained = (b * b - a * a).max(0.0).sqrt();
+            let machine = !matches!(f.effect.as_str(), "step" | "cycle_offsets" | "outliers");
+            if f.effect != "local_anomaly" && gain < MIN_GAIN_WHEN_UNEXPLAINED {
+                Some((i, "it would stretch over structure it does not explain"))
+            } else if machine && explained <= MACHINE_DOMINANCE * rms_left_um {
+                Some((
+                    i,
+                    "it cannot be told from the unexplained structure (a reference that jumps \
+                     also moves the mean path): check the measuring system, then repeat the run",
+                ))
+            } else {
+                None
+            }
         })
         .collect()
 }

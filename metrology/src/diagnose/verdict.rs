@@ -206,7 +206,21 @@ pub(super) fn conclusion(findings: &[Finding], baseline_heldout: f64, noise_um: 
              of noise) explains the run: no effect beyond the noise"
         );
     }
-    let names: Vec<&str> = findings.iter().map(|f| f.effect.as_str()).collect();
+    let names: Vec<String> = findings
+        .iter()
+        .map(|f| {
+            if f.alternatives.is_empty() {
+                f.effect.clone()
+            } else {
+                let alts: Vec<&str> = f.alternatives.iter().map(|a| a.effect.as_str()).collect();
+                format!(
+                    "{} (or {}: the data cannot tell)",
+                    f.effect,
+                    alts.join(" or ")
+                )
+            }
+        })
+        .collect();
     format!(
         "the run is explained by {} on top of the baseline (held-out error of the baseline \
          {baseline_heldout:.2} µm; each finding gives its own gain)",

@@ -209,8 +209,9 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     let rivals = alternatives::rivals(&obs, opt, use_temp, &steps, &fin);
     let mut found = Vec::new();
     let mut col0 = 0;
-    for (st, rv) in steps.iter().zip(&rivals) {
-        let (mut f, e) = report::mean_finding(&obs, data, &fin, st, col0);
+    for (i, (st, rv)) in steps.iter().zip(&rivals).enumerate() {
+        let spread = spread_of(&obs, &fin, &steps, i);
+        let (mut f, e) = report::mean_finding(&obs, data, &fin, st, col0, spread.as_ref());
         for r in rv {
             f.alternatives.push(rival_finding(&obs, data, opt, &fin, r));
         }
@@ -305,6 +306,33 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     })
 }
 
+/// The spread of step `i`'s searched parameter in the final fit (the other effects in).
+fn spread_of(
+    obs: &Obs,
+    fin: &FinalFit,
+    steps: &[search::Step],
+    i: usize,
+) -> Option<search::Spread> {
+    let others: Vec<Vec<f64>> = steps
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| *k != i)
+        .flat_map(|(_, s)| s.sel.cols.iter().cloned())
+        .collect();
+    let p = fit::Projector::new(obs, &fin.w, &others);
+    let y_perp = p.residualize(obs, &obs.y);
+    let st = &steps[i];
+    search::theta_spread(
+        obs,
+        &p,
+        &y_perp,
+        st.sel.family,
+        st.sel.theta,
+        st.u_theta,
+        fin.sigma2,
+    )
+}
+
 /// A rival fitted in a finding's place, the rest of the model kept.
 fn rival_finding(
     obs: &Obs,
@@ -316,7 +344,7 @@ fn rival_finding(
     let mut cols = r.step.before_cols.clone();
     cols.extend(r.step.sel.cols.iter().cloned());
     let fin_r = settle(obs, opt, fin.out.clone(), cols);
-    let (f, _) = report::mean_finding(obs, data, &fin_r, &r.step, r.step.before_cols.len());
+    let (f, _) = report::mean_finding(obs, data, &fin_r, &r.step, r.step.before_cols.len(), None);
     Alternative {
         effect: f.effect,
         params: f.params,

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use super::family::{Family, cycle_length_s};
 use super::fit::{FinalFit, Obs, Projector, fit_mean, heldout_residuals, heldout_rms};
 use super::outliers::weights;
-use super::search::{Step, search};
+use super::search::{Spread, Step, search};
 use super::{Finding, Options};
 use crate::axis_model::Effect;
 use crate::positioning_data::PositioningData;
@@ -46,14 +46,26 @@ pub(super) fn mean_finding(
     fin: &FinalFit,
     st: &Step,
     col0: usize,
+    spread: Option<&Spread>,
 ) -> (Finding, Effect) {
     let k = st.sel.cols.len();
     let sigma2 = fin.sigma2;
+    let extra = |i: usize| {
+        spread
+            .and_then(|s| s.coef_var.get(i))
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let u_theta = match (st.sel.family, st.u_theta, spread) {
+        (Family::Step, _, s) => s.map(|s| s.u_theta),
+        (_, Some(u), Some(s)) => Some(u.max(s.u_theta)),
+        (_, u, _) => u,
+    };
     let c = Coefs {
         beta: (0..k).map(|i| fin.fit.beta[col0 + i]).collect(),
         ub: (0..k)
             .map(|i| {
-                (sigma2 * fin.fit.cov_unscaled[(col0 + i, col0 + i)])
+                (sigma2 * fin.fit.cov_unscaled[(col0 + i, col0 + i)] + extra(i))
                     .max(0.0)
                     .sqrt()
             })
@@ -64,7 +76,7 @@ pub(super) fn mean_finding(
             0.0
         },
         theta: st.sel.theta,
-        u_theta: st.u_theta,
+        u_theta,
     };
     let before = heldout_rms(obs, &fin.w, &st.before_cols, &fin.eval);
     let mut after_cols = st.before_cols.clone();
@@ -239,10 +251,14 @@ fn step(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
         .iter()
         .position(|&j| obs.t[j] >= t_s)
         .map_or(0, |k| k + 1);
-    // The moment is known to the reading: half an interval either way.
+    // The moment is known to the reading at best (half an interval either way), and to the
+    // spread of the plausible moments when neighbouring readings fit nearly as well.
     let params_u = BTreeMap::from([
         ("size_um".into(), c.ub[0]),
-        ("time_s".into(), 0.5 * obs.dt_s),
+        (
+            "time_s".into(),
+            (0.5 * obs.dt_s).max(c.u_theta.unwrap_or(0.0)),
+        ),
     ]);
     let at = if has_times {
         format!("{:.1} min into the run", (t_s - obs.t0) / 60.0)

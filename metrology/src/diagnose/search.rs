@@ -36,6 +36,17 @@ pub(super) fn candidate_rss(
 
 /// RSS of y on baseline + `p`'s columns + `cols`.
 pub(super) fn cols_rss(obs: &Obs, p: &Projector, y_perp: &[f64], cols: &[Vec<f64>]) -> f64 {
+    cols_fit(obs, p, y_perp, cols).0
+}
+
+/// RSS of y on baseline + `p`'s columns + `cols`, and the coefficients of `cols` (None when
+/// they are collinear).
+fn cols_fit(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    cols: &[Vec<f64>],
+) -> (f64, Option<DVector<f64>>) {
     let cp: Vec<Vec<f64>> = cols.iter().map(|c| p.residualize(obs, c)).collect();
     let k = cp.len();
     let mut a = DMatrix::zeros(k, k);
@@ -52,10 +63,74 @@ pub(super) fn cols_rss(obs: &Obs, p: &Projector, y_perp: &[f64], cols: &[Vec<f64
     match a.cholesky() {
         Some(ch) => {
             let x = ch.solve(&b);
-            (y2 - b.dot(&x)).max(0.0)
+            ((y2 - b.dot(&x)).max(0.0), Some(x))
         }
-        None => y2,
+        None => (y2, None),
     }
+}
+
+/// What not knowing a searched parameter exactly adds to the uncertainties: the parameter
+/// averaged over its plausible values with weights exp(−(RSS − RSS_min)/2σ²) (the likelihood
+/// with a flat prior over the points tried), and the spread of the linear coefficients over
+/// them. A step's moment can be one reading either way, and its size changes with it; the
+/// uncertainty at the best moment alone misses that.
+pub(super) struct Spread {
+    /// Standard deviation of the parameter over the weights.
+    pub(super) u_theta: f64,
+    /// Variance of each linear coefficient over the weights.
+    pub(super) coef_var: Vec<f64>,
+}
+
+/// A parameter value tried, the RSS there and the linear coefficients.
+type TriedPoint = (f64, f64, DVector<f64>);
+
+/// [`Spread`] of `fam` at `theta`: over its own grid for a step (every reading), over ±4
+/// curvature uncertainties (`u_theta`) around `theta` otherwise.
+pub(super) fn theta_spread(
+    obs: &Obs,
+    p: &Projector,
+    y_perp: &[f64],
+    fam: Family,
+    theta: f64,
+    u_theta: Option<f64>,
+    s2: f64,
+) -> Option<Spread> {
+    let points: Vec<f64> = match (fam, u_theta) {
+        (Family::Step, _) => fam.grid(obs),
+        (_, Some(u)) if theta.is_finite() && u > 0.0 => (-16..=16)
+            .map(|k| theta + u * k as f64 / 4.0)
+            .filter(|t| *t > 0.0)
+            .collect(),
+        _ => return None,
+    };
+    let fits: Vec<TriedPoint> = points
+        .iter()
+        .filter_map(|&t| {
+            let (rss, x) = cols_fit(obs, p, y_perp, &fam.columns(obs, t));
+            x.map(|x| (t, rss, x))
+        })
+        .collect();
+    let rss_min = fits.iter().map(|f| f.1).fold(f64::INFINITY, f64::min);
+    if !(rss_min.is_finite() && s2 > 0.0) {
+        return None;
+    }
+    let w: Vec<f64> = fits
+        .iter()
+        .map(|f| (-(f.1 - rss_min) / (2.0 * s2)).exp())
+        .collect();
+    let sw: f64 = w.iter().sum();
+    let mean = |v: &dyn Fn(&TriedPoint) -> f64| {
+        fits.iter().zip(&w).map(|(f, w)| w * v(f)).sum::<f64>() / sw
+    };
+    let var = |v: &dyn Fn(&TriedPoint) -> f64| {
+        let m = mean(v);
+        mean(&|f| (v(f) - m).powi(2))
+    };
+    let k = fits.first()?.2.len();
+    Some(Spread {
+        u_theta: var(&|f| f.0).sqrt(),
+        coef_var: (0..k).map(|i| var(&|f| f.2[i])).collect(),
+    })
 }
 
 /// Two effects can explain together what neither explains alone (a step and a drift look like

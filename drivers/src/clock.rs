@@ -205,6 +205,21 @@ pub struct NcClock {
     fit: ClockFit,
     nc: Unwrap,
     restarts: u64,
+    /// NC time of the newest frame, µs (unwrapped, since the last restart).
+    newest_us: u64,
+}
+
+/// A trigger frame as [`NcClock::observe`] saw it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NcPoint {
+    /// Its NC time, µs, unwrapped.
+    pub nc_us: u64,
+    /// Its arrival.
+    pub host_ns: u64,
+    /// The fit it belongs to (restarts before it).
+    pub epoch: u64,
+    /// Where the fit placed it when it came.
+    pub placed_ns: u64,
 }
 
 /// A trigger whose NC time maps to this much before its arrival is not late but comes from a
@@ -221,6 +236,7 @@ impl Default for NcClock {
             fit: ClockFit::new(2_000_000, 1800),
             nc: Unwrap::new(32),
             restarts: 0,
+            newest_us: 0,
         }
     }
 }
@@ -229,6 +245,13 @@ impl NcClock {
     /// The host-axis time of a trigger stamped `nc_ms` by the NC that arrived at `host_ns`:
     /// never later than its arrival.
     pub fn time(&mut self, nc_ms: u32, host_ns: u64) -> u64 {
+        self.observe(nc_ms, host_ns).placed_ns
+    }
+
+    /// Adds a trigger frame to the fit and places it with the fit as it then stands
+    /// ([`NcClock::time`]); the point can be placed again later ([`NcClock::place`]), once
+    /// later frames have improved the fit.
+    pub fn observe(&mut self, nc_ms: u32, host_ns: u64) -> NcPoint {
         let raw = u64::from(nc_ms);
         let mut ms = match self.nc.push(raw) {
             Some(ms) => ms,
@@ -246,7 +269,40 @@ impl NcClock {
         }
         let us = ms.saturating_mul(1000);
         self.fit.push(us, host_ns);
-        self.fit.estimate(us).unwrap_or(host_ns).min(host_ns)
+        self.newest_us = us;
+        NcPoint {
+            nc_us: us,
+            host_ns,
+            epoch: self.restarts,
+            placed_ns: self.fit.estimate(us).unwrap_or(host_ns).min(host_ns),
+        }
+    }
+
+    /// `p` placed with the fit as it stands now: never later than its arrival; where the fit
+    /// was started afresh since `p` was observed, where it was placed then.
+    pub fn place(&self, p: &NcPoint) -> u64 {
+        if p.epoch != self.restarts {
+            return p.placed_ns;
+        }
+        self.fit
+            .estimate(p.nc_us)
+            .unwrap_or(p.host_ns)
+            .min(p.host_ns)
+    }
+
+    /// Whether the fit has its line (enough windows of frames): later frames then no longer
+    /// move a placement by more than the fit's own error.
+    pub fn settled(&self) -> bool {
+        self.fit.drift_ppm().is_some()
+    }
+
+    /// How far the NC clock has run since `p`, µs (`u64::MAX` across a restart of the fit:
+    /// `p` cannot be placed better any more).
+    pub fn since(&self, p: &NcPoint) -> u64 {
+        if p.epoch != self.restarts {
+            return u64::MAX;
+        }
+        self.newest_us.saturating_sub(p.nc_us)
     }
 
     fn restart(&mut self) {

@@ -53,7 +53,7 @@ mod stamper;
 mod trigger;
 
 pub use cb3::{Cb3Config, spawn_cb3};
-pub use clock::NcClock;
+pub use clock::{NcClock, NcPoint};
 pub use error::DriverError;
 pub use event::{Counters, DriverEvent, EventSender, Sample, SampleValues, Trigger};
 pub use host_clock::HostClock;

@@ -93,7 +93,7 @@ pub struct DetectorSettings {
     pub psd: SteadyConfig,
     /// Which time of a CNC trigger opens and closes the dwells. Logs written before this
     /// setting existed used the arrival time, and replay must reproduce them: a missing key
-    /// reads as [`TriggerTime::Arrival`]; new runs write [`TriggerTime::NcClock`].
+    /// reads as [`TriggerTime::Arrival`]; new runs write [`TriggerTime::NcClockSettled`].
     #[serde(default = "TriggerTime::arrival")]
     pub trigger_time: TriggerTime,
 }
@@ -104,13 +104,23 @@ pub struct DetectorSettings {
 #[serde(rename_all = "snake_case")]
 pub enum TriggerTime {
     /// The frame's NC clock (`nc_ms`) fitted against the host clock (`drivers::NcClock`):
-    /// when the NC says the event happened.
-    #[default]
+    /// when the NC says the event happened; each trigger placed with the fit as it stood when
+    /// its frame came. Runs of version 0.1 before the settled placement.
     NcClock,
+    /// As [`TriggerTime::NcClock`], but a trigger is placed once the fit is settled (it has its
+    /// line) or the NC clock has run [`NC_SETTLE_US`] past it, with the fit as it then stands:
+    /// frames that came in one late burst at the start of a program, before any prompt frame,
+    /// are placed by the later prompt ones instead of at the burst's arrival.
+    #[default]
+    NcClockSettled,
     /// The host arrival time of the frame: late by the adapter's, the link's and the
     /// scheduler's delays (hundreds of ms on a loaded host). Only for replaying old logs.
     Arrival,
 }
+
+/// How far the NC clock must run past an unsettled trigger before it is placed anyway, µs:
+/// one window of the NC clock fit.
+pub const NC_SETTLE_US: u64 = 2_000_000;
 
 impl TriggerTime {
     fn arrival() -> TriggerTime {
@@ -125,7 +135,7 @@ impl Default for DetectorSettings {
             interferometer: SteadyConfig::default(),
             capball: SteadyConfig::default(),
             psd: SteadyConfig::default(),
-            trigger_time: TriggerTime::NcClock,
+            trigger_time: TriggerTime::NcClockSettled,
         }
     }
 }

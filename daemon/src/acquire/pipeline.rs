@@ -44,6 +44,11 @@ pub trait EventSink: Send {
     fn tick(&mut self, now_ns: u64) -> anyhow::Result<()>;
     /// Close open dwells and the log; returns the last pose values.
     fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>>;
+    /// Whether triggers are placed as they come ([`PoseEngine::placing_at_once`]): poses of
+    /// triggers that waited for the NC clock fit to settle are left out of the pose latency.
+    fn placing_at_once(&self) -> bool {
+        true
+    }
 }
 
 /// The run's log: the log's `Recorder` (raw topics, pose engine, `/status`), writing through
@@ -113,6 +118,9 @@ impl EventSink for LiveLog {
     fn tick(&mut self, now_ns: u64) -> anyhow::Result<()> {
         Ok(self.recorder.tick(now_ns)?)
     }
+    fn placing_at_once(&self) -> bool {
+        self.recorder.placing_at_once()
+    }
     fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
         let LiveLog {
             recorder,
@@ -148,6 +156,9 @@ impl EventSink for DetectOnly {
     }
     fn finish(mut self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
         Ok(self.0.finish(now_ns))
+    }
+    fn placing_at_once(&self) -> bool {
+        self.0.placing_at_once()
     }
 }
 
@@ -357,13 +368,15 @@ impl Pipeline {
         self.instruments.entry(i).or_default()
     }
 
-    fn count_poses(&mut self, poses: Vec<PoseMsg>) {
+    /// Counts pose values; `timed`: their latency counts (not when their triggers waited for
+    /// the NC clock fit to settle, docs/design.md).
+    fn count_poses(&mut self, poses: Vec<PoseMsg>, timed: bool) {
         if poses.is_empty() {
             return;
         }
         let now = self.clock.now_ns();
         for v in poses {
-            if v.n > 0 {
+            if v.n > 0 && timed {
                 let latency_ms = now.saturating_sub(v.t_last_ns) as f64 / 1e6;
                 if latency_ms > self.status.pose_latency_max_ms {
                     self.status.pose_latency_max_ms = latency_ms;
@@ -394,6 +407,7 @@ impl Pipeline {
     /// Handle one driver event.
     pub fn handle(&mut self, ev: DriverEvent) {
         let now = self.clock.now_ns();
+        let timed = self.sink.placing_at_once();
         let r = self.sink.record(&ev, now);
         let poses = self.sink_result(r);
         match ev {
@@ -446,7 +460,7 @@ impl Pipeline {
                 self.slot(instrument).driver = counters;
             }
         }
-        self.count_poses(poses);
+        self.count_poses(poses, timed);
     }
 
     /// Snapshot the status.
@@ -487,8 +501,9 @@ impl Pipeline {
             Box::new(DetectOnly(PoseEngine::new(&DetectorSettings::default())?)),
         );
         let mut reason = reason;
+        let timed = sink.placing_at_once();
         match sink.finish(now) {
-            Ok(last) => self.count_poses(last),
+            Ok(last) => self.count_poses(last, timed),
             // The file could not be closed (its footer not written): what was written before
             // stays readable, as after a kill (the reader reads the intact prefix).
             Err(e) => {

@@ -68,6 +68,11 @@ impl Recorder {
     /// Writes one driver event (and the pose values it completes); returns those pose values.
     /// `now_ns` is the host clock (`HostClock::now_ns`), used for the log time of events that
     /// carry none and for the `/status` cadence.
+    /// Whether its pose engine places triggers as they come ([`PoseEngine::placing_at_once`]).
+    pub fn placing_at_once(&self) -> bool {
+        self.engine.placing_at_once()
+    }
+
     pub fn record(&mut self, ev: &DriverEvent, now_ns: u64) -> Result<Vec<PoseMsg>, LogError> {
         self.last_ns = self.last_ns.max(now_ns);
         let poses = match ev {

@@ -28,9 +28,11 @@ pub struct Args {
     /// Samples averaged per pose (overrides the logged detector settings).
     #[arg(long)]
     pub detector_samples: Option<usize>,
-    /// Which time of a trigger places the dwells (overrides the logged setting): `nc_clock`
-    /// (the NC clock fitted to the host clock) or `arrival` (the frame's arrival time, what
-    /// logs from before the NC clock fit used); docs/design.md, timing model.
+    /// Which time of a trigger places the dwells (overrides the logged setting):
+    /// `nc_clock_settled` (the NC clock fitted to the host clock, each trigger placed once the
+    /// fit has settled), `nc_clock` (placed with the fit as it stood when the frame came) or
+    /// `arrival` (the frame's arrival time, what logs from before the NC clock fit used);
+    /// docs/design.md, timing model.
     #[arg(long, value_parser = parse_trigger_time)]
     pub trigger_time: Option<TriggerTime>,
     /// Print the report as JSON.
@@ -47,8 +49,9 @@ pub struct ReplayOptions {
 }
 
 fn parse_trigger_time(s: &str) -> Result<TriggerTime, String> {
-    serde_json::from_value(serde_json::Value::String(s.replace('-', "_")))
-        .map_err(|_| format!("`{s}` is not a trigger time: use nc_clock or arrival"))
+    serde_json::from_value(serde_json::Value::String(s.replace('-', "_"))).map_err(|_| {
+        format!("`{s}` is not a trigger time: use nc_clock_settled, nc_clock or arrival")
+    })
 }
 
 /// What a replay produced.

@@ -253,7 +253,7 @@ impl<'a> Context<'a> {
 }
 
 /// The columns of every step but those listed.
-fn cols_except(steps: &[Step], skip: &[usize]) -> Vec<Vec<f64>> {
+pub(super) fn cols_except(steps: &[Step], skip: &[usize]) -> Vec<Vec<f64>> {
     steps
         .iter()
         .enumerate()

@@ -313,12 +313,7 @@ fn spread_of(
     steps: &[search::Step],
     i: usize,
 ) -> Option<search::Spread> {
-    let others: Vec<Vec<f64>> = steps
-        .iter()
-        .enumerate()
-        .filter(|(k, _)| *k != i)
-        .flat_map(|(_, s)| s.sel.cols.iter().cloned())
-        .collect();
+    let others = alternatives::cols_except(steps, &[i]);
     let p = fit::Projector::new(obs, &fin.w, &others);
     let y_perp = p.residualize(obs, &obs.y);
     let st = &steps[i];

@@ -107,6 +107,14 @@ pub fn read_log_until(
     read_log_progress(path, |_, _| {}, on)
 }
 
+/// The longest record the reader accepts: 100 × the file (a record inside a compressed chunk
+/// can be longer than the file, by the compression ratio), at least 16 MiB and at most 1 GiB.
+/// A damaged length field then costs at most that much memory, not a gigabyte for any file.
+fn record_length_limit(file_bytes: u64) -> usize {
+    let limit = file_bytes.saturating_mul(100).clamp(16 << 20, 1 << 30);
+    usize::try_from(limit).unwrap_or(1 << 30)
+}
+
 /// Like [`read_log_until`], telling `progress(bytes read, file bytes)` as it goes (for a
 /// progress bar: an 8-hour log is gigabytes).
 pub fn read_log_progress(
@@ -134,7 +142,7 @@ pub fn read_log_progress(
             // is an unexpected end. The footer is checked for separately.
             .with_skip_end_magic(true)
             // A damaged record must not make the reader allocate without bound.
-            .with_record_length_limit(1 << 30),
+            .with_record_length_limit(record_length_limit(file_bytes)),
     );
     let mut schemas: BTreeMap<u16, (String, String, Vec<u8>)> = BTreeMap::new();
     let mut topics: BTreeMap<u16, (String, String)> = BTreeMap::new();
@@ -165,7 +173,13 @@ pub fn read_log_progress(
         };
         match ev {
             LinearReadEvent::ReadRequest(n) => {
-                let buf = reader.insert(n.max(64 * 1024));
+                // Never more than the file still holds: a damaged length asks for up to the
+                // record limit, and the buffer is allocated (and zeroed) before the read.
+                let left = file_bytes.saturating_sub(summary.bytes_read);
+                let want = n
+                    .max(64 * 1024)
+                    .min(usize::try_from(left).unwrap_or(usize::MAX));
+                let buf = reader.insert(want.max(1));
                 let got = loop {
                     match file.read(buf) {
                         Ok(k) => break k,

@@ -107,6 +107,25 @@ pub fn read_log_until(
     read_log_progress(path, |_, _| {}, on)
 }
 
+/// Whether an attachment record's body ends before its CRC: `mcap::parse_record` (0.26.0)
+/// slices `body[header..len - 4]` without checking and panics on such a body (found by the
+/// `mcap_reader` fuzz target; the input is kept in its corpus). Fields: log time, create time
+/// (u64 each), name and media type (u32 length + bytes each), data length (u64), data, CRC
+/// (u32).
+fn attachment_too_short(body: &[u8]) -> bool {
+    let string_end = |at: usize| -> Option<usize> {
+        let len = body.get(at..at.checked_add(4)?)?;
+        let len = u32::from_le_bytes(len.try_into().ok()?) as usize;
+        at.checked_add(4)?.checked_add(len)
+    };
+    let header_end = string_end(16).and_then(string_end);
+    match header_end.and_then(|h| h.checked_add(8 + 4)) {
+        Some(min) => body.len() < min,
+        // Too short for the header itself: `parse_record` reports that as an error.
+        None => false,
+    }
+}
+
 /// The longest record the reader accepts: 100 × the file (a record inside a compressed chunk
 /// can be longer than the file, by the compression ratio), at least 16 MiB and at most 1 GiB.
 /// A damaged length field then costs at most that much memory, not a gigabyte for any file.
@@ -192,6 +211,14 @@ pub fn read_log_progress(
                 progress(summary.bytes_read, file_bytes);
             }
             LinearReadEvent::Record { data, opcode } => {
+                if opcode == mcap::records::op::ATTACHMENT && attachment_too_short(data) {
+                    summary.error = Some(format!(
+                        "damaged record (opcode {opcode:#04x}): an attachment of {} bytes, too \
+                         short for its own fields",
+                        data.len()
+                    ));
+                    break;
+                }
                 let rec = match mcap::parse_record(opcode, data) {
                     Ok(r) => r,
                     Err(e) => {

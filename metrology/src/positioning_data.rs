@@ -251,6 +251,17 @@ impl PositioningData {
         if self.readings.is_empty() {
             return Err(DatasetError::Empty);
         }
+        // Target and cycle numbers count up from 1; numbers far beyond the readings are a
+        // damaged file, and the analyses size their tables by them (the `positioning_csv`
+        // fuzz target found an index of 4 333 333 333 333 333 aborting on allocation).
+        let n = self.readings.len();
+        if let Some(r) = self.readings.iter().find(|r| r.index > n || r.cycle > n) {
+            return Err(DatasetError::Inconsistent(format!(
+                "target {} in cycle {}: target and cycle numbers count 1, 2, 3, ..., and the \
+                 file has only {n} readings",
+                r.index, r.cycle
+            )));
+        }
         let mut pos: BTreeMap<(usize, usize), f64> = BTreeMap::new();
         let mut seen = std::collections::HashSet::new();
         for r in &self.readings {

@@ -42,6 +42,7 @@
 
 #[doc(hidden)]
 pub mod fuzzcheck;
+mod prescan;
 pub mod raw;
 pub mod reader;
 pub mod recover;

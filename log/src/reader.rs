@@ -151,6 +151,9 @@ pub fn read_log_progress(
         file_bytes,
         ..ReadSummary::default()
     };
+    // Fed only up to a chunk the `mcap` reader would not survive (`prescan`).
+    let bad_chunk = crate::prescan::first_bad_chunk(&mut file, file_bytes).map_err(open_err)?;
+    let feed_bytes = bad_chunk.unwrap_or(file_bytes);
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
@@ -180,6 +183,10 @@ pub fn read_log_progress(
             }
             Some(Err(e)) => {
                 summary.error = Some(match e {
+                    mcap::McapError::UnexpectedEof if bad_chunk.is_some() => format!(
+                        "damaged chunk at byte {feed_bytes}: a record inside it runs past the \
+                         chunk's end"
+                    ),
                     mcap::McapError::UnexpectedEof => format!(
                         "the file ends inside a record after {} of {} bytes (the writer did not close it)",
                         summary.bytes_read, file_bytes
@@ -194,12 +201,17 @@ pub fn read_log_progress(
             LinearReadEvent::ReadRequest(n) => {
                 // Never more than the file still holds: a damaged length asks for up to the
                 // record limit, and the buffer is allocated (and zeroed) before the read.
-                let left = file_bytes.saturating_sub(summary.bytes_read);
+                let left = feed_bytes.saturating_sub(summary.bytes_read);
                 let want = n
                     .max(64 * 1024)
                     .min(usize::try_from(left).unwrap_or(usize::MAX));
-                let buf = reader.insert(want.max(1));
+                let buf = reader.insert(want);
+                // Nothing left to feed (the file's end, or a chunk `prescan` stops at): an
+                // empty read tells the reader it is the end.
                 let got = loop {
+                    if buf.is_empty() {
+                        break 0;
+                    }
                     match file.read(buf) {
                         Ok(k) => break k,
                         Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,

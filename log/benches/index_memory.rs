@@ -11,41 +11,18 @@
 //!
 //! `cargo bench -p metrolog-log --bench index_memory` (MINUTES=60 by default).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicI64, Ordering};
+#[path = "../tests/support/counting_alloc.rs"]
+mod counting_alloc;
 
 use drivers::DriverEvent;
 use metrolog_log::synthetic::SyntheticRun;
 use metrolog_log::{LogOptions, LogWriter, RunMetadata};
 
-/// The system allocator, counting the bytes held.
-struct Counting;
-
-static HELD: AtomicI64 = AtomicI64::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        HELD.fetch_add(l.size() as i64, Ordering::Relaxed);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        HELD.fetch_sub(l.size() as i64, Ordering::Relaxed);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
-        HELD.fetch_add(new as i64 - l.size() as i64, Ordering::Relaxed);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.realloc(p, l, new) }
-    }
-}
-
 #[global_allocator]
-static ALLOC: Counting = Counting;
+static ALLOC: counting_alloc::Counting = counting_alloc::Counting;
 
 fn held() -> i64 {
-    HELD.load(Ordering::Relaxed)
+    counting_alloc::held() as i64
 }
 
 /// Bytes held at each whole minute of run time, and the chunks written.

@@ -50,6 +50,20 @@ impl Default for SyntheticRun {
 }
 
 impl SyntheticRun {
+    /// A run of two poses at low rates (a few kB of log): fuzz seeds and reader tests.
+    pub fn small() -> SyntheticRun {
+        SyntheticRun {
+            targets_mm: vec![0.0, 25.0],
+            dwell_s: 0.05,
+            move_s: 0.02,
+            li80_hz: 200.0,
+            cb3_hz: 100.0,
+            psd_hz: 50.0,
+            seed: 1,
+            ..SyntheticRun::default()
+        }
+    }
+
     /// Duration of the run, s.
     pub fn duration_s(&self) -> f64 {
         self.targets_mm.len() as f64 * (self.move_s + self.dwell_s) + 0.5

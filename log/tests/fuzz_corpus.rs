@@ -65,16 +65,7 @@ fn replay_mcap_reader_corpus() {
 fn write_mcap_seeds() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../protocol/fuzz/corpus/mcap_reader");
     std::fs::create_dir_all(&dir).unwrap();
-    let run = SyntheticRun {
-        targets_mm: vec![0.0, 25.0],
-        dwell_s: 0.05,
-        move_s: 0.02,
-        li80_hz: 200.0,
-        cb3_hz: 100.0,
-        psd_hz: 50.0,
-        seed: 1,
-        ..SyntheticRun::default()
-    };
+    let run = SyntheticRun::small();
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("seed.mcap");
     let meta = RunMetadata {

@@ -529,3 +529,17 @@ fn an_erratic_reference_gets_no_machine_cause() {
     let t = run_class("erratic_reference", &["unexplained"], 100, 1);
     assert!(t.detected >= 90 && t.machine_wrong <= 8, "{t:?}");
 }
+
+/// Heavy-tailed noise (Student t, 3–5 degrees of freedom) against isolated outliers on normal
+/// noise: the residuals' whole shape is weighed (a t model against normal noise with events,
+/// by BIC), so the tail of a t is rarely reported as outliers while real outliers still are.
+/// With the zone and kurtosis tests alone, 26 of these 200 heavy-tailed runs named an effect
+/// (10 with the comparison) and 192 of the 200 outlier runs named their outliers (188).
+#[test]
+fn heavy_tails_are_not_reported_as_outliers() {
+    let heavy = run_class("heavy_tailed_noise", &[], 200, 5000);
+    let outliers = run_class("outliers", &["outliers"], 200, 5000);
+    eprintln!("{heavy:?}\n{outliers:?}");
+    assert!(heavy.wrong <= 14, "{heavy:?}");
+    assert!(outliers.detected >= 184, "{outliers:?}");
+}

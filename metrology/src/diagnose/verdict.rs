@@ -7,7 +7,7 @@
 
 use std::collections::BTreeMap;
 
-use statrs::distribution::{ContinuousCDF, DiscreteCDF, Normal, Poisson};
+use statrs::distribution::{Continuous, ContinuousCDF, DiscreteCDF, Normal, Poisson, StudentsT};
 
 use super::Finding;
 use super::fit::{FinalFit, Obs, heldout_rms};
@@ -91,7 +91,8 @@ pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
     let heavy_tails = n_out > 0
         && (n_far == 0
             || p_mid_excess < HEAVY_TAIL_ALPHA
-            || kurtosis > 3.0 + 3.0 * (24.0 / inside.len().max(1) as f64).sqrt());
+            || kurtosis > 3.0 + 3.0 * (24.0 / inside.len().max(1) as f64).sqrt()
+            || tails_as_likely(&fin.resid, &fin.out));
     Residue {
         rho,
         sigma_short_um,
@@ -99,6 +100,64 @@ pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
         heavy_tails,
         outlier_share: n_out as f64 / n.max(1) as f64,
     }
+}
+
+/// Do the residuals fit a Student-t noise better than normal noise with the flagged readings
+/// as isolated events? The two models by their BIC, the lower one taken:
+/// - the t: its scale and degrees of freedom (the best of a grid from 2.2 to 50);
+/// - the events: normal noise for the kept readings, and each reading an event with a
+///   probability q, its value then uniform within ±R (scale, q and R fitted: q = k/N, R the
+///   largest residual).
+///
+/// The whole shape of the residuals is weighed, not only a zone: on a short run one reading
+/// 6 σ out with a few at 3–4 σ is the tail of a t with 3–5 degrees of freedom rather than a
+/// beam cut.
+fn tails_as_likely(resid: &[f64], out: &[bool]) -> bool {
+    let n = resid.len() as f64;
+    let k = out.iter().filter(|o| **o).count() as f64;
+    let kept: Vec<f64> = (0..resid.len())
+        .filter(|&j| !out[j])
+        .map(|j| resid[j])
+        .collect();
+    let var = kept.iter().map(|r| r * r).sum::<f64>() / kept.len().max(1) as f64;
+    let span = resid.iter().fold(0.0_f64, |m, r| m.max(r.abs()));
+    if var <= 0.0 || k == 0.0 || k >= n || span <= 0.0 {
+        return false;
+    }
+    let q = k / n;
+    let ll_events = -0.5 * kept.len() as f64 * ((std::f64::consts::TAU * var).ln() + 1.0)
+        + k * (q / (2.0 * span)).ln()
+        + (n - k) * (1.0 - q).ln();
+    let ll_t = [
+        2.2, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0, 25.0, 50.0,
+    ]
+    .iter()
+    .map(|&nu| student_t_loglik(resid, nu, var.sqrt()))
+    .fold(f64::NEG_INFINITY, f64::max);
+    let bic_events = -2.0 * ll_events + 3.0 * n.ln();
+    let bic_t = -2.0 * ll_t + 2.0 * n.ln();
+    bic_t < bic_events
+}
+
+/// Maximum log-likelihood of `r` under a Student t with `nu` degrees of freedom over its
+/// scale (EM iteration for the scale, started at `s0`).
+fn student_t_loglik(r: &[f64], nu: f64, s0: f64) -> f64 {
+    let mut s2 = s0 * s0;
+    for _ in 0..100 {
+        let next = r
+            .iter()
+            .map(|x| (nu + 1.0) / (nu + x * x / s2) * x * x)
+            .sum::<f64>()
+            / r.len() as f64;
+        let done = (next - s2).abs() <= 1e-10 * s2;
+        s2 = next.max(f64::MIN_POSITIVE);
+        if done {
+            break;
+        }
+    }
+    StudentsT::new(0.0, s2.sqrt(), nu)
+        .map(|d| r.iter().map(|x| d.ln_pdf(*x)).sum())
+        .unwrap_or(f64::NEG_INFINITY)
 }
 
 impl Residue {

@@ -383,12 +383,14 @@ fn residual(f: &[f64], others: &[&[f64]]) -> Vec<f64> {
         if a[c][c].abs() < 1e-300 {
             continue;
         }
-        for r in 0..k {
+        let pivot = a[c].clone();
+        for (r, row) in a.iter_mut().enumerate() {
             if r != c {
-                let m = a[r][c] / a[c][c];
-                for q in c..=k {
-                    a[r][q] -= m * a[c][q];
-                }
+                let m = row[c] / pivot[c];
+                row[c..]
+                    .iter_mut()
+                    .zip(&pivot[c..])
+                    .for_each(|(x, y)| *x -= m * y);
             }
         }
     }

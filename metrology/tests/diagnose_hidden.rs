@@ -494,7 +494,7 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
             }
             if std::env::var("SHOW_MISSES").is_ok() && (t.detected == 0 || t.wrong == 1) {
                 eprintln!(
-                    "{class} seed {seed}: m={} n={} truth {truth:?} findings {:?}",
+                    "{class} seed {seed}: m={} n={} λ {lambdas:.0?} truth {truth:?} findings {:?}",
                     data.n_targets(),
                     data.n_cycles(),
                     f.iter()
@@ -667,4 +667,24 @@ fn heavy_tails_are_not_reported_as_outliers() {
     eprintln!("{heavy:?}\n{outliers:?}");
     assert!(heavy.wrong <= 14, "{heavy:?}");
     assert!(outliers.detected >= 184, "{outliers:?}");
+}
+
+/// A warm-up beside a cycle: the cycle's period, found first, is biased by the warm-up and
+/// can leave it looking like a step. The backfitting swaps an effect with the others'
+/// parameters searched again around the newcomer; without that, a step was named instead of
+/// the warm-up in 10 of these 100 runs (8 of the 61 where an oracle tells the warm-up from a
+/// drift), with it in none of those 61.
+#[test]
+fn a_warmup_beside_a_cycle_is_not_taken_for_a_step() {
+    let t = run_class(
+        "warmup+cyclic",
+        &["exponential_warmup", "cyclic_drift"],
+        100,
+        5000,
+    );
+    eprintln!("{t:?}");
+    assert!(
+        t.detected >= 85 && t.detected_detectable + 2 >= t.detectable,
+        "{t:?}"
+    );
 }

@@ -111,6 +111,18 @@ pub(super) fn refine(
                 steps[i].significance = r.step.significance;
                 steps[i].alpha_temp = false;
                 changed = true;
+            } else if let Some(j) = ctx.best_joint(steps, i, use_temp) {
+                for (k, s) in j.others {
+                    steps[k].sel = s.sel;
+                    steps[k].u_theta = s.u_theta;
+                    steps[k].significance = s.significance;
+                    steps[k].alpha_temp = false;
+                }
+                steps[i].sel = j.step.sel;
+                steps[i].u_theta = j.step.u_theta;
+                steps[i].significance = j.step.significance;
+                steps[i].alpha_temp = false;
+                changed = true;
             }
         }
         if !changed {
@@ -122,6 +134,15 @@ pub(super) fn refine(
         s.before_cols = before.clone();
         before.extend(s.sel.cols.iter().cloned());
     }
+}
+
+/// A replacement of one step with the others refitted around it ([`Context::joint_in_place`]).
+struct Joint {
+    step: Step,
+    /// The other steps as refitted, by index.
+    others: Vec<(usize, Step)>,
+    /// BIC of the whole model with the replacement minus without.
+    delta_bic: f64,
 }
 
 struct Context<'a> {
@@ -163,6 +184,60 @@ impl<'a> Context<'a> {
         let delta_bic = self.discount * self.n_eff * (rss / rss_sel).ln()
             + (g.n_params(self.obs) as f64 - sel.family.n_params(self.obs) as f64) * self.ln_n;
         Some(Rival { step, delta_bic })
+    }
+
+    /// The best other effect in place of step `i` with the other steps' parameters searched
+    /// again around it ([`Context::joint_in_place`]), when that lowers the BIC of the whole
+    /// model by more than [`REFINE_MIN`].
+    fn best_joint(&self, steps: &[Step], i: usize, use_temp: bool) -> Option<Joint> {
+        families(self.obs, use_temp)
+            .into_iter()
+            .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+            .filter_map(|g| self.joint_in_place(steps, i, g))
+            .filter(|j| j.delta_bic < -REFINE_MIN)
+            .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
+    }
+
+    /// `g` in place of step `i`, and each other step's parameter searched again with `g` in
+    /// the model (one round of backfitting), then `g`'s once more. The others' parameters
+    /// were found with step `i`'s effect in the model: a cycle's period fitted beside a step
+    /// can leave a warm-up looking like that step, and the swap alone does not show it.
+    fn joint_in_place(&self, steps: &[Step], i: usize, g: Family) -> Option<Joint> {
+        let (mut cur, _) = self.fit_in(&cols_except(steps, &[i]), g)?;
+        let mut others: Vec<(usize, Step)> = Vec::new();
+        for k in (0..steps.len()).filter(|&k| k != i) {
+            let mut base: Vec<Vec<f64>> = (0..steps.len())
+                .filter(|&q| q != i && q != k)
+                .flat_map(|q| {
+                    let done = others.iter().find(|(o, _)| *o == q);
+                    done.map_or(&steps[q].sel.cols, |(_, s)| &s.sel.cols)
+                        .clone()
+                })
+                .collect();
+            base.extend(cur.sel.cols.iter().cloned());
+            let (s, _) = self.fit_in(&base, steps[k].sel.family)?;
+            others.push((k, s));
+        }
+        let base: Vec<Vec<f64>> = others
+            .iter()
+            .flat_map(|(_, s)| s.sel.cols.iter().cloned())
+            .collect();
+        let rss;
+        (cur, rss) = self.fit_in(&base, g)?;
+        let all = cols_except(steps, &[]);
+        let p = Projector::new(self.obs, &self.fin.w, &all);
+        let r = p.residualize(self.obs, &self.obs.y);
+        let rss_now = dotw(&r, &r, &self.fin.w);
+        if rss_now <= 0.0 || rss <= 0.0 {
+            return None;
+        }
+        let extra = g.n_params(self.obs) as f64 - steps[i].sel.family.n_params(self.obs) as f64;
+        let delta_bic = self.discount * self.n_eff * (rss / rss_now).ln() + extra * self.ln_n;
+        Some(Joint {
+            step: cur,
+            others,
+            delta_bic,
+        })
     }
 
     /// Two smooth effects in place of the offsets per cycle of step `i` (a step and a drift

@@ -325,40 +325,58 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth, Oracle) {
 /// removing the per-(target, direction) constants and the other hidden effects, whose shapes
 /// (τ, period, step moment) the oracle knows. A test of one known shape at the false-alarm
 /// level α = 0.001 detects it with 95 % probability when λ ≥ (z₀.₉₉₉₅ + z₀.₉₅)² ≈ 24.4; below
-/// that no method can reach 95 % at that level. A warm-up is told from a linear drift only
-/// by its curvature, so a straight line in time is removed from it too: naming a warm-up
-/// rather than a drift needs λ of the curvature. Written here, apart from the analysis.
+/// that no method can reach 95 % at that level. A warm-up is told from a linear drift only by
+/// its curvature and from a step only by its smoothness, so its λ is the least left after
+/// removing a straight line in time or a step at any reading: naming a warm-up rather than a
+/// drift or a step needs that much. Written here, apart from the analysis.
 fn oracle_lambdas(data: &PositioningData, o: &Oracle) -> Vec<f64> {
     let key = |r: &Reading| (r.index, r.direction == Direction::Up);
-    let line: Vec<f64> = data.readings.iter().map(|r| r.time_s).collect();
-    let mut shapes: Vec<&[f64]> = o.signals.iter().map(|(_, f)| f.as_slice()).collect();
-    shapes.push(&line);
-    let centred: Vec<Vec<f64>> = shapes
-        .iter()
-        .map(|f: &&[f64]| {
-            let mut sums: std::collections::HashMap<(usize, bool), (f64, f64)> = Default::default();
-            for (r, v) in data.readings.iter().zip(f.iter()) {
-                let e = sums.entry(key(r)).or_default();
-                e.0 += v;
-                e.1 += 1.0;
-            }
-            data.readings
-                .iter()
-                .zip(f.iter())
-                .map(|(r, v)| v - sums[&key(r)].0 / sums[&key(r)].1)
-                .collect()
-        })
+    let centre = |f: &[f64]| -> Vec<f64> {
+        let mut sums: std::collections::HashMap<(usize, bool), (f64, f64)> = Default::default();
+        for (r, v) in data.readings.iter().zip(f) {
+            let e = sums.entry(key(r)).or_default();
+            e.0 += v;
+            e.1 += 1.0;
+        }
+        data.readings
+            .iter()
+            .zip(f)
+            .map(|(r, v)| v - sums[&key(r)].0 / sums[&key(r)].1)
+            .collect()
+    };
+    let t: Vec<f64> = data.readings.iter().map(|r| r.time_s).collect();
+    // A warm-up's rivals: a straight line, and a step at any reading.
+    let rivals: Vec<Vec<f64>> = std::iter::once(centre(&t))
+        .chain(t.iter().skip(1).map(|&t0| {
+            centre(
+                &t.iter()
+                    .map(|&x| f64::from(u8::from(x >= t0)))
+                    .collect::<Vec<_>>(),
+            )
+        }))
         .collect();
+    let cs: Vec<Vec<f64>> = o.signals.iter().map(|(_, f)| centre(f)).collect();
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let line_at = centred.len() - 1;
-    (0..o.signals.len())
+    (0..cs.len())
         .map(|i| {
-            let others: Vec<&[f64]> = (0..centred.len())
-                .filter(|&j| j != i && (j != line_at || o.signals[i].0 == "exponential_warmup"))
-                .map(|j| centred[j].as_slice())
+            let others: Vec<&[f64]> = (0..cs.len())
+                .filter(|&j| j != i)
+                .map(|j| cs[j].as_slice())
                 .collect();
-            let f = residual(&centred[i], &others);
-            dot(&f, &f) / (o.sigma * o.sigma)
+            let lambda = |extra: Option<&[f64]>| {
+                let mut with = others.clone();
+                with.extend(extra);
+                let f = residual(&cs[i], &with);
+                dot(&f, &f) / (o.sigma * o.sigma)
+            };
+            if o.signals[i].0 == "exponential_warmup" {
+                rivals
+                    .iter()
+                    .map(|r| lambda(Some(r)))
+                    .fold(f64::INFINITY, f64::min)
+            } else {
+                lambda(None)
+            }
         })
         .collect()
 }

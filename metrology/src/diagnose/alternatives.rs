@@ -78,10 +78,18 @@ pub(super) fn refine(
     fin: &FinalFit,
 ) {
     let ctx = Context::new(obs, opt, fin);
-    if let Some(i) = steps
-        .iter()
-        .position(|s| s.sel.family == Family::CycleOffsets)
-    {
+    // Offsets per cycle, and a cycle seen for less than two periods: neither shows more than
+    // that the run's mean path bends, which a pair of smooth effects may explain better (a
+    // step up and a drift down look like half a cycle).
+    let splittable = |s: &Step| match s.sel.family {
+        Family::CycleOffsets => true,
+        Family::Cyclic => 2.0 * s.sel.theta > obs.duration_s,
+        _ => false,
+    };
+    let order: Vec<usize> = (0..steps.len())
+        .filter(|&i| splittable(&steps[i]))
+        .collect();
+    for i in order {
         let fams: Vec<Family> = families(obs, use_temp)
             .into_iter()
             .filter(|g| *g != Family::CycleOffsets)
@@ -90,6 +98,7 @@ pub(super) fn refine(
         if let Some([a, b]) = ctx.split_offsets(steps, i, &fams) {
             steps[i] = a;
             steps.insert(i + 1, b);
+            break;
         }
     }
     for _ in 0..3 {

@@ -194,8 +194,13 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     let baseline_rms = rms(r0.iter().copied());
     let baseline_heldout = heldout_rms(&obs, &ones, &[], &vec![true; n]);
 
-    // Outliers: a first screen around the group medians, refined after each step.
+    // Outliers: a first screen around the group medians, refined after each step. A screen
+    // that flags more than a tenth of the readings sees structure (a large step moves half
+    // the run off its medians), not isolated events: the search then starts without it.
     let mut out = flag_outliers(&obs, &group_median_residuals(&obs), opt.outlier_alpha, m);
+    if out.iter().filter(|o| **o).count() as f64 > verdict::MAX_OUTLIER_SHARE * n as f64 {
+        out = vec![false; n];
+    }
     let mut steps = search::forward_select(&obs, opt, use_temp, &mut out, &mut notes);
     if !steps.is_empty() {
         let cols = all_cols(&steps.iter().map(|s| s.sel.clone()).collect::<Vec<_>>());

@@ -17,7 +17,7 @@ use super::search::lag1_correlation;
 /// Residual RMS above this many times the short-term noise is structure, not noise.
 const UNEXPLAINED_RATIO: f64 = 3.0;
 /// More flagged readings than this share are not isolated outliers.
-const MAX_OUTLIER_SHARE: f64 = 0.10;
+pub(super) const MAX_OUTLIER_SHARE: f64 = 0.10;
 /// Readings this many robust scales off their trend are far: isolated events, not the tail.
 const FAR: f64 = 6.5;
 /// Level of the test for more readings between 3 and [`FAR`] robust scales than normal noise

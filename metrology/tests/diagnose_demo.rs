@@ -49,3 +49,28 @@ fn demo_run_names_thermal_expansion_and_cyclic_drift() {
     }
     assert!(ok >= 8, "both effects named in {ok}/10 demo-like runs");
 }
+
+/// The positioning readings of a real `metrolog demo` run: the simulated instruments through
+/// the drivers and the daemon, exported with `metrolog analyze positioning LOG --csv DIR`
+/// (`tests/data/demo_run_positioning.csv`). The simulation-only runs above did not catch a
+/// change (reading a clearly positive residual correlation one standard error up) that made
+/// this run `unexplained`; this one does.
+#[test]
+fn the_demo_logs_run_names_both_effects() {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/demo_run_positioning.csv");
+    let d = metrology::positioning_data::PositioningData::from_csv_path(&p).expect("fixture reads");
+    let r = diagnose(&d, &Options::default()).expect("diagnose");
+    let names: Vec<&str> = r
+        .report
+        .findings
+        .iter()
+        .map(|f| f.effect.as_str())
+        .collect();
+    assert!(
+        names.contains(&"cyclic_drift")
+            && names.contains(&"thermal_expansion")
+            && !names.contains(&"unexplained"),
+        "{names:?}"
+    );
+}

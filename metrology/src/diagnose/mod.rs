@@ -311,26 +311,46 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     })
 }
 
-/// The spread of step `i`'s searched parameter in the final fit (the other effects in).
+/// The spread of step `i`'s searched parameter in the final fit (the other effects in). At
+/// each value tried, the other effects' searched parameters (a warm-up's τ, a cycle's period,
+/// a step's moment) are searched again: a period and a τ fitted together trade off, and the
+/// spread of one with the other held fixed is too narrow.
 fn spread_of(
     obs: &Obs,
     fin: &FinalFit,
     steps: &[search::Step],
     i: usize,
 ) -> Option<search::Spread> {
-    let others = alternatives::cols_except(steps, &[i]);
-    let p = fit::Projector::new(obs, &fin.w, &others);
-    let y_perp = p.residualize(obs, &obs.y);
     let st = &steps[i];
-    search::theta_spread(
-        obs,
-        &p,
-        &y_perp,
-        st.sel.family,
-        st.sel.theta,
-        st.u_theta,
-        fin.sigma2,
-    )
+    let fam = st.sel.family;
+    let searched: Vec<usize> = (0..steps.len())
+        .filter(|&j| j != i && steps[j].sel.theta.is_finite())
+        .collect();
+    let fit_at = |t: f64| {
+        let cols_i = fam.columns(obs, t);
+        let mut cols: Vec<Vec<Vec<f64>>> = steps.iter().map(|s| s.sel.cols.clone()).collect();
+        for &j in &searched {
+            let mut base: Vec<Vec<f64>> = (0..steps.len())
+                .filter(|&q| q != i && q != j)
+                .flat_map(|q| cols[q].clone())
+                .collect();
+            base.extend(cols_i.iter().cloned());
+            let p = fit::Projector::new(obs, &fin.w, &base);
+            let y = p.residualize(obs, &obs.y);
+            if let Some(c) = search::search(obs, &p, &y, steps[j].sel.family) {
+                cols[j] = steps[j].sel.family.columns(obs, c.theta);
+            }
+        }
+        let others: Vec<Vec<f64>> = (0..steps.len())
+            .filter(|&q| q != i)
+            .flat_map(|q| cols[q].clone())
+            .collect();
+        let p = fit::Projector::new(obs, &fin.w, &others);
+        let y = p.residualize(obs, &obs.y);
+        let (rss, x) = search::cols_fit(obs, &p, &y, &cols_i);
+        x.map(|x| (rss, x))
+    };
+    search::theta_spread(obs, &fit_at, fam, st.sel.theta, st.u_theta, fin.sigma2)
 }
 
 /// A rival fitted in a finding's place, the rest of the model kept.

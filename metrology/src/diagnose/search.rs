@@ -41,7 +41,7 @@ pub(super) fn cols_rss(obs: &Obs, p: &Projector, y_perp: &[f64], cols: &[Vec<f64
 
 /// RSS of y on baseline + `p`'s columns + `cols`, and the coefficients of `cols` (None when
 /// they are collinear).
-fn cols_fit(
+pub(super) fn cols_fit(
     obs: &Obs,
     p: &Projector,
     y_perp: &[f64],
@@ -85,11 +85,12 @@ pub(super) struct Spread {
 type TriedPoint = (f64, f64, DVector<f64>);
 
 /// [`Spread`] of `fam` at `theta`: over its own grid for a step (every reading), over ±4
-/// curvature uncertainties (`u_theta`) around `theta` otherwise.
+/// curvature uncertainties (`u_theta`) around `theta` otherwise. `fit_at(t)` is the RSS and
+/// the effect's linear coefficients with its parameter at `t` (the rest of the model refitted
+/// as the caller decides).
 pub(super) fn theta_spread(
     obs: &Obs,
-    p: &Projector,
-    y_perp: &[f64],
+    fit_at: &(dyn Fn(f64) -> Option<(f64, DVector<f64>)> + Sync),
     fam: Family,
     theta: f64,
     u_theta: Option<f64>,
@@ -105,10 +106,7 @@ pub(super) fn theta_spread(
     };
     let fits: Vec<TriedPoint> = points
         .iter()
-        .filter_map(|&t| {
-            let (rss, x) = cols_fit(obs, p, y_perp, &fam.columns(obs, t));
-            x.map(|x| (t, rss, x))
-        })
+        .filter_map(|&t| fit_at(t).map(|(rss, x)| (t, rss, x)))
         .collect();
     let rss_min = fits.iter().map(|f| f.1).fold(f64::INFINITY, f64::min);
     if !(rss_min.is_finite() && s2 > 0.0) {
@@ -489,11 +487,6 @@ fn discounted_gain(
         let (_, r2) = in_sample_residuals(obs, w, cols);
         rho = rho.min(lag1_correlation(obs, w, &r2));
     }
-    // Clearly correlated residuals (ρ over two standard errors √((1 − ρ²)/N)): the evidence
-    // must not rest on an underestimated ρ, whose error moves the discount by about
-    // 2/√((1 − ρ²)N) of itself (a third on 60 readings); ρ one standard error up is used.
-    let se = ((1.0 - rho * rho).max(0.0) / n_eff).sqrt();
-    let rho = if rho > 2.0 * se { rho + se } else { rho };
     let rho = rho.clamp(0.0, 0.95);
     let lr = n_eff * (rss0 / cand.rss).ln();
     Some(lr * (1.0 - rho) / (1.0 + rho) - fam.n_params(obs) as f64 * (obs.len() as f64).ln())

@@ -11,11 +11,11 @@
 //! pays for its extra parameters shows no more than that they are not supported.
 
 use super::Options;
+use super::correlation::design_lag1;
 use super::family::Family;
 use super::fit::{FinalFit, Obs, Projector, dotw, heldout_rms};
 use super::search::{
-    Selected, Step, absorbed_by_baseline, cols_rss, families, lag1_correlation, search,
-    theta_uncertainty,
+    Selected, Step, absorbed_by_baseline, cols_rss, families, search, theta_uncertainty,
 };
 
 /// BIC difference below which two effects are not told apart: under 6 is at most "positive"
@@ -166,7 +166,7 @@ struct Context<'a> {
 
 impl<'a> Context<'a> {
     fn new(obs: &'a Obs, opt: &'a Options, fin: &'a FinalFit) -> Self {
-        let rho = lag1_correlation(obs, &fin.w, &fin.resid).clamp(0.0, 0.95);
+        let rho = design_lag1(obs, &fin.w, &fin.cols, &fin.resid).clamp(0.0, 0.95);
         Context {
             obs,
             opt,

@@ -29,6 +29,7 @@ use crate::axis_model::{AxisModel, Effect};
 use crate::positioning_data::PositioningData;
 
 mod alternatives;
+mod correlation;
 mod family;
 mod fit;
 mod model;

@@ -7,6 +7,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use super::Options;
+use super::correlation::design_lag1;
 use super::family::Family;
 use super::fit::{Obs, Projector, dotw, heldout_rms, in_sample_residuals};
 use super::outliers::{flag_outliers, weights};
@@ -296,9 +297,9 @@ pub(super) fn forward_select(
             // alone: a flexible effect (an offset per cycle) can rank high alone by absorbing
             // part of two effects, yet leave the structure of either as "correlation".
             let partner =
-                best_partner(obs, &p, &y_perp, rss0, fam, &new.cols, &partners).map(|pc| {
+                best_partner(obs, &p, &y_perp, rss0, fam, &new.cols, &partners).map(|pf| {
                     let mut c = cols_after.clone();
-                    c.extend(pc);
+                    c.extend(partner_given(obs, &w, &cols_after, pf));
                     c
                 });
             let Some(significance) =
@@ -373,7 +374,7 @@ fn best_partner(
     fam: Family,
     cols: &[Vec<f64>],
     partners: &[(Family, f64)],
-) -> Option<Vec<Vec<f64>>> {
+) -> Option<(Family, f64)> {
     let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
     let ln_n = (obs.len() as f64).ln();
     partners
@@ -396,11 +397,22 @@ fn best_partner(
             (rss > 0.0).then(|| {
                 let dbic =
                     n_eff * (rss / rss0).ln() + (fam.n_params(obs) + f.n_params(obs)) as f64 * ln_n;
-                (pc, dbic)
+                ((f, th), dbic)
             })
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|x| x.0)
+}
+
+/// The partner's columns with its parameter searched again beside the candidate (`cols`):
+/// searched alone, a partner's parameter (a τ, a period) bends to take part of the
+/// candidate's structure, and what the pair leaves then looks correlated.
+fn partner_given(obs: &Obs, w: &[f64], cols: &[Vec<f64>], pf: (Family, f64)) -> Vec<Vec<f64>> {
+    let (f, th) = pf;
+    let p = Projector::new(obs, w, cols);
+    let y = p.residualize(obs, &obs.y);
+    let th = search(obs, &p, &y, f).map_or(th, |c| c.theta);
+    f.columns(obs, th)
 }
 
 /// Every family not yet selected, searched, with its BIC change.
@@ -445,26 +457,6 @@ pub(super) fn families(obs: &Obs, use_temp: bool) -> Vec<Family> {
     fams
 }
 
-/// Lag-1 correlation of residuals in time order (rows with weight > 0), corrected for its
-/// small-sample bias.
-pub(super) fn lag1_correlation(obs: &Obs, w: &[f64], resid: &[f64]) -> f64 {
-    let r: Vec<f64> = obs
-        .time_order
-        .iter()
-        .filter(|&&j| w[j] > 0.0)
-        .map(|&j| resid[j])
-        .collect();
-    let ss: f64 = r.iter().map(|x| x * x).sum();
-    if r.len() < 3 || ss <= 0.0 {
-        return 0.0;
-    }
-    // The plain estimate is biased low by about (1 + 3ρ)/N on short series (Kendall 1954;
-    // Marriott and Pope 1954): a 5 × 5 run has N = 50, and ρ = 0.6 reads as 0.54.
-    let n = r.len() as f64;
-    let raw = r.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / ss;
-    (raw + (1.0 + 3.0 * raw) / n).min(raw.max(0.95))
-}
-
 /// The BIC gain of a candidate with its likelihood-ratio part discounted for correlated
 /// noise: with a lag-1 correlation ρ of what is left, consecutive readings carry about
 /// (1 − ρ)/(1 + ρ) of the information of independent ones (air turbulence, `docs/methods.md`).
@@ -482,10 +474,10 @@ fn discounted_gain(
     }
     let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
     let (_, r) = in_sample_residuals(obs, w, cols_after);
-    let mut rho = lag1_correlation(obs, w, &r);
+    let mut rho = design_lag1(obs, w, cols_after, &r);
     if let Some(cols) = with_partner {
         let (_, r2) = in_sample_residuals(obs, w, cols);
-        rho = rho.min(lag1_correlation(obs, w, &r2));
+        rho = rho.min(design_lag1(obs, w, cols, &r2));
     }
     let rho = rho.clamp(0.0, 0.95);
     let lr = n_eff * (rss0 / cand.rss).ln();

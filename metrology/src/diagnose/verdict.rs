@@ -10,9 +10,9 @@ use std::collections::BTreeMap;
 use statrs::distribution::{Continuous, ContinuousCDF, DiscreteCDF, Normal, Poisson, StudentsT};
 
 use super::Finding;
+use super::correlation::design_lag1;
 use super::fit::{FinalFit, Obs, heldout_rms};
 use super::outliers::robust_scale;
-use super::search::lag1_correlation;
 
 /// Residual RMS above this many times the short-term noise is structure, not noise.
 const UNEXPLAINED_RATIO: f64 = 3.0;
@@ -43,7 +43,7 @@ pub(super) struct Residue {
 }
 
 pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
-    let rho = lag1_correlation(obs, &fin.w, &fin.resid);
+    let rho = design_lag1(obs, &fin.w, &fin.cols, &fin.resid);
     let kept: Vec<f64> = obs
         .time_order
         .iter()

@@ -40,6 +40,11 @@ pub struct MeasurementUncertainty {
 }
 
 fn measurement_uncertainty(data: &PositioningData) -> Option<MeasurementUncertainty> {
+    // A length budget of a laser interferometer: nothing to say for other units (a rotary
+    // axis in degrees).
+    if !data.units().is_default() {
+        return None;
+    }
     let mut budget = metrology::uncertainty::length::LengthBudget::default();
     if let Some(a) = data.alpha_um_per_m_k {
         budget.alpha_per_k = a * 1e-6;

@@ -185,3 +185,24 @@ fn bad_input_gets_a_clear_error() {
     assert!(!ok && err.contains(".svg or .png"), "{err}");
     assert!(!err.contains("panicked"));
 }
+
+/// The real rotary run declares `target_unit: deg` and `deviation_unit: mdeg`: both reports
+/// name those units, never mm or µm.
+#[test]
+fn a_rotary_run_is_reported_in_its_own_units() {
+    let f = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../metrology/tests/data/real/bifrost_vactank_rotary_repeat.csv");
+    let f = f.to_str().expect("utf-8 path");
+    for args in [vec!["analyze", "positioning", f], vec!["diagnose", f]] {
+        let (ok, out, err) = metrolog(&args);
+        assert!(ok, "{args:?}: {err}");
+        assert!(
+            out.contains("mdeg") && out.contains("deg"),
+            "{args:?}: {out}"
+        );
+        assert!(
+            !out.contains("µm") && !out.contains(" mm"),
+            "{args:?}: {out}"
+        );
+    }
+}

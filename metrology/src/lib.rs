@@ -14,6 +14,7 @@ pub mod drift;
 pub mod iso230;
 pub mod positioning_data;
 pub mod standards;
+pub mod units;
 
 // Machine error models and identification (papers 001, 003, 004).
 pub mod capball;

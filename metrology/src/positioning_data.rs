@@ -86,6 +86,23 @@ pub enum DatasetError {
 }
 
 impl PositioningData {
+    /// Units of the target and deviation columns: metadata `target_unit` and
+    /// `deviation_unit`, mm and µm when absent.
+    pub fn units(&self) -> crate::units::Units {
+        let d = crate::units::Units::default();
+        let get = |k: &str, def: String| {
+            self.metadata
+                .get(k)
+                .filter(|v| !v.is_empty())
+                .cloned()
+                .unwrap_or(def)
+        };
+        crate::units::Units {
+            target: get("target_unit", d.target.clone()),
+            deviation: get("deviation_unit", d.deviation.clone()),
+        }
+    }
+
     /// Reads a dataset from a CSV file.
     pub fn from_csv_path(path: &std::path::Path) -> Result<Self, DatasetError> {
         let text = std::fs::read_to_string(path)?;

@@ -128,6 +128,10 @@ fn rotary_constant_backlash_and_no_invented_cause() {
     ] {
         assert!(!e.contains(&bad), "{e:?}");
     }
+    // The file declares degrees and millidegrees: the report says so and names no µm.
+    let r = &d.report;
+    let text = r.notes.join(" ") + &r.conclusion;
+    assert!(text.contains("mdeg") && !text.contains("µm"), "{text}");
 }
 
 /// ecmc-style logs approach each target 0.2 mm apart in the two directions: evaluated by

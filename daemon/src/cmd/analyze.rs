@@ -116,7 +116,12 @@ fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
         }
         serde_json::to_string_pretty(&v)? + "\n"
     } else {
-        render_text(&an) + &metrolog_analysis::export::render_standards(&standards)
+        let units = data.units();
+        let text = render_text(&an) + &metrolog_analysis::export::render_standards(&standards);
+        units
+            .note()
+            .map_or(String::new(), |n| format!("Note: {n}.\n"))
+            + &units.relabel(&text)
     };
     crate::cmd::input::print_out(&text)
 }

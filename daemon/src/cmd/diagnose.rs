@@ -75,7 +75,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let text = if args.json {
         serde_json::to_string_pretty(&d.report)? + "\n"
     } else {
-        metrolog_analysis::diagnosis_text::positioning_text(&d)
+        data.units()
+            .relabel(&metrolog_analysis::diagnosis_text::positioning_text(&d))
     };
     crate::cmd::input::print_out(&text)
 }

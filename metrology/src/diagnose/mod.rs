@@ -291,6 +291,12 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
             .map_or(fin.sigma2.sqrt(), |a| a.noise_others_um),
         effects,
     };
+    let units = data.units();
+    for f in findings.iter_mut() {
+        f.cause = units.relabel(&f.cause);
+    }
+    let notes = notes.iter().map(|n| units.relabel(n)).collect();
+    let conclusion = units.relabel(&conclusion);
     Ok(Diagnosis {
         report: DiagnosisReport {
             kind: "positioning".into(),
@@ -388,7 +394,7 @@ fn note_alternatives(f: &mut Finding) {
 
 /// Caveats about the input: missing readings, no real times.
 fn input_notes(data: &PositioningData) -> Vec<String> {
-    let mut notes = Vec::new();
+    let mut notes: Vec<String> = data.units().note().into_iter().collect();
     let missing = data.missing();
     if !missing.is_empty() {
         notes.push(format!(

@@ -237,10 +237,13 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         }
     }
     if res.rho > 0.3 {
+        let at_least = if res.rho >= 0.95 { "at least " } else { "" };
         notes.push(format!(
-            "consecutive readings correlate (lag-1 correlation {:.2}, air turbulence or a slow \
-             reference): the evidence for every effect and its uncertainties allow for it",
-            res.rho
+            "consecutive readings correlate (lag-1 correlation of the noise {at_least}{:.2}, \
+             allowing for what the fit takes out of the residuals; air turbulence, a slow \
+             reference or slow structure no effect models): the evidence for every effect and \
+             its uncertainties allow for it",
+            res.rho.min(0.95)
         ));
     }
     let unexplained = res.unexplained();

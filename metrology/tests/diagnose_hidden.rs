@@ -113,6 +113,9 @@ fn aliased(period: f64, cycle: f64, duration: f64) -> bool {
 struct Oracle {
     sigma: f64,
     signals: Vec<(String, Vec<f64>)>,
+    /// A scale change's time shape g(t) at every reading: the same drift common to every
+    /// target is what a scale change must be told from.
+    scale_shape: Option<Vec<f64>>,
 }
 
 /// A random run of class `class`, what it hides, and what an oracle knows of it.
@@ -164,6 +167,7 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth, Oracle) {
     let sign = |rng: &mut ChaCha8Rng| if rng.random::<bool>() { 1.0 } else { -1.0 };
     let cycle_len = duration / n as f64;
     let mut signals = Vec::new();
+    let mut scale_shape = None;
     for p in parts {
         let before = dev.clone();
         match p {
@@ -209,6 +213,7 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth, Oracle) {
                 for (d, s) in dev.iter_mut().zip(&slots) {
                     *d += end_ppm / g_end * x_mm[s.target] * 1e-3 * (1.0 - (-s.t / tau).exp());
                 }
+                scale_shape = Some(slots.iter().map(|s| 1.0 - (-s.t / tau).exp()).collect());
                 truth.push(("thermal_expansion", "scale_ppm", end_ppm));
             }
             "step" => {
@@ -318,7 +323,15 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth, Oracle) {
         readings,
         ..Default::default()
     };
-    (data, truth, Oracle { sigma, signals })
+    (
+        data,
+        truth,
+        Oracle {
+            sigma,
+            signals,
+            scale_shape,
+        },
+    )
 }
 
 /// Power of an oracle: the non-centrality λ = ‖P⊥f‖²/σ² of each hidden mean effect f, P⊥
@@ -328,7 +341,9 @@ fn random_case(seed: u64, class: &str) -> (PositioningData, Truth, Oracle) {
 /// that no method can reach 95 % at that level. A warm-up is told from a linear drift only by
 /// its curvature and from a step only by its smoothness, so its λ is the least left after
 /// removing a straight line in time or a step at any reading: naming a warm-up rather than a
-/// drift or a step needs that much. Written here, apart from the analysis.
+/// drift or a step needs that much. A scale change likewise counts only by what tells it from
+/// a drift common to every target: the least left after removing a straight line in time, or
+/// its own time shape g(t) at every target. Written here, apart from the analysis.
 fn oracle_lambdas(data: &PositioningData, o: &Oracle) -> Vec<f64> {
     let key = |r: &Reading| (r.index, r.direction == Direction::Up);
     let centre = |f: &[f64]| -> Vec<f64> {
@@ -369,13 +384,15 @@ fn oracle_lambdas(data: &PositioningData, o: &Oracle) -> Vec<f64> {
                 let f = residual(&cs[i], &with);
                 dot(&f, &f) / (o.sigma * o.sigma)
             };
-            if o.signals[i].0 == "exponential_warmup" {
-                rivals
+            match (o.signals[i].0.as_str(), &o.scale_shape) {
+                ("exponential_warmup", _) => rivals
                     .iter()
                     .map(|r| lambda(Some(r)))
-                    .fold(f64::INFINITY, f64::min)
-            } else {
-                lambda(None)
+                    .fold(f64::INFINITY, f64::min),
+                ("thermal_expansion", Some(g)) => {
+                    lambda(Some(&rivals[0])).min(lambda(Some(&centre(g))))
+                }
+                _ => lambda(None),
             }
         })
         .collect()

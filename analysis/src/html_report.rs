@@ -11,6 +11,7 @@ use std::fmt::Write as _;
 use metrology::axis_model::Direction;
 use metrology::positioning_data::PositioningData;
 use metrology::standards::StandardResult;
+use metrology::units::Units;
 
 use crate::export::num;
 use crate::positioning_report::PositioningAnalysis;
@@ -477,7 +478,7 @@ fn uncertainty_section(an: &PositioningAnalysis) -> String {
         .as_ref()
         .filter(|m| !m.u_k2_um.is_empty())
     else {
-        return "<p>No measurement uncertainty could be computed for this run.</p>".into();
+        return "<p>No measurement uncertainty could be computed for this run (the budget is that of a laser interferometer measuring lengths; a run in other units, such as a rotary axis, has none).</p>".into();
     };
     let mut s = format!(
         "<p>Uncertainty of one interferometer reading (ISO/TR 230-9 style length budget; α {} µm/(m·K), material {} °C), expanded with k = 2:</p><table class=\"res\"><tr><th>target (mm)</th><th>u (µm)</th><th>U, k = 2 (µm)</th></tr>",
@@ -596,5 +597,20 @@ pub fn positioning_html(
     s.push_str(&readings_table(data));
     s.push_str("<h2>Signatures</h2><table class=\"sign\"><tr><th>Measured by</th><td></td></tr><tr><th>Accepted by</th><td></td></tr></table>");
     s.push_str("<p class=\"note\">Written by metrolog report.</p></section></body></html>\n");
-    s
+    relabel_body(&s, &data.units())
+}
+
+/// The page with the body's mm and µm named in the dataset's units (a rotary axis: deg and
+/// mdeg), and a note saying so; the style sheet (its page margins in mm) is left alone.
+fn relabel_body(page: &str, u: &Units) -> String {
+    let Some(note) = u.note() else {
+        return page.to_string();
+    };
+    let (head, body) = page.split_at(page.find("</head>").unwrap_or(0));
+    let body = u.relabel(body).replacen(
+        "<h2>Results</h2>",
+        &format!("<p class=\"note\">{}.</p><h2>Results</h2>", esc(&note)),
+        1,
+    );
+    format!("{head}{body}")
 }

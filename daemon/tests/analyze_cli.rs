@@ -206,3 +206,34 @@ fn a_rotary_run_is_reported_in_its_own_units() {
         );
     }
 }
+
+/// The same run's signed report (HTML) and charts: the body and the axis titles name deg and
+/// mdeg; the style sheet keeps its page margins in mm.
+#[test]
+#[cfg_attr(not(feature = "plot"), ignore = "draws charts: needs --features plot")]
+fn a_rotary_runs_report_and_charts_are_in_its_own_units() {
+    let f = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../metrology/tests/data/real/bifrost_vactank_rotary_repeat.csv");
+    let f = f.to_str().expect("utf-8 path");
+    let dir = tempfile::tempdir().unwrap();
+    let html = dir.path().join("r.html");
+    let svg = dir.path().join("p.svg");
+    let dsvg = dir.path().join("d.svg");
+    let p = |x: &Path| x.to_str().expect("utf-8 path").to_string();
+    for args in [
+        vec!["report", f, "-o", &p(&html)],
+        vec!["analyze", "positioning", f, "--plot", &p(&svg)],
+        vec!["diagnose", f, "--plot", &p(&dsvg)],
+    ] {
+        let (ok, _, err) = metrolog(&args);
+        assert!(ok, "{args:?}: {err}");
+    }
+    let page = std::fs::read_to_string(&html).unwrap();
+    let (head, body) = page.split_at(page.find("</head>").expect("a head"));
+    assert!(head.contains("mm"), "the style sheet is left alone");
+    assert!(body.contains("mdeg") && !body.contains("µm"), "{body}");
+    for s in [&svg, &dsvg] {
+        let t = std::fs::read_to_string(s).unwrap();
+        assert!(t.contains("/ mdeg") && !t.contains("µm"), "{}", s.display());
+    }
+}

@@ -94,7 +94,7 @@ fn residuals_vs_time<'a, DB: DrawingBackend>(
         .x_label_formatter(&ticks((ta.t0, ta.t1)))
         .y_label_formatter(&ticks(yr))
         .x_desc(ta.desc)
-        .y_desc("residual / µm")
+        .y_desc(data.units().relabel("residual / µm"))
         .label_style((FONT, 13))
         .draw()
         .map_err(e)?;
@@ -180,8 +180,8 @@ fn draw_baseline_vs_position<DB: DrawingBackend>(
         .y_labels(LABELS)
         .x_label_formatter(&ticks(xr))
         .y_label_formatter(&ticks(yr))
-        .x_desc("target position / mm")
-        .y_desc("residual / µm")
+        .x_desc(data.units().relabel("target position / mm"))
+        .y_desc(data.units().relabel("residual / µm"))
         .label_style((FONT, 13))
         .draw()
         .map_err(e)?;
@@ -249,7 +249,7 @@ fn draw_rms_per_target<DB: DrawingBackend>(
         .x_label_formatter(&ticks((0.5, n_t as f64 + 0.5)))
         .y_label_formatter(&ticks((0.0, ymax)))
         .x_desc("target index")
-        .y_desc("RMS residual / µm")
+        .y_desc(data.units().relabel("RMS residual / µm"))
         .label_style((FONT, 13))
         .draw()
         .map_err(e)?;

@@ -8,6 +8,7 @@ use std::path::Path;
 use anyhow::Context as _;
 use metrology::axis_model::Direction;
 use metrology::positioning_data::PositioningData;
+use metrology::units::Units;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
@@ -47,9 +48,10 @@ fn framed<'a, DB: DrawingBackend>(
     x: (f64, f64),
     y: (f64, f64),
     x_desc: &str,
+    u: &Units,
 ) -> anyhow::Result<Chart<'a, DB>> {
     let mut chart = ChartBuilder::on(area)
-        .caption(caption, (FONT, 19))
+        .caption(u.relabel(caption), (FONT, 19))
         .margin(10)
         .margin_right(4)
         .x_label_area_size(44)
@@ -58,8 +60,8 @@ fn framed<'a, DB: DrawingBackend>(
         .map_err(e)?;
     chart
         .configure_mesh()
-        .x_desc(x_desc)
-        .y_desc("deviation / µm")
+        .x_desc(u.relabel(x_desc))
+        .y_desc(u.relabel("deviation / µm"))
         .x_labels(LABELS)
         .y_labels(LABELS)
         .x_label_formatter(&ticks(x))
@@ -174,6 +176,7 @@ fn iso_chart<DB: DrawingBackend>(
         x,
         y,
         "target position / mm",
+        &data.units(),
     )?;
     let mut legend = Vec::new();
     for dir in [Direction::Up, Direction::Down] {
@@ -206,7 +209,11 @@ fn iso_chart<DB: DrawingBackend>(
         .results_block()
         .into_iter()
         .map(|r| {
-            let unit = if r.value == "—" { "" } else { " µm" };
+            let unit = if r.value == "—" {
+                String::new()
+            } else {
+                data.units().relabel(" µm")
+            };
             (
                 format!("{}  {}", r.symbol, r.name),
                 format!("{}{unit}", r.value),
@@ -221,6 +228,7 @@ fn iso_chart<DB: DrawingBackend>(
 fn drift_chart<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     an: &PositioningAnalysis,
+    u: &Units,
     x: (f64, f64),
     y: (f64, f64),
 ) -> anyhow::Result<()> {
@@ -231,6 +239,7 @@ fn drift_chart<DB: DrawingBackend>(
         x,
         y,
         "target position / mm",
+        u,
     )?;
     let de = &an.drift_elimination;
     let mut legend = Vec::new();
@@ -292,6 +301,7 @@ fn time_chart<DB: DrawingBackend>(
         } else {
             "reading number (no times in the dataset)"
         },
+        &data.units(),
     )?;
     let mut legend = Vec::new();
     for (p, dir) in [(up, Direction::Up), (down, Direction::Down)] {
@@ -335,7 +345,7 @@ fn draw_positioning_on<DB: DrawingBackend>(
     };
     let x = padded_range(an.targets.iter().map(|t| t.target_mm), 0.03);
     iso_chart(&top, data, an, x, y_iso)?;
-    drift_chart(&left, an, x, y_df)?;
+    drift_chart(&left, an, &data.units(), x, y_df)?;
     time_chart(&right, data, an, target)
 }
 

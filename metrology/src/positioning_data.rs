@@ -239,6 +239,18 @@ impl PositioningData {
             })?),
             None => None,
         };
+        for key in ["target_unit", "deviation_unit"] {
+            if let Some(v) = metadata.get(key)
+                && !crate::units::is_plain_unit(v)
+            {
+                return Err(DatasetError::BadMetadata {
+                    key: key.into(),
+                    value: v.clone(),
+                    message: "a unit is 1 to 12 letters, digits or the signs µ ° ' \" / · ^ -                               (e.g. deg, mdeg, arcsec, µrad)"
+                        .into(),
+                });
+            }
+        }
         let material_compensation = !matches!(
             metadata
                 .get("material_compensation")
@@ -596,6 +608,24 @@ pub fn simulate(model: &AxisModel, schedule: &[ScheduledReading], seed: u64) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn units_come_from_metadata_and_markup_is_refused() {
+        let rows = "cycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n1,+,2,10,2\n";
+        let d = PositioningData::from_csv_str(rows).expect("plain");
+        assert!(d.units().is_default());
+        let text = format!("# target_unit: deg\n# deviation_unit: mdeg\n{rows}");
+        let u = PositioningData::from_csv_str(&text)
+            .expect("rotary")
+            .units();
+        assert_eq!((u.target.as_str(), u.deviation.as_str()), ("deg", "mdeg"));
+        let bad = format!("# deviation_unit: <b>mdeg</b>\n{rows}");
+        let e = PositioningData::from_csv_str(&bad).unwrap_err().to_string();
+        assert!(
+            e.contains("deviation_unit") && e.contains("e.g. deg"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn parses_any_column_order_metadata_and_missing() {

@@ -53,6 +53,15 @@ impl Units {
     }
 }
 
+/// A unit name a report can print as it is: 1 to 12 letters, digits or the signs µ ° ' " /
+/// · ^ - (no markup, no spaces, nothing a page or a chart would read as code).
+pub fn is_plain_unit(s: &str) -> bool {
+    let n = s.chars().count();
+    (1..=12).contains(&n)
+        && s.chars()
+            .all(|c| c.is_alphanumeric() || "µ°'\"/·^-".contains(c))
+}
+
 /// Replaces `word` in `text` where it is not part of a longer word (letters or digits on
 /// neither side; a number before it is fine: "12 mm", "(3.0 µm)", "µm/h").
 fn replace_word(text: &str, word: &str, by: &str) -> String {
@@ -110,5 +119,15 @@ mod tests {
         assert_eq!(Units::default().relabel("1 µm"), "1 µm");
         assert!(Units::default().note().is_none());
         assert!(u.note().is_some_and(|n| n.contains("mdeg")));
+    }
+
+    #[test]
+    fn only_plain_unit_names_pass() {
+        for ok in ["deg", "mdeg", "arcsec", "µrad", "\"", "°"] {
+            assert!(is_plain_unit(ok), "{ok}");
+        }
+        for bad in ["", "<b>deg</b>", "m deg", "a&b", "abcdefghijklm", "x\u{7}"] {
+            assert!(!is_plain_unit(bad), "{bad}");
+        }
     }
 }

@@ -55,13 +55,7 @@ impl Family {
         match self {
             Family::Linear => vec![obs.t.iter().map(|t| t / 3600.0).collect()],
             Family::Warmup => vec![obs.t.iter().map(|&t| warm(t)).collect()],
-            Family::Cyclic => {
-                let om = std::f64::consts::TAU / theta;
-                vec![
-                    obs.t.iter().map(|t| (om * t).sin()).collect(),
-                    obs.t.iter().map(|t| (om * t).cos()).collect(),
-                ]
-            }
+            Family::Cyclic => obs.sin_cos(theta).to_vec(),
             // Shift in µm of a scale of 1 ppm at position x: x_mm · 1e-3.
             Family::Thermal => {
                 vec![

@@ -61,12 +61,7 @@ fn the_demo_logs_run_names_both_effects() {
         .join("tests/data/demo_run_positioning.csv");
     let d = metrology::positioning_data::PositioningData::from_csv_path(&p).expect("fixture reads");
     let r = diagnose(&d, &Options::default()).expect("diagnose");
-    let names: Vec<&str> = r
-        .report
-        .findings
-        .iter()
-        .map(|f| f.effect.as_str())
-        .collect();
+    let names = r.report.effects();
     assert!(
         names.contains(&"cyclic_drift")
             && names.contains(&"thermal_expansion")

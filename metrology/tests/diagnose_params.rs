@@ -123,12 +123,7 @@ fn the_extended_model_reproduces_the_run_better_than_the_baseline() {
     );
     let d = simulate(&m, &standard_schedule(11, 20, 15.0), 21);
     let r = diagnose(&d, &Options::default()).unwrap();
-    let names: Vec<&str> = r
-        .report
-        .findings
-        .iter()
-        .map(|f| f.effect.as_str())
-        .collect();
+    let names = r.report.effects();
     assert!(
         names.contains(&"exponential_warmup") && names.contains(&"local_anomaly"),
         "{names:?}"

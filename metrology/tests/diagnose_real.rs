@@ -15,11 +15,7 @@ fn load(name: &str) -> PositioningData {
 }
 
 fn effects(d: &metrology::diagnose::Diagnosis) -> Vec<&str> {
-    d.report
-        .findings
-        .iter()
-        .map(|f| f.effect.as_str())
-        .collect()
+    d.report.effects()
 }
 
 /// ESS target drive, X: wavy systematic error and a reversal at every target (baseline), a

@@ -179,12 +179,7 @@ fn demo_capball_diagnosis_finds_the_cooling_cycle() {
         CapballSetup::with_ball_from_poses(CapballSetup::paper_default().machine, &poses).unwrap();
     let d = capball_diagnosis::diagnose(&setup, &ident, &validation, None, &Options::default())
         .unwrap();
-    let found: Vec<&str> = d
-        .report
-        .findings
-        .iter()
-        .map(|f| f.effect.as_str())
-        .collect();
+    let found = d.report.effects();
     assert_eq!(found, ["cyclic_drift"], "{:#?}", d.report.findings);
     let f = &d.report.findings[0];
     let want = sc.capball.truth.cyclic_drift.clone().unwrap();

@@ -69,12 +69,7 @@ fn extended_model_reproduces_the_residual_pattern() {
         &Options::default(),
     )
     .expect("diagnosis");
-    let found: Vec<&str> = d
-        .report
-        .findings
-        .iter()
-        .map(|f| f.effect.as_str())
-        .collect();
+    let found = d.report.effects();
     assert_eq!(found, ["cyclic_drift"], "{:?}", d.report.findings);
     let model = CapballModel::from_diagnosis(&d);
     let c = model.cyclic_drift.as_ref().expect("cyclic drift written");

@@ -57,12 +57,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if d.report.findings.is_empty() {
                 "none".to_string()
             } else {
-                d.report
-                    .findings
-                    .iter()
-                    .map(|f| f.effect.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                d.report.effects().join(", ")
             }
         );
         std::fs::write(p, header + &toml).with_context(|| format!("writing {}", p.display()))?;

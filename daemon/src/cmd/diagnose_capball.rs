@@ -99,12 +99,7 @@ pub fn scenario_section(d: &CapballDiagnosis, source: &Path) -> anyhow::Result<S
         },
     })
     .context("serialising the CapBall model")?;
-    let found: Vec<&str> = d
-        .report
-        .findings
-        .iter()
-        .map(|f| f.effect.as_str())
-        .collect();
+    let found = d.report.effects();
     Ok(format!(
         "# CapBall model extended by `metrolog diagnose {}`: the 14 parameters identified with\n\
          # the effects modelled, plus the effects found ({}). Times are the dataset's clock.\n\

@@ -90,6 +90,13 @@ pub struct CapballDiagnosisReport {
     pub notes: Vec<String>,
 }
 
+impl CapballDiagnosisReport {
+    /// The findings' effect names, in report order.
+    pub fn effects(&self) -> Vec<&str> {
+        self.findings.iter().map(|f| f.effect.as_str()).collect()
+    }
+}
+
 /// A diagnosis: the report and what a caller needs to write the extended model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CapballDiagnosis {

@@ -143,6 +143,13 @@ pub struct DiagnosisReport {
     pub conclusion: String,
 }
 
+impl DiagnosisReport {
+    /// The findings' effect names, in report order.
+    pub fn effects(&self) -> Vec<&str> {
+        self.findings.iter().map(|f| f.effect.as_str()).collect()
+    }
+}
+
 /// A diagnosis: the report and the extended model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Diagnosis {

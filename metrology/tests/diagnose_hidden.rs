@@ -721,16 +721,17 @@ fn an_erratic_reference_gets_no_machine_cause() {
 }
 
 /// Heavy-tailed noise (Student t, 3–5 degrees of freedom) against isolated outliers on normal
-/// noise: the residuals' whole shape is weighed (a t model against normal noise with events,
-/// by BIC), so the tail of a t is rarely reported as outliers while real outliers still are.
-/// With the zone and kurtosis tests alone, 26 of these 200 heavy-tailed runs named an effect
-/// (10 with the comparison) and 192 of the 200 outlier runs named their outliers (188).
+/// noise: the residuals' whole shape is weighed (a Bayes factor of normal noise with events
+/// against a t, `tails.rs`), so the tail of a t is rarely reported as outliers while real
+/// outliers still are. With the zone and kurtosis tests alone, 26 of these 200 heavy-tailed
+/// runs named an effect and 192 of the 200 outlier runs named their outliers; with the Bayes
+/// factor 9 and 187 (on 1000 runs each: 1.7 % and 96.1 %).
 #[test]
 fn heavy_tails_are_not_reported_as_outliers() {
     let heavy = run_class("heavy_tailed_noise", &[], 200, 5000);
     let outliers = run_class("outliers", &["outliers"], 200, 5000);
     eprintln!("{heavy:?}\n{outliers:?}");
-    assert!(heavy.wrong <= 14, "{heavy:?}");
+    assert!(heavy.wrong <= 12, "{heavy:?}");
     assert!(outliers.detected >= 184, "{outliers:?}");
 }
 

@@ -36,6 +36,7 @@ mod model;
 mod outliers;
 mod report;
 mod search;
+mod tails;
 mod verdict;
 
 pub use model::{AxisTable, axis_model_from_toml, baseline_model, reproduction_check};

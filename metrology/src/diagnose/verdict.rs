@@ -7,22 +7,16 @@
 
 use std::collections::BTreeMap;
 
-use statrs::distribution::{Continuous, ContinuousCDF, DiscreteCDF, Normal, Poisson, StudentsT};
-
 use super::Finding;
 use super::correlation::design_lag1;
 use super::fit::{FinalFit, Obs, heldout_rms};
 use super::outliers::robust_scale;
+use super::tails::{EVENTS_BAYES_FACTOR, ln_bayes_factor_events};
 
 /// Residual RMS above this many times the short-term noise is structure, not noise.
 const UNEXPLAINED_RATIO: f64 = 3.0;
 /// More flagged readings than this share are not isolated outliers.
 pub(super) const MAX_OUTLIER_SHARE: f64 = 0.10;
-/// Readings this many robust scales off their trend are far: isolated events, not the tail.
-const FAR: f64 = 6.5;
-/// Level of the test for more readings between 3 and [`FAR`] robust scales than normal noise
-/// gives.
-const HEAVY_TAIL_ALPHA: f64 = 0.01;
 /// A mean effect that gains less than this share of the held-out error is not reported next
 /// to an `unexplained` finding (it only stretches over structure it does not explain).
 const MIN_GAIN_WHEN_UNEXPLAINED: f64 = 0.10;
@@ -55,44 +49,10 @@ pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
     let rms_left_um = (kept.iter().map(|r| r * r).sum::<f64>() / kept.len().max(1) as f64).sqrt();
     let n = obs.len();
     let n_out = fin.out.iter().filter(|o| **o).count();
-    // Tails: readings between 3 and 6.5 robust scales from their trend (flagged or not),
-    // compared with what normal noise gives; a continuum there means the flagged ones are its
-    // tail. Isolated events (8–15 σ is typical of a beam interruption) fall beyond it.
-    let scale = robust_scale(&mut fin.resid.clone());
-    let n_mid = fin
-        .resid
-        .iter()
-        .filter(|r| (3.0 * scale..FAR * scale).contains(&r.abs()))
-        .count() as f64;
-    let p_mid = Normal::new(0.0, 1.0)
-        .map(|d| 2.0 * (d.cdf(-3.0) - d.cdf(-FAR)))
-        .unwrap_or(0.0027);
-    let expected = n as f64 * p_mid;
-    // And the kurtosis of the readings inside the bound: 3 for normal noise, with a sampling
-    // standard deviation of √(24/n).
-    let inside: Vec<f64> = (0..n)
-        .filter(|&j| fin.eval[j])
-        .map(|j| fin.resid[j])
-        .collect();
-    let m2 = inside.iter().map(|r| r * r).sum::<f64>() / inside.len().max(1) as f64;
-    let m4 = inside.iter().map(|r| r.powi(4)).sum::<f64>() / inside.len().max(1) as f64;
-    let kurtosis = if m2 > 0.0 { m4 / (m2 * m2) } else { 3.0 };
-    // Flagged readings that all stay below 6.5 robust scales are the tail of the noise.
-    let n_far = (0..n)
-        .filter(|&j| fin.out[j] && fin.resid[j].abs() >= FAR * scale)
-        .count();
-    // How likely is at least this many readings in the zone under normal noise (Poisson with
-    // the normal expectation)? A tail that continues into the bulk is heavy.
-    let p_mid_excess = if n_mid >= 1.0 {
-        Poisson::new(expected.max(1e-9)).map_or(1.0, |d| 1.0 - d.cdf(n_mid as u64 - 1))
-    } else {
-        1.0
-    };
+    // The flagged readings are the tail of the noise unless isolated events explain all the
+    // residuals clearly better than a heavy-tailed noise does (tails.rs).
     let heavy_tails = n_out > 0
-        && (n_far == 0
-            || p_mid_excess < HEAVY_TAIL_ALPHA
-            || kurtosis > 3.0 + 3.0 * (24.0 / inside.len().max(1) as f64).sqrt()
-            || tails_as_likely(&fin.resid, &fin.out));
+        && ln_bayes_factor_events(&fin.resid, MAX_OUTLIER_SHARE) < EVENTS_BAYES_FACTOR.ln();
     Residue {
         rho,
         sigma_short_um,
@@ -100,64 +60,6 @@ pub(super) fn residue(obs: &Obs, fin: &FinalFit) -> Residue {
         heavy_tails,
         outlier_share: n_out as f64 / n.max(1) as f64,
     }
-}
-
-/// Do the residuals fit a Student-t noise better than normal noise with the flagged readings
-/// as isolated events? The two models by their BIC, the lower one taken:
-/// - the t: its scale and degrees of freedom (the best of a grid from 2.2 to 50);
-/// - the events: normal noise for the kept readings, and each reading an event with a
-///   probability q, its value then uniform within ±R (scale, q and R fitted: q = k/N, R the
-///   largest residual).
-///
-/// The whole shape of the residuals is weighed, not only a zone: on a short run one reading
-/// 6 σ out with a few at 3–4 σ is the tail of a t with 3–5 degrees of freedom rather than a
-/// beam cut.
-fn tails_as_likely(resid: &[f64], out: &[bool]) -> bool {
-    let n = resid.len() as f64;
-    let k = out.iter().filter(|o| **o).count() as f64;
-    let kept: Vec<f64> = (0..resid.len())
-        .filter(|&j| !out[j])
-        .map(|j| resid[j])
-        .collect();
-    let var = kept.iter().map(|r| r * r).sum::<f64>() / kept.len().max(1) as f64;
-    let span = resid.iter().fold(0.0_f64, |m, r| m.max(r.abs()));
-    if var <= 0.0 || k == 0.0 || k >= n || span <= 0.0 {
-        return false;
-    }
-    let q = k / n;
-    let ll_events = -0.5 * kept.len() as f64 * ((std::f64::consts::TAU * var).ln() + 1.0)
-        + k * (q / (2.0 * span)).ln()
-        + (n - k) * (1.0 - q).ln();
-    let ll_t = [
-        2.2, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0, 25.0, 50.0,
-    ]
-    .iter()
-    .map(|&nu| student_t_loglik(resid, nu, var.sqrt()))
-    .fold(f64::NEG_INFINITY, f64::max);
-    let bic_events = -2.0 * ll_events + 3.0 * n.ln();
-    let bic_t = -2.0 * ll_t + 2.0 * n.ln();
-    bic_t < bic_events
-}
-
-/// Maximum log-likelihood of `r` under a Student t with `nu` degrees of freedom over its
-/// scale (EM iteration for the scale, started at `s0`).
-fn student_t_loglik(r: &[f64], nu: f64, s0: f64) -> f64 {
-    let mut s2 = s0 * s0;
-    for _ in 0..100 {
-        let next = r
-            .iter()
-            .map(|x| (nu + 1.0) / (nu + x * x / s2) * x * x)
-            .sum::<f64>()
-            / r.len() as f64;
-        let done = (next - s2).abs() <= 1e-10 * s2;
-        s2 = next.max(f64::MIN_POSITIVE);
-        if done {
-            break;
-        }
-    }
-    StudentsT::new(0.0, s2.sqrt(), nu)
-        .map(|d| r.iter().map(|x| d.ln_pdf(*x)).sum())
-        .unwrap_or(f64::NEG_INFINITY)
 }
 
 impl Residue {

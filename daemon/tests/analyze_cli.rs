@@ -207,6 +207,58 @@ fn a_rotary_run_is_reported_in_its_own_units() {
     }
 }
 
+/// A rotary run whose file does not declare its units: `--units deg,mdeg` gives them; a unit
+/// the file declares otherwise, one unit only, or markup is refused with what to fix.
+#[test]
+fn units_given_on_the_command_line() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../metrology/tests/data/real/bifrost_vactank_rotary_repeat.csv");
+    let text = std::fs::read_to_string(&src).unwrap();
+    let bare: String = text
+        .lines()
+        .filter(|l| !l.contains("target_unit") && !l.contains("deviation_unit"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("rotary.csv");
+    std::fs::write(&f, bare).unwrap();
+    let f = f.to_str().expect("utf-8 path");
+    let (ok, out, err) = metrolog(&["diagnose", f]);
+    assert!(
+        ok && out.contains("µm"),
+        "without the option: mm and µm\n{err}"
+    );
+    for cmd in [&["analyze", "positioning"][..], &["diagnose"][..]] {
+        let args: Vec<&str> = cmd
+            .iter()
+            .copied()
+            .chain([f, "--units", "deg,mdeg"])
+            .collect();
+        let (ok, out, err) = metrolog(&args);
+        assert!(ok, "{args:?}: {err}");
+        assert!(
+            out.contains("mdeg") && !out.contains("µm"),
+            "{args:?}: {out}"
+        );
+    }
+    let declared = src.to_str().expect("utf-8 path");
+    for (file, units, says) in [
+        (
+            declared,
+            "deg,arcsec",
+            "the file declares `deviation_unit: mdeg`",
+        ),
+        (f, "deg", "give two units"),
+        (f, "deg,<b>", "is not a unit name"),
+    ] {
+        let (ok, _, err) = metrolog(&["diagnose", file, "--units", units]);
+        assert!(!ok && err.contains(says), "{units}: {err}");
+        assert!(!err.contains("panicked"));
+    }
+    let (ok, _, err) = metrolog(&["diagnose", declared, "--units", "deg,mdeg"]);
+    assert!(ok, "the file's own units again: {err}");
+}
+
 /// The same run's signed report (HTML) and charts: the body and the axis titles name deg and
 /// mdeg; the style sheet keeps its page margins in mm.
 #[test]

@@ -20,6 +20,8 @@ pub enum Command {
 pub struct PositioningArgs {
     /// Positioning dataset (CSV, see datasets.md) or MCAP log of a run.
     pub input: PathBuf,
+    #[command(flatten)]
+    pub units: crate::cmd::input::UnitArgs,
     /// Print a JSON report instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -66,7 +68,8 @@ fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
             .transpose()?,
         datum_x_mm: None,
     };
-    let data = load_positioning_with(&a.input, &opts)?;
+    let mut data = load_positioning_with(&a.input, &opts)?;
+    a.units.apply(&mut data)?;
     if let Some(r) = a.reference_cycle {
         anyhow::ensure!(
             (1..=data.n_cycles()).contains(&r),

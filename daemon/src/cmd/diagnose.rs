@@ -10,6 +10,8 @@ use metrology::diagnose::{self, Diagnosis, Options};
 pub struct Args {
     /// Positioning dataset (CSV, see datasets.md) or MCAP log of a run.
     pub input: PathBuf,
+    #[command(flatten)]
+    pub units: crate::cmd::input::UnitArgs,
     /// Print the JSON report (datasets.md, "Diagnosis report") instead of text.
     #[arg(long)]
     pub json: bool,
@@ -35,7 +37,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.capball || crate::cmd::diagnose_capball::is_capball_csv(&args.input) {
         return crate::cmd::diagnose_capball::run(&args);
     }
-    let data = crate::cmd::input::load_positioning(&args.input)?;
+    let mut data = crate::cmd::input::load_positioning(&args.input)?;
+    args.units.apply(&mut data)?;
     let mut d: Diagnosis = diagnose::diagnose(&data, &Options::default())
         .with_context(|| format!("diagnosing {}", args.input.display()))?;
     d.report.reproduction = Some(diagnose::reproduction_check(

@@ -15,6 +15,8 @@ use crate::cmd::input::{load_positioning, print_out};
 pub struct Args {
     /// Positioning dataset (CSV, see datasets.md) or MCAP log of a run.
     pub input: PathBuf,
+    #[command(flatten)]
+    pub units: crate::cmd::input::UnitArgs,
     /// The report to write: `.html` (one self-contained page) or `.pdf` (that page printed by
     /// a headless Chromium: `apt-get install chromium`, or METROLOG_BROWSER=/path/to/browser).
     #[arg(long, short = 'o')]
@@ -47,7 +49,8 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let data = load_positioning(&a.input)?;
+    let mut data = load_positioning(&a.input)?;
+    a.units.apply(&mut data)?;
     let an = analyze_positioning(&data, None);
     let standards: Vec<_> = a.standard.iter().map(|s| evaluate(&data, *s)).collect();
     let mut h = ReportHeader::from_metadata(&data);

@@ -159,7 +159,7 @@ pub(super) fn cycle_length_s(obs: &Obs) -> Option<f64> {
 /// per-direction baseline absorbs the sinusoid or turns it into a slow per-target pattern
 /// (`docs/methods.md`, "Diagnosis").
 pub(super) fn aliases_structure(obs: &Obs, period_s: f64) -> bool {
-    let Some(pc) = cycle_length_s(obs) else {
+    let Some(pc) = obs.cycle_s else {
         return false;
     };
     let (f, fc) = (1.0 / period_s, 1.0 / pc);

@@ -34,6 +34,7 @@ mod family;
 mod fit;
 mod model;
 mod outliers;
+mod projector;
 mod report;
 mod search;
 mod verdict;
@@ -352,7 +353,7 @@ fn spread_of(
                 .flat_map(|q| cols[q].clone())
                 .collect();
             base.extend(cols_i.iter().cloned());
-            let p = fit::Projector::new(obs, &fin.w, &base);
+            let p = projector::Projector::new(obs, &fin.w, &base);
             let y = p.residualize(obs, &obs.y);
             if let Some(c) = search::search(obs, &p, &y, steps[j].sel.family) {
                 cols[j] = steps[j].sel.family.columns(obs, c.theta);
@@ -362,7 +363,7 @@ fn spread_of(
             .filter(|&q| q != i)
             .flat_map(|q| cols[q].clone())
             .collect();
-        let p = fit::Projector::new(obs, &fin.w, &others);
+        let p = projector::Projector::new(obs, &fin.w, &others);
         let y = p.residualize(obs, &obs.y);
         let (rss, x) = search::cols_fit(obs, &p, &y, &cols_i);
         x.map(|x| (rss, x))

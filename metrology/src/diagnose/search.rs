@@ -3,14 +3,15 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 use rayon::prelude::*;
 
 use super::Options;
 use super::correlation::design_lag1;
 use super::family::Family;
-use super::fit::{Obs, Projector, dotw, heldout_rms, in_sample_residuals};
+use super::fit::{Obs, heldout_rms, in_sample_residuals};
 use super::outliers::{flag_outliers, weights};
+use super::projector::{Projector, dotw};
 
 #[derive(Debug, Clone)]
 pub(super) struct Selected {
@@ -48,26 +49,7 @@ pub(super) fn cols_fit(
     y_perp: &[f64],
     cols: &[Vec<f64>],
 ) -> (f64, Option<DVector<f64>>) {
-    let cp: Vec<Vec<f64>> = cols.iter().map(|c| p.residualize(obs, c)).collect();
-    let k = cp.len();
-    let mut a = DMatrix::zeros(k, k);
-    let mut b = DVector::zeros(k);
-    for i in 0..k {
-        b[i] = dotw(&cp[i], y_perp, &p.w);
-        for j in i..k {
-            let v = dotw(&cp[i], &cp[j], &p.w);
-            a[(i, j)] = v;
-            a[(j, i)] = v;
-        }
-    }
-    let y2 = dotw(y_perp, y_perp, &p.w);
-    match a.cholesky() {
-        Some(ch) => {
-            let x = ch.solve(&b);
-            ((y2 - b.dot(&x)).max(0.0), Some(x))
-        }
-        None => (y2, None),
-    }
+    p.fit_cols(obs, y_perp, cols)
 }
 
 /// What not knowing a searched parameter exactly adds to the uncertainties: the parameter

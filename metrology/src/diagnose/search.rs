@@ -160,15 +160,26 @@ fn prefer_pair(
     }
 }
 
+/// The best value of `fam`'s parameter: the lowest RSS over its grid, refined between the
+/// grid points either side of the best one.
 pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> Option<Candidate> {
     let grid = fam.grid(obs);
     if grid.is_empty() {
         return None;
     }
-    let rss: Vec<f64> = grid
-        .par_iter()
-        .map(|&th| candidate_rss(obs, p, y_perp, fam, th))
-        .collect();
+    let rss: Vec<f64> = if fam == Family::Step {
+        p.step_rss(obs, y_perp, &grid)
+    } else {
+        grid.par_iter()
+            .map(|&th| candidate_rss(obs, p, y_perp, fam, th))
+            .collect()
+    };
+    // A step from any time up to the last grid time is the step at the next grid time (the
+    // grid holds every reading time in between): its RSS is the grid's.
+    let rss_at = |th: f64| match grid.partition_point(|g| *g < th) {
+        i if fam == Family::Step && i < grid.len() => rss[i],
+        _ => candidate_rss(obs, p, y_perp, fam, th),
+    };
     let (mut best_k, mut best) = (0, f64::INFINITY);
     for (k, r) in rss.iter().enumerate() {
         if *r < best {
@@ -183,7 +194,7 @@ pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> O
         let hi = grid[(best_k + 1).min(grid.len() - 1)];
         for s in 0..=24 {
             let th = lo + (hi - lo) * s as f64 / 24.0;
-            let r = candidate_rss(obs, p, y_perp, fam, th);
+            let r = rss_at(th);
             if r < best {
                 best = r;
                 theta = th;

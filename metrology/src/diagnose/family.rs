@@ -1,6 +1,8 @@
 //! The candidate mean effects: their regressors (columns) and the grids their non-linear
 //! parameter is searched on (names and parameters of `docs/datasets.md`).
 
+use std::sync::Arc;
+
 use super::fit::Obs;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,12 +52,41 @@ impl Family {
         }
     }
 
+    /// A grid-searched family, whose columns are kept for the run ([`super::sums::Cache`]).
+    pub(super) fn is_searched_dense(self) -> bool {
+        matches!(self, Family::Warmup | Family::Cyclic | Family::Thermal)
+    }
+
+    /// The regressors of the effect with its parameter at `theta`.
     pub(super) fn columns(self, obs: &Obs, theta: f64) -> Vec<Vec<f64>> {
+        if self.is_searched_dense() {
+            obs.cache.columns(obs, self, theta).to_vec()
+        } else {
+            self.compute_columns(obs, theta)
+        }
+    }
+
+    /// [`Family::columns`], shared.
+    pub(super) fn columns_shared(self, obs: &Obs, theta: f64) -> Arc<Vec<Vec<f64>>> {
+        if self.is_searched_dense() {
+            obs.cache.columns(obs, self, theta)
+        } else {
+            Arc::new(self.compute_columns(obs, theta))
+        }
+    }
+
+    pub(super) fn compute_columns(self, obs: &Obs, theta: f64) -> Vec<Vec<f64>> {
         let warm = |t: f64| 1.0 - (-t / theta).exp();
         match self {
             Family::Linear => vec![obs.t.iter().map(|t| t / 3600.0).collect()],
             Family::Warmup => vec![obs.t.iter().map(|&t| warm(t)).collect()],
-            Family::Cyclic => obs.sin_cos(theta).to_vec(),
+            Family::Cyclic => {
+                let om = std::f64::consts::TAU / theta;
+                vec![
+                    obs.t.iter().map(|t| (om * t).sin()).collect(),
+                    obs.t.iter().map(|t| (om * t).cos()).collect(),
+                ]
+            }
             // Shift in µm of a scale of 1 ppm at position x: x_mm · 1e-3.
             Family::Thermal => {
                 vec![

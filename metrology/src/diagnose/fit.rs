@@ -4,13 +4,11 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
-
 use nalgebra::{DMatrix, DVector};
 
 use super::family::cycle_length_s;
 use super::projector::Projector;
+use super::sums::Cache;
 use crate::positioning_data::{PositioningData, dir_slot};
 
 pub(super) struct Obs {
@@ -36,17 +34,12 @@ pub(super) struct Obs {
     pub(super) n_cycles: usize,
     /// Rows in time order (ties in row order).
     pub(super) time_order: Vec<usize>,
-    /// sin and cos of a cycle's phase at every row, by period (bits of θ): the parameter
-    /// searches visit the same grid periods many times, and the trigonometry was a third of a
-    /// long run's diagnosis. Bounded by [`TRIG_CACHE_MAX`] entries.
-    pub(super) trig: Mutex<HashMap<u64, Arc<[Vec<f64>; 2]>>>,
+    /// Columns of the searched effects and their weighted sums, kept for the run.
+    pub(super) cache: Cache,
     /// Length of one bidirectional cycle, s ([`cycle_length_s`]): every period of a cyclic
     /// drift's grid is checked against it.
     pub(super) cycle_s: Option<f64>,
 }
-
-/// Most periods whose columns [`Obs::trig`] keeps (each 2·N values).
-const TRIG_CACHE_MAX: usize = 512;
 
 impl Obs {
     pub(super) fn new(data: &PositioningData, max_folds: usize) -> Self {
@@ -95,7 +88,7 @@ impl Obs {
                 o.sort_by(|&a, &b| r[a].time_s.total_cmp(&r[b].time_s));
                 o
             },
-            trig: Mutex::default(),
+            cache: Cache::default(),
             cycle_s: None,
         };
         obs.cycle_s = cycle_length_s(&obs);
@@ -120,32 +113,12 @@ impl Obs {
             dir_half: self.dir_half.clone(),
             cycle: self.cycle.clone(),
             time_order: self.time_order.clone(),
-            trig: Mutex::default(),
+            cache: Cache::default(),
             ..*self
         }
     }
     pub(super) fn len(&self) -> usize {
         self.y.len()
-    }
-
-    /// sin(ωt) and cos(ωt) at every row for the period `theta` (ω = 2π/θ), computed once per
-    /// period (the cache is only a speed-up: the values are those computed directly).
-    pub(super) fn sin_cos(&self, theta: f64) -> Arc<[Vec<f64>; 2]> {
-        let key = theta.to_bits();
-        if let Some(v) = self.trig.lock().ok().and_then(|c| c.get(&key).cloned()) {
-            return v;
-        }
-        let om = std::f64::consts::TAU / theta;
-        let v = Arc::new([
-            self.t.iter().map(|t| (om * t).sin()).collect(),
-            self.t.iter().map(|t| (om * t).cos()).collect(),
-        ]);
-        if let Ok(mut c) = self.trig.lock()
-            && c.len() < TRIG_CACHE_MAX
-        {
-            c.insert(key, Arc::clone(&v));
-        }
-        v
     }
 }
 

@@ -37,6 +37,7 @@ mod outliers;
 mod projector;
 mod report;
 mod search;
+mod sums;
 mod verdict;
 
 pub use model::{AxisTable, axis_model_from_toml, baseline_model, reproduction_check};

@@ -254,10 +254,43 @@ impl Projector {
         vc
     }
 
+    /// The fixed columns.
+    pub(super) fn fixed(&self) -> &[Fixed] {
+        &self.fixed
+    }
+
+    /// Weighted product of cycle `c`'s centred indicator with a column whose weighted sums by
+    /// group and by cycle are `by_group` and `by_cycle`.
+    pub(super) fn cycle_product(&self, c: usize, by_group: &[f64], by_cycle: &[f64]) -> f64 {
+        by_cycle[c]
+            - (0..by_group.len())
+                .map(|g| self.counts.share(g, c) * by_group[g])
+                .sum::<f64>()
+    }
+
+    /// RSS once columns C are added, from their products: `centred` = C'WC (C centred),
+    /// `u` = Z'WC with the fixed columns Z, `b` = C'Wy⊥, `y2` = y⊥'Wy⊥. The residuals of C
+    /// have the Gram matrix A = C'WC − U'(Z'WZ)⁻¹U, and RSS = y2 − b'A⁻¹b; the coefficients of
+    /// C are A⁻¹b (None, and no gain, when A is not positive definite: collinear columns).
+    pub(super) fn rss_from(
+        &self,
+        y2: f64,
+        centred: DMatrix<f64>,
+        u: &DMatrix<f64>,
+        b: &DVector<f64>,
+    ) -> (f64, Option<DVector<f64>>) {
+        let a = centred - u.transpose() * (&self.ginv * u);
+        match a.cholesky() {
+            Some(ch) => {
+                let x = ch.solve(b);
+                ((y2 - b.dot(&x)).max(0.0), Some(x))
+            }
+            None => (y2, None),
+        }
+    }
+
     /// RSS of y on the groups, the fixed columns and `cols`, and the coefficients of `cols`
-    /// (None when they are collinear); `y_perp` is y residualized. With Z the fixed columns
-    /// and C the new ones, both centred: RSS = y⊥'Wy⊥ − b'A⁻¹b with b = C'Wy⊥ and
-    /// A = C'WC − (Z'WC)'(Z'WZ)⁻¹(Z'WC), the Gram matrix of C's residuals.
+    /// (None when they are collinear); `y_perp` is y residualized ([`Projector::rss_from`]).
     pub(super) fn fit_cols(
         &self,
         obs: &Obs,
@@ -270,15 +303,7 @@ impl Projector {
         let new = centre_all(obs, &self.counts, w, cols, need_cycles);
         let (k, m) = (self.fixed.len(), new.len());
         let u = DMatrix::from_fn(k, m, |a, b| gram(&self.counts, w, &self.fixed[a], &new[b]));
-        let gu = &self.ginv * &u;
-        let mut a = DMatrix::zeros(m, m);
-        for i in 0..m {
-            for j in i..m {
-                let v = gram(&self.counts, w, &new[i], &new[j]) - u.column(i).dot(&gu.column(j));
-                a[(i, j)] = v;
-                a[(j, i)] = v;
-            }
-        }
+        let centred = DMatrix::from_fn(m, m, |i, j| gram(&self.counts, w, &new[i], &new[j]));
         let y_cycles = if new.iter().any(|f| matches!(f, Fixed::Cycle(_))) {
             cycle_sums(obs, w, y_perp)
         } else {
@@ -291,14 +316,7 @@ impl Projector {
                 Fixed::Cycle(c) => y_cycles[*c],
             }),
         );
-        let y2 = dotw(y_perp, y_perp, w);
-        match a.cholesky() {
-            Some(ch) => {
-                let x = ch.solve(&b);
-                ((y2 - b.dot(&x)).max(0.0), Some(x))
-            }
-            None => (y2, None),
-        }
+        self.rss_from(dotw(y_perp, y_perp, w), centred, &u, &b)
     }
 
     /// RSS with a step added at each of `times` (ascending; the step column is 1 from that
@@ -331,40 +349,36 @@ impl Projector {
                     }
                 }
             }
-            let u = DVector::from_iterator(
+            let u = DMatrix::from_iterator(
                 k,
+                1,
                 self.fixed.iter().zip(&sz).map(|(f, s)| match f {
                     Fixed::Dense { .. } => *s,
-                    Fixed::Cycle(c) => {
-                        by_cycle[*c]
-                            - (0..obs.n_groups)
-                                .map(|g| self.counts.share(g, *c) * by_group[g])
-                                .sum::<f64>()
-                    }
+                    Fixed::Cycle(c) => self.cycle_product(*c, &by_group, &by_cycle),
                 }),
             );
             let centred: f64 = (0..obs.n_groups)
                 .filter(|&g| self.counts.group[g] > 0.0)
                 .map(|g| by_group[g] * by_group[g] / self.counts.group[g])
                 .sum();
-            let a = sw - centred - u.dot(&(&self.ginv * &u));
-            if a > 0.0 {
-                out[i] = (y2 - sy * (sy / a)).max(0.0);
-            }
+            let centred = DMatrix::from_element(1, 1, sw - centred);
+            out[i] = self
+                .rss_from(y2, centred, &u, &DVector::from_element(1, sy))
+                .0;
         }
         out
     }
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::axis_model::Direction;
     use crate::diagnose::family::Family;
     use crate::positioning_data::{PositioningData, Reading};
 
     /// A bidirectional run of 4 targets × 6 cycles with deviations that follow no effect.
-    fn run() -> Obs {
+    pub(in crate::diagnose) fn run() -> Obs {
         let mut readings = Vec::new();
         for cycle in 1..=6 {
             for (dir, order) in [

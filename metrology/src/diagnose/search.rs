@@ -12,6 +12,7 @@ use super::family::Family;
 use super::fit::{Obs, heldout_rms, in_sample_residuals};
 use super::outliers::{flag_outliers, weights};
 use super::projector::{Projector, dotw};
+use super::sums::DenseSearch;
 
 #[derive(Debug, Clone)]
 pub(super) struct Selected {
@@ -33,7 +34,11 @@ pub(super) fn candidate_rss(
     fam: Family,
     theta: f64,
 ) -> f64 {
-    cols_rss(obs, p, y_perp, &fam.columns(obs, theta))
+    if fam.is_searched_dense() {
+        DenseSearch::new(obs, p, y_perp).rss(fam, theta)
+    } else {
+        cols_rss(obs, p, y_perp, &fam.columns(obs, theta))
+    }
 }
 
 /// RSS of y on baseline + `p`'s columns + `cols`.
@@ -167,18 +172,23 @@ pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> O
     if grid.is_empty() {
         return None;
     }
+    let dense = fam
+        .is_searched_dense()
+        .then(|| DenseSearch::new(obs, p, y_perp));
+    let eval = |th: f64| match &dense {
+        Some(d) => d.rss(fam, th),
+        None => candidate_rss(obs, p, y_perp, fam, th),
+    };
     let rss: Vec<f64> = if fam == Family::Step {
         p.step_rss(obs, y_perp, &grid)
     } else {
-        grid.par_iter()
-            .map(|&th| candidate_rss(obs, p, y_perp, fam, th))
-            .collect()
+        grid.par_iter().map(|&th| eval(th)).collect()
     };
     // A step from any time up to the last grid time is the step at the next grid time (the
     // grid holds every reading time in between): its RSS is the grid's.
     let rss_at = |th: f64| match grid.partition_point(|g| *g < th) {
         i if fam == Family::Step && i < grid.len() => rss[i],
-        _ => candidate_rss(obs, p, y_perp, fam, th),
+        _ => eval(th),
     };
     let (mut best_k, mut best) = (0, f64::INFINITY);
     for (k, r) in rss.iter().enumerate() {

@@ -1,0 +1,248 @@
+//! The grid searches' columns and their weighted sums, kept for the run ([`Cache`]).
+//!
+//! A diagnosis tries the same parameter values of a cyclic drift, a warm-up or a scale change
+//! many times: at each step of the selection, for each effect put in another's place and at
+//! each point of a parameter's spread, mostly with the same weights and only the other
+//! effects' columns changed. What depends on the column and the weights alone — the column
+//! itself (its sines, cosines or exponentials), its weighted sums by group and by cycle and its
+//! weighted products with itself — is computed once ([`ColSums`]); each try then costs one pass
+//! over the readings per fixed column of the model ([`DenseSearch::rss`]). The values are those
+//! of [`Projector::fit_cols`] on the same columns (the same products, summed in another order).
+
+#![allow(clippy::needless_range_loop)]
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use nalgebra::{DMatrix, DVector};
+
+use super::family::Family;
+use super::fit::Obs;
+use super::projector::{Fixed, Projector, dotw};
+
+/// Most bytes of columns [`Cache`] keeps (each column 8·N bytes); beyond, columns are
+/// computed each time.
+const COLUMN_CACHE_BYTES: usize = 128 << 20;
+
+/// Most sets of weights whose sums [`Cache`] keeps (the oldest is dropped).
+const WEIGHT_SETS: usize = 8;
+
+/// A family's columns at one parameter value.
+type Columns = Arc<Vec<Vec<f64>>>;
+
+/// Key of a family's columns: the family and the parameter's bits.
+type Key = (u8, u64);
+
+/// Columns and sums of the searched families for one run.
+#[derive(Default)]
+pub(super) struct Cache {
+    columns: Mutex<HashMap<Key, Columns>>,
+    weight_sets: Mutex<Vec<Arc<WeightSums>>>,
+}
+
+impl Cache {
+    /// `fam`'s columns at `theta`, computed once (within [`COLUMN_CACHE_BYTES`]).
+    pub(super) fn columns(&self, obs: &Obs, fam: Family, theta: f64) -> Columns {
+        let key = (fam as u8, theta.to_bits());
+        if let Some(c) = self.columns.lock().ok().and_then(|m| m.get(&key).cloned()) {
+            return c;
+        }
+        let cols = Arc::new(fam.compute_columns(obs, theta));
+        if let Ok(mut m) = self.columns.lock() {
+            let per = cols.len().max(1) * obs.len().max(1) * 8;
+            if (m.len() + 1) * per <= COLUMN_CACHE_BYTES {
+                m.insert(key, Arc::clone(&cols));
+            }
+        }
+        cols
+    }
+
+    /// The sums kept for the weights `w`.
+    fn for_weights(&self, w: &[f64]) -> Arc<WeightSums> {
+        let Ok(mut sets) = self.weight_sets.lock() else {
+            return Arc::new(WeightSums::new(w));
+        };
+        if let Some(s) = sets.iter().find(|s| s.w == w) {
+            return Arc::clone(s);
+        }
+        if sets.len() >= WEIGHT_SETS {
+            sets.remove(0);
+        }
+        let s = Arc::new(WeightSums::new(w));
+        sets.push(Arc::clone(&s));
+        s
+    }
+}
+
+/// A family's columns at one parameter value and what the weights make of them alone.
+pub(super) struct ColSums {
+    cols: Columns,
+    /// Weighted sums of each column by group.
+    by_group: Vec<Vec<f64>>,
+    /// Weighted sums of each column by cycle.
+    by_cycle: Vec<Vec<f64>>,
+    /// Weighted products of the columns (not centred).
+    gram: DMatrix<f64>,
+}
+
+impl ColSums {
+    fn new(obs: &Obs, w: &[f64], cols: Columns) -> Self {
+        let m = cols.len();
+        let mut by_group = vec![vec![0.0; obs.n_groups]; m];
+        let mut by_cycle = vec![vec![0.0; obs.n_cycles]; m];
+        for (i, c) in cols.iter().enumerate() {
+            for j in 0..obs.len() {
+                by_group[i][obs.group[j]] += w[j] * c[j];
+                by_cycle[i][obs.cycle[j]] += w[j] * c[j];
+            }
+        }
+        let gram = DMatrix::from_fn(m, m, |a, b| dotw(&cols[a], &cols[b], w));
+        ColSums {
+            cols,
+            by_group,
+            by_cycle,
+            gram,
+        }
+    }
+}
+
+/// The sums kept for one set of weights, by family and parameter value.
+struct WeightSums {
+    w: Vec<f64>,
+    by_key: Mutex<HashMap<Key, Arc<ColSums>>>,
+}
+
+impl WeightSums {
+    fn new(w: &[f64]) -> Self {
+        WeightSums {
+            w: w.to_vec(),
+            by_key: Mutex::default(),
+        }
+    }
+
+    fn get(&self, obs: &Obs, fam: Family, theta: f64) -> Arc<ColSums> {
+        let key = (fam as u8, theta.to_bits());
+        if let Some(s) = self.by_key.lock().ok().and_then(|m| m.get(&key).cloned()) {
+            return s;
+        }
+        let s = Arc::new(ColSums::new(obs, &self.w, fam.columns_shared(obs, theta)));
+        if let Ok(mut m) = self.by_key.lock() {
+            m.insert(key, Arc::clone(&s));
+        }
+        s
+    }
+}
+
+/// Products of two vectors (four partial sums, so that the loop vectorises).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for i in 0..4 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// A grid search of a family with dense columns (a cyclic drift, a warm-up, a scale change)
+/// against one projector: y⊥ and the fixed dense columns weighted once.
+pub(super) struct DenseSearch<'a> {
+    obs: &'a Obs,
+    p: &'a Projector,
+    sums: Arc<WeightSums>,
+    /// w·y⊥.
+    wy: Vec<f64>,
+    /// w·z for each dense fixed column (None for a cycle's indicator).
+    wz: Vec<Option<Vec<f64>>>,
+    /// y⊥'Wy⊥.
+    y2: f64,
+}
+
+impl<'a> DenseSearch<'a> {
+    pub(super) fn new(obs: &'a Obs, p: &'a Projector, y_perp: &[f64]) -> Self {
+        let w = &p.w;
+        let weigh = |v: &[f64]| -> Vec<f64> { v.iter().zip(w).map(|(v, w)| v * w).collect() };
+        DenseSearch {
+            obs,
+            p,
+            sums: obs.cache.for_weights(w),
+            wy: weigh(y_perp),
+            wz: p
+                .fixed()
+                .iter()
+                .map(|f| match f {
+                    Fixed::Dense { zc, .. } => Some(weigh(zc)),
+                    Fixed::Cycle(_) => None,
+                })
+                .collect(),
+            y2: dotw(y_perp, y_perp, w),
+        }
+    }
+
+    /// RSS with `fam`'s columns at `theta` added (as [`Projector::fit_cols`]).
+    pub(super) fn rss(&self, fam: Family, theta: f64) -> f64 {
+        let (obs, p) = (self.obs, self.p);
+        let s = self.sums.get(obs, fam, theta);
+        let m = s.cols.len();
+        let n_g = &p.counts.group;
+        let centred = DMatrix::from_fn(m, m, |a, b| {
+            let within: f64 = (0..obs.n_groups)
+                .filter(|&g| n_g[g] > 0.0)
+                .map(|g| s.by_group[a][g] * s.by_group[b][g] / n_g[g])
+                .sum();
+            s.gram[(a, b)] - within
+        });
+        let u = DMatrix::from_fn(p.fixed().len(), m, |k, i| {
+            match (&p.fixed()[k], &self.wz[k]) {
+                (_, Some(wz)) => dot(&s.cols[i], wz),
+                (Fixed::Cycle(c), None) => p.cycle_product(*c, &s.by_group[i], &s.by_cycle[i]),
+                (Fixed::Dense { .. }, None) => 0.0,
+            }
+        });
+        let b = DVector::from_iterator(m, s.cols.iter().map(|c| dot(c, &self.wy)));
+        p.rss_from(self.y2, centred, &u, &b).0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::projector::tests::run;
+
+    /// The cached sums give the RSS of the columns fitted directly, with a drift and offsets
+    /// per cycle in the model and a reading left out, for every searched dense family.
+    #[test]
+    fn cached_sums_give_the_direct_rss() {
+        let obs = run();
+        let w: Vec<f64> = (0..obs.len())
+            .map(|j| if j == 4 { 0.0 } else { 1.0 })
+            .collect();
+        let mut fixed = Family::Linear.columns(&obs, f64::NAN);
+        fixed.extend(Family::CycleOffsets.columns(&obs, f64::NAN));
+        let p = Projector::new(&obs, &w, &fixed);
+        let y = p.residualize(&obs, &obs.y);
+        let d = DenseSearch::new(&obs, &p, &y);
+        for (fam, theta) in [
+            (Family::Cyclic, 700.0),
+            (Family::Cyclic, 1234.5),
+            (Family::Warmup, 900.0),
+            (Family::Thermal, 3000.0),
+        ] {
+            for _ in 0..2 {
+                let got = d.rss(fam, theta);
+                let (want, _) = p.fit_cols(&obs, &y, &fam.columns(&obs, theta));
+                assert!(
+                    (got - want).abs() < 1e-9 * want,
+                    "{fam:?} {theta}: {got} vs {want}"
+                );
+            }
+        }
+    }
+}

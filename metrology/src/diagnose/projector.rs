@@ -15,6 +15,24 @@ use nalgebra::{DMatrix, DVector};
 
 use super::fit::Obs;
 
+/// Sum of the products of `a` and `b` (four partial sums, so that the loop vectorises).
+pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for i in 0..4 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
 /// Weighted sum of the products of `a` and `b`.
 pub(super) fn dotw(a: &[f64], b: &[f64], w: &[f64]) -> f64 {
     a.iter().zip(b).zip(w).map(|((a, b), w)| a * b * w).sum()

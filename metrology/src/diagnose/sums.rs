@@ -18,7 +18,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::family::Family;
 use super::fit::Obs;
-use super::projector::{Fixed, Projector, dotw};
+use super::projector::{Fixed, Projector, dot, dotw};
 
 /// Most bytes of columns [`Cache`] keeps (each column 8·N bytes); beyond, columns are
 /// computed each time.
@@ -131,24 +131,6 @@ impl WeightSums {
         }
         s
     }
-}
-
-/// Products of two vectors (four partial sums, so that the loop vectorises).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for i in 0..4 {
-            acc[i] += x[i] * y[i];
-        }
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// A grid search of a family with dense columns (a cyclic drift, a warm-up, a scale change)

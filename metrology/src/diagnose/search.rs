@@ -72,13 +72,21 @@ pub(super) struct Spread {
 /// A parameter value tried, the RSS there and the linear coefficients.
 type TriedPoint = (f64, f64, DVector<f64>);
 
+/// What [`theta_spread`] fits at a batch of parameter values: the RSS and the effect's linear
+/// coefficients at each (None where they cannot be fitted).
+pub(super) type FitAll<'a> = dyn Fn(&[f64]) -> Vec<Option<(f64, DVector<f64>)>> + Sync + 'a;
+
+/// Most parameter values [`theta_spread`] hands its fit at once (a step's spread tries every
+/// reading; each value holds a model's columns).
+const SPREAD_BATCH: usize = 64;
+
 /// [`Spread`] of `fam` at `theta`: over its own grid for a step (every reading), over ±4
-/// curvature uncertainties (`u_theta`) around `theta` otherwise. `fit_at(t)` is the RSS and
-/// the effect's linear coefficients with its parameter at `t` (the rest of the model refitted
-/// as the caller decides).
+/// curvature uncertainties (`u_theta`) around `theta` otherwise. `fit_all(ts)` is the RSS and
+/// the effect's linear coefficients with its parameter at each of `ts` (the rest of the model
+/// refitted as the caller decides).
 pub(super) fn theta_spread(
     obs: &Obs,
-    fit_at: &(dyn Fn(f64) -> Option<(f64, DVector<f64>)> + Sync),
+    fit_all: &FitAll,
     fam: Family,
     theta: f64,
     u_theta: Option<f64>,
@@ -93,8 +101,13 @@ pub(super) fn theta_spread(
         _ => return None,
     };
     let fits: Vec<TriedPoint> = points
-        .iter()
-        .filter_map(|&t| fit_at(t).map(|(rss, x)| (t, rss, x)))
+        .chunks(SPREAD_BATCH)
+        .flat_map(|ts| {
+            ts.iter()
+                .zip(fit_all(ts))
+                .filter_map(|(&t, f)| f.map(|(rss, x)| (t, rss, x)))
+                .collect::<Vec<_>>()
+        })
         .collect();
     let rss_min = fits.iter().map(|f| f.1).fold(f64::INFINITY, f64::min);
     if !(rss_min.is_finite() && s2 > 0.0) {
@@ -168,28 +181,61 @@ fn prefer_pair(
 /// The best value of `fam`'s parameter: the lowest RSS over its grid, refined between the
 /// grid points either side of the best one.
 pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> Option<Candidate> {
+    search_many(obs, &[(p, y_perp)], fam).pop().flatten()
+}
+
+/// [`search`] for several fits (a projector and its y⊥) at once: the grid's values are
+/// visited once for all of them, so that a period's columns are read from memory once, not
+/// once per fit (a parameter's spread searches another effect beside 33 values of it).
+pub(super) fn search_many(
+    obs: &Obs,
+    fits: &[(&Projector, &[f64])],
+    fam: Family,
+) -> Vec<Option<Candidate>> {
     let grid = fam.grid(obs);
     if grid.is_empty() {
-        return None;
+        return fits.iter().map(|_| None).collect();
     }
-    let dense = fam
-        .is_searched_dense()
-        .then(|| DenseSearch::new(obs, p, y_perp));
-    let eval = |th: f64| match &dense {
-        Some(d) => d.rss(fam, th),
-        None => candidate_rss(obs, p, y_perp, fam, th),
-    };
-    let rss: Vec<f64> = if fam == Family::Step {
-        p.step_rss(obs, y_perp, &grid)
-    } else {
-        grid.par_iter().map(|&th| eval(th)).collect()
-    };
-    // A step from any time up to the last grid time is the step at the next grid time (the
-    // grid holds every reading time in between): its RSS is the grid's.
-    let rss_at = |th: f64| match grid.partition_point(|g| *g < th) {
-        i if fam == Family::Step && i < grid.len() => rss[i],
-        _ => eval(th),
-    };
+    if fam.is_searched_dense() {
+        let ds: Vec<DenseSearch> = fits
+            .iter()
+            .map(|(p, y)| DenseSearch::new(obs, p, y))
+            .collect();
+        let table: Vec<Vec<f64>> = grid
+            .par_iter()
+            .map(|&th| ds.iter().map(|d| d.rss(fam, th)).collect())
+            .collect();
+        return ds
+            .iter()
+            .enumerate()
+            .map(|(k, d)| {
+                let rss: Vec<f64> = table.iter().map(|r| r[k]).collect();
+                Some(refine_best(&grid, &rss, |th| d.rss(fam, th)))
+            })
+            .collect();
+    }
+    fits.iter()
+        .map(|&(p, y_perp)| {
+            let eval = |th: f64| candidate_rss(obs, p, y_perp, fam, th);
+            let rss: Vec<f64> = if fam == Family::Step {
+                p.step_rss(obs, y_perp, &grid)
+            } else {
+                grid.iter().map(|&th| eval(th)).collect()
+            };
+            // A step from any time up to the last grid time is the step at the next grid
+            // time (the grid holds every reading time in between): its RSS is the grid's.
+            let rss_at = |th: f64| match grid.partition_point(|g| *g < th) {
+                i if fam == Family::Step && i < grid.len() => rss[i],
+                _ => eval(th),
+            };
+            Some(refine_best(&grid, &rss, rss_at))
+        })
+        .collect()
+}
+
+/// The grid value of the lowest RSS (`rss` on `grid`), refined between the grid values
+/// either side of it (`eval` the RSS at any value).
+fn refine_best(grid: &[f64], rss: &[f64], eval: impl Fn(f64) -> f64) -> Candidate {
     let (mut best_k, mut best) = (0, f64::INFINITY);
     for (k, r) in rss.iter().enumerate() {
         if *r < best {
@@ -199,19 +245,18 @@ pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> O
     }
     let mut theta = grid[best_k];
     if grid.len() > 2 {
-        // Refine between the neighbours of the best grid point.
         let lo = grid[best_k.saturating_sub(1)];
         let hi = grid[(best_k + 1).min(grid.len() - 1)];
         for s in 0..=24 {
             let th = lo + (hi - lo) * s as f64 / 24.0;
-            let r = rss_at(th);
+            let r = eval(th);
             if r < best {
                 best = r;
                 theta = th;
             }
         }
     }
-    Some(Candidate { theta, rss: best })
+    Candidate { theta, rss: best }
 }
 
 /// Uncertainty of a grid-searched parameter from the curvature of the RSS profile:

@@ -11,6 +11,8 @@
 
 #![allow(clippy::needless_range_loop)]
 
+use std::sync::OnceLock;
+
 use nalgebra::{DMatrix, DVector};
 
 use super::fit::Obs;
@@ -47,6 +49,8 @@ pub(super) struct Counts {
     /// Weight of each (group, cycle), `gc[g * n_cycles + c]`.
     gc: Vec<f64>,
     n_cycles: usize,
+    /// [`Counts::share`] of every (group, cycle), computed when first needed.
+    shares: OnceLock<Vec<f64>>,
 }
 
 impl Counts {
@@ -57,6 +61,7 @@ impl Counts {
             cycle: vec![0.0; nc],
             gc: vec![0.0; obs.n_groups * nc],
             n_cycles: nc,
+            shares: OnceLock::new(),
         };
         for j in 0..obs.len() {
             let (g, k) = (obs.group[j], obs.cycle[j]);
@@ -69,11 +74,24 @@ impl Counts {
 
     /// Group g's mean of the indicator of cycle `c` (the share of its weight in that cycle).
     pub(super) fn share(&self, g: usize, c: usize) -> f64 {
-        if self.group[g] > 0.0 {
-            self.gc[g * self.n_cycles + c] / self.group[g]
-        } else {
-            0.0
-        }
+        let nc = self.n_cycles;
+        self.shares.get_or_init(|| {
+            (0..self.gc.len())
+                .map(|i| {
+                    let n = self.group[i / nc];
+                    if n > 0.0 { self.gc[i] / n } else { 0.0 }
+                })
+                .collect()
+        })[g * nc + c]
+    }
+
+    /// Weighted product of cycle `c`'s centred indicator with a column whose weighted sums by
+    /// group and by cycle are `by_group` and `by_cycle`.
+    pub(super) fn cycle_product(&self, c: usize, by_group: &[f64], by_cycle: &[f64]) -> f64 {
+        by_cycle[c]
+            - (0..by_group.len())
+                .map(|g| self.share(g, c) * by_group[g])
+                .sum::<f64>()
     }
 
     /// Weighted product of the indicators of cycles `c` and `d`, both centred within the
@@ -277,15 +295,6 @@ impl Projector {
         &self.fixed
     }
 
-    /// Weighted product of cycle `c`'s centred indicator with a column whose weighted sums by
-    /// group and by cycle are `by_group` and `by_cycle`.
-    pub(super) fn cycle_product(&self, c: usize, by_group: &[f64], by_cycle: &[f64]) -> f64 {
-        by_cycle[c]
-            - (0..by_group.len())
-                .map(|g| self.counts.share(g, c) * by_group[g])
-                .sum::<f64>()
-    }
-
     /// RSS once columns C are added, from their products: `centred` = C'WC (C centred),
     /// `u` = Z'WC with the fixed columns Z, `b` = C'Wy⊥, `y2` = y⊥'Wy⊥. The residuals of C
     /// have the Gram matrix A = C'WC − U'(Z'WZ)⁻¹U, and RSS = y2 − b'A⁻¹b; the coefficients of
@@ -372,7 +381,7 @@ impl Projector {
                 1,
                 self.fixed.iter().zip(&sz).map(|(f, s)| match f {
                     Fixed::Dense { .. } => *s,
-                    Fixed::Cycle(c) => self.cycle_product(*c, &by_group, &by_cycle),
+                    Fixed::Cycle(c) => self.counts.cycle_product(*c, &by_group, &by_cycle),
                 }),
             );
             let centred: f64 = (0..obs.n_groups)

@@ -12,13 +12,13 @@
 #![allow(clippy::needless_range_loop)]
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use nalgebra::{DMatrix, DVector};
 
 use super::family::Family;
 use super::fit::Obs;
-use super::projector::{Fixed, Projector, dot, dotw};
+use super::projector::{Counts, Fixed, Projector, dot, dotw};
 
 /// Most bytes of columns [`Cache`] keeps (each column 8·N bytes); beyond, columns are
 /// computed each time.
@@ -58,9 +58,9 @@ impl Cache {
     }
 
     /// The sums kept for the weights `w`.
-    fn for_weights(&self, w: &[f64]) -> Arc<WeightSums> {
+    fn for_weights(&self, obs: &Obs, w: &[f64]) -> Arc<WeightSums> {
         let Ok(mut sets) = self.weight_sets.lock() else {
-            return Arc::new(WeightSums::new(w));
+            return Arc::new(WeightSums::new(obs, w));
         };
         if let Some(s) = sets.iter().find(|s| s.w == w) {
             return Arc::clone(s);
@@ -68,7 +68,7 @@ impl Cache {
         if sets.len() >= WEIGHT_SETS {
             sets.remove(0);
         }
-        let s = Arc::new(WeightSums::new(w));
+        let s = Arc::new(WeightSums::new(obs, w));
         sets.push(Arc::clone(&s));
         s
     }
@@ -81,12 +81,15 @@ pub(super) struct ColSums {
     by_group: Vec<Vec<f64>>,
     /// Weighted sums of each column by cycle.
     by_cycle: Vec<Vec<f64>>,
-    /// Weighted products of the columns (not centred).
-    gram: DMatrix<f64>,
+    /// Weighted products of the columns, centred within the groups.
+    centred: DMatrix<f64>,
+    /// Weighted products of each column with every cycle's centred indicator (when first
+    /// needed: a model with offsets per cycle).
+    cycle_products: OnceLock<Vec<Vec<f64>>>,
 }
 
 impl ColSums {
-    fn new(obs: &Obs, w: &[f64], cols: Columns) -> Self {
+    fn new(obs: &Obs, w: &[f64], counts: &Counts, cols: Columns) -> Self {
         let m = cols.len();
         let mut by_group = vec![vec![0.0; obs.n_groups]; m];
         let mut by_cycle = vec![vec![0.0; obs.n_cycles]; m];
@@ -96,26 +99,49 @@ impl ColSums {
                 by_cycle[i][obs.cycle[j]] += w[j] * c[j];
             }
         }
-        let gram = DMatrix::from_fn(m, m, |a, b| dotw(&cols[a], &cols[b], w));
+        let n_g = &counts.group;
+        let centred = DMatrix::from_fn(m, m, |a, b| {
+            let within: f64 = (0..obs.n_groups)
+                .filter(|&g| n_g[g] > 0.0)
+                .map(|g| by_group[a][g] * by_group[b][g] / n_g[g])
+                .sum();
+            dotw(&cols[a], &cols[b], w) - within
+        });
         ColSums {
             cols,
             by_group,
             by_cycle,
-            gram,
+            centred,
+            cycle_products: OnceLock::new(),
         }
+    }
+
+    /// [`ColSums::cycle_products`] (`counts` those of its weights).
+    fn cycle_products(&self, counts: &Counts) -> &[Vec<f64>] {
+        self.cycle_products.get_or_init(|| {
+            (0..self.cols.len())
+                .map(|i| {
+                    (0..self.by_cycle[i].len())
+                        .map(|c| counts.cycle_product(c, &self.by_group[i], &self.by_cycle[i]))
+                        .collect()
+                })
+                .collect()
+        })
     }
 }
 
 /// The sums kept for one set of weights, by family and parameter value.
 struct WeightSums {
     w: Vec<f64>,
+    counts: Counts,
     by_key: Mutex<HashMap<Key, Arc<ColSums>>>,
 }
 
 impl WeightSums {
-    fn new(w: &[f64]) -> Self {
+    fn new(obs: &Obs, w: &[f64]) -> Self {
         WeightSums {
             w: w.to_vec(),
+            counts: Counts::new(obs, w),
             by_key: Mutex::default(),
         }
     }
@@ -125,7 +151,8 @@ impl WeightSums {
         if let Some(s) = self.by_key.lock().ok().and_then(|m| m.get(&key).cloned()) {
             return s;
         }
-        let s = Arc::new(ColSums::new(obs, &self.w, fam.columns_shared(obs, theta)));
+        let cols = fam.columns_shared(obs, theta);
+        let s = Arc::new(ColSums::new(obs, &self.w, &self.counts, cols));
         if let Ok(mut m) = self.by_key.lock() {
             m.insert(key, Arc::clone(&s));
         }
@@ -154,7 +181,7 @@ impl<'a> DenseSearch<'a> {
         DenseSearch {
             obs,
             p,
-            sums: obs.cache.for_weights(w),
+            sums: obs.cache.for_weights(obs, w),
             wy: weigh(y_perp),
             wz: p
                 .fixed()
@@ -173,23 +200,15 @@ impl<'a> DenseSearch<'a> {
         let (obs, p) = (self.obs, self.p);
         let s = self.sums.get(obs, fam, theta);
         let m = s.cols.len();
-        let n_g = &p.counts.group;
-        let centred = DMatrix::from_fn(m, m, |a, b| {
-            let within: f64 = (0..obs.n_groups)
-                .filter(|&g| n_g[g] > 0.0)
-                .map(|g| s.by_group[a][g] * s.by_group[b][g] / n_g[g])
-                .sum();
-            s.gram[(a, b)] - within
-        });
         let u = DMatrix::from_fn(p.fixed().len(), m, |k, i| {
             match (&p.fixed()[k], &self.wz[k]) {
                 (_, Some(wz)) => dot(&s.cols[i], wz),
-                (Fixed::Cycle(c), None) => p.cycle_product(*c, &s.by_group[i], &s.by_cycle[i]),
+                (Fixed::Cycle(c), None) => s.cycle_products(&self.sums.counts)[i][*c],
                 (Fixed::Dense { .. }, None) => 0.0,
             }
         });
         let b = DVector::from_iterator(m, s.cols.iter().map(|c| dot(c, &self.wy)));
-        p.rss_from(self.y2, centred, &u, &b).0
+        p.rss_from(self.y2, s.centred.clone(), &u, &b).0
     }
 }
 

@@ -108,7 +108,11 @@ impl Counts {
 /// A column centred within the groups.
 pub(super) enum Fixed {
     /// Any column: its centred values and their weighted sums by cycle.
-    Dense { zc: Vec<f64>, by_cycle: Vec<f64> },
+    Dense {
+        zc: Vec<f64>,
+        /// Weighted sums of `zc` by cycle (when first needed, against a cycle's indicator).
+        by_cycle: OnceLock<Vec<f64>>,
+    },
     /// The indicator of a cycle (0-based).
     Cycle(usize),
 }
@@ -144,32 +148,31 @@ fn group_means(obs: &Obs, n: &[f64], w: &[f64], v: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// `cols` centred within the groups; the sums by cycle of the dense ones only with
-/// `by_cycle` (they are needed against a cycle's indicator).
-fn centre_all(obs: &Obs, c: &Counts, w: &[f64], cols: &[Vec<f64>], by_cycle: bool) -> Vec<Fixed> {
+/// `cols` centred within the groups.
+fn centre_all(obs: &Obs, c: &Counts, w: &[f64], cols: &[Vec<f64>]) -> Vec<Fixed> {
     cols.iter()
         .map(|col| match cycle_indicator(obs, col) {
             Some(k) => Fixed::Cycle(k),
             None => {
                 let m = group_means(obs, &c.group, w, col);
                 let zc: Vec<f64> = col.iter().zip(&obs.group).map(|(v, &g)| v - m[g]).collect();
-                let by_cycle = if by_cycle {
-                    cycle_sums(obs, w, &zc)
-                } else {
-                    Vec::new()
-                };
-                Fixed::Dense { zc, by_cycle }
+                Fixed::Dense {
+                    zc,
+                    by_cycle: OnceLock::new(),
+                }
             }
         })
         .collect()
 }
 
 /// Weighted product of two centred columns.
-fn gram(c: &Counts, w: &[f64], a: &Fixed, b: &Fixed) -> f64 {
+fn gram(obs: &Obs, c: &Counts, w: &[f64], a: &Fixed, b: &Fixed) -> f64 {
     match (a, b) {
         (Fixed::Dense { zc: x, .. }, Fixed::Dense { zc: y, .. }) => dotw(x, y, w),
-        (Fixed::Dense { by_cycle, .. }, Fixed::Cycle(k))
-        | (Fixed::Cycle(k), Fixed::Dense { by_cycle, .. }) => by_cycle[*k],
+        (Fixed::Dense { zc, by_cycle }, Fixed::Cycle(k))
+        | (Fixed::Cycle(k), Fixed::Dense { zc, by_cycle }) => {
+            by_cycle.get_or_init(|| cycle_sums(obs, w, zc))[*k]
+        }
         (Fixed::Cycle(k), Fixed::Cycle(l)) => c.cycle_gram(*k, *l),
     }
 }
@@ -186,12 +189,12 @@ pub(super) struct Projector {
 impl Projector {
     pub(super) fn new(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> Self {
         let counts = Counts::new(obs, w);
-        let fixed = centre_all(obs, &counts, w, cols, true);
+        let fixed = centre_all(obs, &counts, w, cols);
         let k = fixed.len();
         let mut g = DMatrix::zeros(k, k);
         for a in 0..k {
             for b in a..k {
-                let v = gram(&counts, w, &fixed[a], &fixed[b]);
+                let v = gram(obs, &counts, w, &fixed[a], &fixed[b]);
                 g[(a, b)] = v;
                 g[(b, a)] = v;
             }
@@ -325,12 +328,12 @@ impl Projector {
         cols: &[Vec<f64>],
     ) -> (f64, Option<DVector<f64>>) {
         let w = &self.w;
-        let need_cycles =
-            self.has_cycles() || cols.iter().any(|c| cycle_indicator(obs, c).is_some());
-        let new = centre_all(obs, &self.counts, w, cols, need_cycles);
+        let new = centre_all(obs, &self.counts, w, cols);
         let (k, m) = (self.fixed.len(), new.len());
-        let u = DMatrix::from_fn(k, m, |a, b| gram(&self.counts, w, &self.fixed[a], &new[b]));
-        let centred = DMatrix::from_fn(m, m, |i, j| gram(&self.counts, w, &new[i], &new[j]));
+        let u = DMatrix::from_fn(k, m, |a, b| {
+            gram(obs, &self.counts, w, &self.fixed[a], &new[b])
+        });
+        let centred = DMatrix::from_fn(m, m, |i, j| gram(obs, &self.counts, w, &new[i], &new[j]));
         let y_cycles = if new.iter().any(|f| matches!(f, Fixed::Cycle(_))) {
             cycle_sums(obs, w, y_perp)
         } else {

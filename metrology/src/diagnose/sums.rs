@@ -79,8 +79,6 @@ pub(super) struct ColSums {
     cols: Columns,
     /// Weighted sums of each column by group.
     by_group: Vec<Vec<f64>>,
-    /// Weighted sums of each column by cycle.
-    by_cycle: Vec<Vec<f64>>,
     /// Weighted products of the columns, centred within the groups.
     centred: DMatrix<f64>,
     /// Weighted products of each column with every cycle's centred indicator (when first
@@ -91,38 +89,45 @@ pub(super) struct ColSums {
 impl ColSums {
     fn new(obs: &Obs, w: &[f64], counts: &Counts, cols: Columns) -> Self {
         let m = cols.len();
-        let mut by_group = vec![vec![0.0; obs.n_groups]; m];
-        let mut by_cycle = vec![vec![0.0; obs.n_cycles]; m];
-        for (i, c) in cols.iter().enumerate() {
-            for j in 0..obs.len() {
-                by_group[i][obs.group[j]] += w[j] * c[j];
-                by_cycle[i][obs.cycle[j]] += w[j] * c[j];
-            }
-        }
+        let weighted: Vec<Vec<f64>> = cols
+            .iter()
+            .map(|c| c.iter().zip(w).map(|(c, w)| c * w).collect())
+            .collect();
+        let by_group: Vec<Vec<f64>> = weighted
+            .iter()
+            .map(|wc| {
+                let mut s = vec![0.0; obs.n_groups];
+                obs.group.iter().zip(wc).for_each(|(&g, x)| s[g] += x);
+                s
+            })
+            .collect();
         let n_g = &counts.group;
         let centred = DMatrix::from_fn(m, m, |a, b| {
             let within: f64 = (0..obs.n_groups)
                 .filter(|&g| n_g[g] > 0.0)
                 .map(|g| by_group[a][g] * by_group[b][g] / n_g[g])
                 .sum();
-            dotw(&cols[a], &cols[b], w) - within
+            dot(&weighted[a], &cols[b]) - within
         });
         ColSums {
             cols,
             by_group,
-            by_cycle,
             centred,
             cycle_products: OnceLock::new(),
         }
     }
 
-    /// [`ColSums::cycle_products`] (`counts` those of its weights).
-    fn cycle_products(&self, counts: &Counts) -> &[Vec<f64>] {
+    /// [`ColSums::cycle_products`] (`w` and `counts` those of its weights).
+    fn cycle_products(&self, obs: &Obs, w: &[f64], counts: &Counts) -> &[Vec<f64>] {
         self.cycle_products.get_or_init(|| {
             (0..self.cols.len())
                 .map(|i| {
-                    (0..self.by_cycle[i].len())
-                        .map(|c| counts.cycle_product(c, &self.by_group[i], &self.by_cycle[i]))
+                    let mut by_cycle = vec![0.0; obs.n_cycles];
+                    for j in 0..obs.len() {
+                        by_cycle[obs.cycle[j]] += w[j] * self.cols[i][j];
+                    }
+                    (0..obs.n_cycles)
+                        .map(|c| counts.cycle_product(c, &self.by_group[i], &by_cycle))
                         .collect()
                 })
                 .collect()
@@ -203,7 +208,9 @@ impl<'a> DenseSearch<'a> {
         let u = DMatrix::from_fn(p.fixed().len(), m, |k, i| {
             match (&p.fixed()[k], &self.wz[k]) {
                 (_, Some(wz)) => dot(&s.cols[i], wz),
-                (Fixed::Cycle(c), None) => s.cycle_products(&self.sums.counts)[i][*c],
+                (Fixed::Cycle(c), None) => {
+                    s.cycle_products(obs, &self.sums.w, &self.sums.counts)[i][*c]
+                }
                 (Fixed::Dense { .. }, None) => 0.0,
             }
         });

@@ -149,24 +149,47 @@ impl Family {
                     .map(|k| lo * (hi / lo).powf(k as f64 / (n - 1) as f64))
                     .collect()
             }
-            Family::Cyclic => {
-                // Periods from three reading intervals (and at least 2 min: no thermal cycle of
-                // a machine is faster) to 1/1.2 of the run, uniform in frequency at 1/(3T).
-                let p_min = (3.0 * obs.dt_s).max(120.0_f64.min(d / 10.0));
-                let p_max = d / 1.2;
-                if p_min >= p_max {
-                    return Vec::new();
-                }
-                let (f_lo, f_hi) = (1.0 / p_max, 1.0 / p_min);
-                let df = 1.0 / (3.0 * d);
-                let n = (((f_hi - f_lo) / df).ceil() as usize).clamp(2, 4000);
-                (0..=n)
-                    .map(|k| 1.0 / (f_lo + (f_hi - f_lo) * k as f64 / n as f64))
+            Family::Cyclic => match cyclic_frequencies(obs) {
+                Some(f) => (0..=f.n)
+                    .map(|k| f.period(k))
                     .filter(|p| !aliases_structure(obs, *p))
-                    .collect()
-            }
+                    .collect(),
+                None => Vec::new(),
+            },
         }
     }
+}
+
+/// The frequencies a cyclic drift's period is searched over: periods from three reading
+/// intervals (and at least 2 min: no thermal cycle of a machine is faster) to 1/1.2 of the
+/// run, uniform in frequency at 1/(3T); those that alias the run's structure are then left
+/// out ([`aliases_structure`]).
+pub(super) struct Frequencies {
+    pub(super) lo: f64,
+    pub(super) hi: f64,
+    /// Steps from `lo` to `hi`.
+    pub(super) n: usize,
+}
+
+impl Frequencies {
+    /// The k-th period, s.
+    pub(super) fn period(&self, k: usize) -> f64 {
+        1.0 / (self.lo + (self.hi - self.lo) * k as f64 / self.n as f64)
+    }
+}
+
+/// [`Frequencies`] of the run (None when the run is too short for any).
+pub(super) fn cyclic_frequencies(obs: &Obs) -> Option<Frequencies> {
+    let d = obs.duration_s;
+    let p_min = (3.0 * obs.dt_s).max(120.0_f64.min(d / 10.0));
+    let p_max = d / 1.2;
+    if p_min >= p_max {
+        return None;
+    }
+    let (lo, hi) = (1.0 / p_max, 1.0 / p_min);
+    let df = 1.0 / (3.0 * d);
+    let n = (((hi - lo) / df).ceil() as usize).clamp(2, 4000);
+    Some(Frequencies { lo, hi, n })
 }
 
 /// Length of one bidirectional cycle, s: the median time between the starts of successive

@@ -197,6 +197,9 @@ pub(super) fn search_many(
         return fits.iter().map(|_| None).collect();
     }
     if fam.is_searched_dense() {
+        if fam == Family::Cyclic {
+            obs.cache.fill_cyclic_grid(obs);
+        }
         let ds: Vec<DenseSearch> = fits
             .iter()
             .map(|(p, y)| DenseSearch::new(obs, p, y))

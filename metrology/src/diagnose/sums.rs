@@ -16,7 +16,9 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use nalgebra::{DMatrix, DVector};
 
-use super::family::Family;
+use rayon::prelude::*;
+
+use super::family::{Family, cyclic_frequencies};
 use super::fit::Obs;
 use super::projector::{Counts, Fixed, Projector, dot, dotw};
 
@@ -38,9 +40,59 @@ type Key = (u8, u64);
 pub(super) struct Cache {
     columns: Mutex<HashMap<Key, Columns>>,
     weight_sets: Mutex<Vec<Arc<WeightSums>>>,
+    /// The cyclic drift's grid columns are in `columns` ([`Cache::fill_cyclic_grid`]).
+    cyclic_filled: OnceLock<()>,
 }
 
+/// Frequencies of the cyclic grid whose sines and cosines [`Cache::fill_cyclic_grid`] takes
+/// from one direct computation by rotation (the error of a rotation, ~1e-16, then adds up to
+/// ~1e-14 of the values).
+const ROTATIONS: usize = 64;
+
 impl Cache {
+    /// The sines and cosines of every period of the cyclic drift's grid, by rotating each
+    /// reading's phasor from one grid frequency to the next (a complex product instead of a
+    /// sine and a cosine: the grid is uniform in frequency), computed directly every
+    /// [`ROTATIONS`] frequencies. A period off the grid is computed directly when asked for.
+    pub(super) fn fill_cyclic_grid(&self, obs: &Obs) {
+        self.cyclic_filled.get_or_init(|| {
+            let Some(f) = cyclic_frequencies(obs) else {
+                return;
+            };
+            let per = 2 * obs.len().max(1) * 8;
+            if (f.n + 1) * per > COLUMN_CACHE_BYTES / 2 {
+                return;
+            }
+            let step = std::f64::consts::TAU * (f.hi - f.lo) / f.n as f64;
+            let (rs, rc): (Vec<f64>, Vec<f64>) = obs.t.iter().map(|t| (step * t).sin_cos()).unzip();
+            let starts: Vec<usize> = (0..=f.n).step_by(ROTATIONS).collect();
+            let filled: Vec<(f64, Vec<Vec<f64>>)> = starts
+                .par_iter()
+                .flat_map_iter(|&k0| {
+                    let mut cur = Family::Cyclic.compute_columns(obs, f.period(k0));
+                    let mut out = Vec::new();
+                    for k in k0..(k0 + ROTATIONS).min(f.n + 1) {
+                        if let (true, [s, c]) = (k > k0, &mut cur[..]) {
+                            for j in 0..obs.len() {
+                                let (a, b) = (s[j], c[j]);
+                                s[j] = a * rc[j] + b * rs[j];
+                                c[j] = b * rc[j] - a * rs[j];
+                            }
+                        }
+                        out.push((f.period(k), cur.clone()));
+                    }
+                    out
+                })
+                .collect();
+            if let Ok(mut m) = self.columns.lock() {
+                for (p, cols) in filled {
+                    m.entry((Family::Cyclic as u8, p.to_bits()))
+                        .or_insert_with(|| Arc::new(cols));
+                }
+            }
+        });
+    }
+
     /// `fam`'s columns at `theta`, computed once (within [`COLUMN_CACHE_BYTES`]).
     pub(super) fn columns(&self, obs: &Obs, fam: Family, theta: f64) -> Columns {
         let key = (fam as u8, theta.to_bits());

@@ -13,7 +13,8 @@
 use super::Options;
 use super::correlation::design_lag1;
 use super::family::Family;
-use super::fit::{FinalFit, Obs, Projector, dotw, heldout_rms};
+use super::fit::{FinalFit, Obs, heldout_rms};
+use super::projector::{Projector, dotw};
 use super::search::{
     Selected, Step, absorbed_by_baseline, cols_rss, families, search, theta_uncertainty,
 };

@@ -10,7 +10,10 @@
 
 #![allow(clippy::needless_range_loop)]
 
+use nalgebra::DMatrix;
+
 use super::fit::Obs;
+use super::projector::dot;
 
 /// Lag-1 correlation of `resid` in time order (rows with weight > 0) for the fit of the
 /// per-target, per-direction constants and `cols`, corrected for the bias of that fit.
@@ -27,7 +30,9 @@ pub(super) fn design_lag1(obs: &Obs, w: &[f64], cols: &[Vec<f64>], resid: &[f64]
         return 0.0;
     }
     let raw = r.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / ss;
-    let design = Design::new(basis(obs, &rows, cols), rows.len());
+    let groups = Groups::new(rows.iter().map(|&j| obs.group[j]).collect(), obs.n_groups);
+    let extras = extra_basis(&groups, &rows, cols);
+    let design = Design::new(groups, extras);
     solve(|rho| design.expected_ratio(rho) - raw)
 }
 
@@ -67,35 +72,58 @@ fn solve(f: impl Fn(f64) -> f64) -> f64 {
     0.5 * (a + b)
 }
 
-/// Orthonormal basis of the group indicators and `cols` on `rows`: the indicators are
-/// orthogonal already (disjoint rows); the columns are centred within the groups, then
-/// orthonormalised (modified Gram–Schmidt, twice), and those the others span are dropped.
-fn basis(obs: &Obs, rows: &[usize], cols: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    let g: Vec<usize> = rows.iter().map(|&j| obs.group[j]).collect();
-    let mut count = vec![0.0; obs.n_groups];
-    g.iter().for_each(|&k| count[k] += 1.0);
-    let mut q: Vec<Vec<f64>> = (0..obs.n_groups)
-        .filter(|&k| count[k] > 0.0)
-        .map(|k| {
-            let s = 1.0 / f64::sqrt(count[k]);
-            g.iter().map(|&gi| if gi == k { s } else { 0.0 }).collect()
-        })
-        .collect();
+/// The (target, direction) group of each reading in time order: the design's indicator
+/// columns, orthogonal to each other (disjoint readings) and held implicitly.
+struct Groups {
+    /// Group of each position.
+    of: Vec<usize>,
+    /// Readings in each group.
+    count: Vec<f64>,
+    /// 1 / count (0 for an empty group).
+    inv: Vec<f64>,
+}
+
+impl Groups {
+    fn new(of: Vec<usize>, n_groups: usize) -> Self {
+        let mut count = vec![0.0; n_groups];
+        of.iter().for_each(|&k| count[k] += 1.0);
+        let inv = count
+            .iter()
+            .map(|c| if *c > 0.0 { 1.0 / c } else { 0.0 })
+            .collect();
+        Groups { of, count, inv }
+    }
+
+    fn len(&self) -> usize {
+        self.count.len()
+    }
+
+    /// Sums of `v` by group.
+    fn sums(&self, v: &[f64]) -> Vec<f64> {
+        let mut s = vec![0.0; self.len()];
+        self.of.iter().zip(v).for_each(|(&k, x)| s[k] += x);
+        s
+    }
+}
+
+/// Orthonormal basis of `cols` on `rows` beside the group indicators: the columns are centred
+/// within the groups, then orthonormalised (modified Gram–Schmidt, twice), and those the
+/// others span are dropped.
+fn extra_basis(groups: &Groups, rows: &[usize], cols: &[Vec<f64>]) -> Vec<Vec<f64>> {
     let mut extra = Vec::new();
     for c in cols {
         let v: Vec<f64> = rows.iter().map(|&j| c[j]).collect();
         let norm0 = dot(&v, &v).sqrt();
-        let mut sum = vec![0.0; obs.n_groups];
-        g.iter().zip(&v).for_each(|(&k, x)| sum[k] += x);
-        let centred = g
+        let sum = groups.sums(&v);
+        let centred = groups
+            .of
             .iter()
             .zip(&v)
-            .map(|(&k, x)| x - sum[k] / count[k])
+            .map(|(&k, x)| x - sum[k] * groups.inv[k])
             .collect();
         push_orthonormal(&mut extra, centred, norm0);
     }
-    q.append(&mut extra);
-    q
+    extra
 }
 
 /// Appends `v` orthonormalised against `q` unless `q` spans it (what is left is below 1e-9
@@ -117,22 +145,20 @@ fn push_orthonormal(q: &mut Vec<Vec<f64>>, mut v: Vec<f64>, norm0: f64) {
     }
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-/// Σρ·v for the AR(1) correlation matrix (ρ^|i−j|), by a forward and a backward pass.
-fn ar1_times(v: &[f64], rho: f64) -> Vec<f64> {
+/// Σρ·v for the AR(1) correlation matrix (ρ^|i−j|), by a forward and a backward pass, into
+/// `out`.
+fn ar1_into(v: &[f64], rho: f64, out: &mut [f64]) {
     let n = v.len();
-    let mut f = vec![0.0; n];
-    let mut b = vec![0.0; n];
+    let mut f = 0.0;
     for i in 0..n {
-        f[i] = v[i] + if i > 0 { rho * f[i - 1] } else { 0.0 };
+        f = v[i] + rho * f;
+        out[i] = f;
     }
+    let mut b = 0.0;
     for i in (0..n).rev() {
-        b[i] = v[i] + if i + 1 < n { rho * b[i + 1] } else { 0.0 };
+        b = v[i] + rho * b;
+        out[i] += b - v[i];
     }
-    (0..n).map(|i| f[i] + b[i] - v[i]).collect()
 }
 
 /// A·v for the symmetric lag-1 operator (½ on both off-diagonals): v'Av = Σ v_i v_{i+1}.
@@ -147,44 +173,123 @@ fn lag_times(v: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// What tr(P⊥AP⊥Σρ) / tr(P⊥Σρ) (P⊥ = I − QQ') needs that does not depend on ρ.
+/// What tr(P⊥AP⊥Σρ) / tr(P⊥Σρ) needs that does not depend on ρ. With U the normalised
+/// group indicators and Q the other columns' orthonormal basis (Q ⊥ U), P⊥ = I − UU' − QQ'.
 struct Design {
+    groups: Groups,
     q: Vec<Vec<f64>>,
     /// A·q_c.
     aq: Vec<Vec<f64>>,
     /// Q(Q'AQ), column by column.
     qm: Vec<Vec<f64>>,
+    /// Sums of A·q_c by group.
+    aq_by_group: Vec<Vec<f64>>,
+    /// Σ_k 1[g(k) = g(k−1)]/n_g(k−1) + Σ_k 1[g(k) = g(k+1)]/n_g(k+1): the diagonal of Σρ in
+    /// the sums of [`Design::group_terms`].
+    same_neighbour: f64,
     n: usize,
 }
 
 impl Design {
-    fn new(q: Vec<Vec<f64>>, n: usize) -> Self {
-        let k = q.len();
+    fn new(groups: Groups, q: Vec<Vec<f64>>) -> Self {
+        let n = groups.of.len();
         let aq: Vec<Vec<f64>> = q.iter().map(|c| lag_times(c)).collect();
-        let qm = (0..k)
-            .map(|a| {
-                let mut v = vec![0.0; n];
-                for b in 0..k {
-                    let m_ab = dot(&q[b], &aq[a]);
-                    v.iter_mut().zip(&q[b]).for_each(|(x, y)| *x += m_ab * y);
-                }
-                v
-            })
+        // Q(Q'AQ) by matrix products (a hundred columns with offsets per cycle).
+        let qmat = DMatrix::from_fn(n, q.len(), |i, c| q[c][i]);
+        let aqmat = DMatrix::from_fn(n, q.len(), |i, c| aq[c][i]);
+        let qm_mat = &qmat * (qmat.transpose() * &aqmat);
+        let qm = qm_mat
+            .column_iter()
+            .map(|c| c.iter().copied().collect())
             .collect();
-        Design { q, aq, qm, n }
+        let aq_by_group = aq.iter().map(|v| groups.sums(v)).collect();
+        let g = &groups.of;
+        let same_neighbour = (1..n)
+            .map(|k| {
+                let (a, b) = (g[k - 1], g[k]);
+                if a == b { 2.0 * groups.inv[a] } else { 0.0 }
+            })
+            .sum();
+        Design {
+            groups,
+            q,
+            aq,
+            qm,
+            aq_by_group,
+            same_neighbour,
+            n,
+        }
     }
 
-    /// tr(AΣ) = (N − 1)ρ; tr(QQ'AΣ) = tr(AQQ'Σ) = Σ_c (Aq_c)'(Σq_c);
-    /// tr(QQ'AQQ'Σ) = Σ_a (Σq_a)'(QM)_a with M = Q'AQ symmetric; tr(P⊥Σ) = N − tr(Q'ΣQ).
+    /// The group indicators' part of the traces: (tr(UU'AΣ), tr(UU'AUU'Σ), tr(UU'Σ)).
+    ///
+    /// With s_k = (Σ·1_g)_k for every group g at once (a forward and a backward pass of the
+    /// AR(1) recursion over the positions, a vector over the groups): K_gh = 1_g'Σ1_h is the
+    /// sum of the forward part over h's positions plus its transpose; 1_g'AΣ1_g sums s_k at
+    /// the neighbours k of g's positions; 1_g'A1_h counts the neighbouring positions of g and
+    /// h. O(N·G) per ρ instead of the O(N·G) per group of dense indicator columns.
+    fn group_terms(&self, rho: f64) -> (f64, f64, f64) {
+        let (g, inv) = (&self.groups.of, &self.groups.inv);
+        let (n, ng) = (self.n, self.groups.len());
+        // fsum[h * ng + a]: sum over h's positions k of (forward part of Σ·1_a)_k.
+        let mut fsum = vec![0.0; ng * ng];
+        let mut f = vec![0.0; ng];
+        let mut shifted = 0.0;
+        for k in 0..n {
+            f.iter_mut().for_each(|x| *x *= rho);
+            f[g[k]] += 1.0;
+            fsum[g[k] * ng..(g[k] + 1) * ng]
+                .iter_mut()
+                .zip(&f)
+                .for_each(|(s, x)| *s += x);
+            shifted += neighbours(g, k, |a| f[a] * inv[a]);
+        }
+        let mut b = vec![0.0; ng];
+        for k in (0..n).rev() {
+            b.iter_mut().for_each(|x| *x *= rho);
+            b[g[k]] += 1.0;
+            shifted += neighbours(g, k, |a| b[a] * inv[a]);
+        }
+        let t_uas = 0.5 * (shifted - self.same_neighbour);
+        let k_of = |a: usize, h: usize| {
+            fsum[h * ng + a] + fsum[a * ng + h] - if a == h { self.groups.count[a] } else { 0.0 }
+        };
+        let t_uauus = (1..n)
+            .map(|k| k_of(g[k - 1], g[k]) * inv[g[k - 1]] * inv[g[k]])
+            .sum();
+        let t_us = (0..ng).map(|a| k_of(a, a) * inv[a]).sum();
+        (t_uas, t_uauus, t_us)
+    }
+
+    /// tr(AΣ) = (N − 1)ρ; with B = [U Q] the orthonormal basis of the design,
+    /// tr(BB'AΣ) = Σ_c (Ab_c)'(Σb_c), tr(BB'ABB'Σ) = tr((B'AB)(B'ΣB)) and
+    /// tr(P⊥Σ) = N − tr(B'ΣB); the group indicators' parts come from
+    /// [`Design::group_terms`], the cross terms of U and Q from sums by group.
     fn expected_ratio(&self, rho: f64) -> f64 {
-        let (mut num, mut den) = ((self.n as f64 - 1.0) * rho, self.n as f64);
+        let (t_uas, t_uauus, t_us) = self.group_terms(rho);
+        let mut num = (self.n as f64 - 1.0) * rho - 2.0 * t_uas + t_uauus;
+        let mut den = self.n as f64 - t_us;
+        let mut s = vec![0.0; self.n];
         for c in 0..self.q.len() {
-            let s = ar1_times(&self.q[c], rho);
-            num += dot(&self.qm[c], &s) - 2.0 * dot(&self.aq[c], &s);
+            ar1_into(&self.q[c], rho, &mut s);
+            let by_group = self.groups.sums(&s);
+            // (U'Aq_c)'(U'Σq_c): twice in tr(BB'ABB'Σ), once with −2 in tr(BB'AΣ) ... as
+            // tr(Q'AUU'ΣQ) − tr(Q'AΣQ) terms.
+            let cross: f64 = (0..self.groups.len())
+                .map(|k| self.aq_by_group[c][k] * by_group[k] * self.groups.inv[k])
+                .sum();
+            num += dot(&self.qm[c], &s) - 2.0 * (dot(&self.aq[c], &s) - cross);
             den -= dot(&self.q[c], &s);
         }
         if den > 0.0 { num / den } else { 0.0 }
     }
+}
+
+/// `f` at the groups of position k's neighbours (k − 1 and k + 1, where they exist), summed.
+fn neighbours(g: &[usize], k: usize, f: impl Fn(usize) -> f64) -> f64 {
+    let before = if k > 0 { f(g[k - 1]) } else { 0.0 };
+    let after = if k + 1 < g.len() { f(g[k + 1]) } else { 0.0 };
+    before + after
 }
 
 #[cfg(test)]
@@ -198,37 +303,45 @@ mod tests {
     #[test]
     fn a_single_mean_gives_about_kendalls_bias() {
         let n = 50;
-        let d = Design::new(vec![vec![1.0 / (n as f64).sqrt(); n]], n);
+        let d = Design::new(Groups::new(vec![0; n], 1), Vec::new());
         let r = d.expected_ratio(0.6);
         assert!((r - 0.544).abs() < 0.015, "{r}");
-        // No columns: the ratio is ρ exactly but for the one product fewer than squares.
-        let d0 = Design::new(Vec::new(), n);
-        assert!((d0.expected_ratio(0.6) - 0.6 * 49.0 / 50.0).abs() < 1e-12);
     }
 
-    /// The trace formula against a dense computation of tr(P⊥AP⊥Σ)/tr(P⊥Σ) (nalgebra).
+    /// The trace formula against a dense computation of tr(P⊥AP⊥Σ)/tr(P⊥Σ) (nalgebra), the
+    /// group indicators there explicit columns: three groups interleaved in time (neighbours
+    /// within and across groups, one group at both ends) and two other columns.
     #[test]
     fn the_traces_match_dense_matrices() {
         use nalgebra::DMatrix;
-        let n = 12;
-        let rho: f64 = 0.55;
+        let of = vec![0, 1, 2, 0, 1, 2, 2, 1, 0, 0, 1, 2, 1, 0];
+        let n = of.len();
+        let cols = vec![
+            (0..n).map(|i| (i as f64 * 0.7).sin()).collect::<Vec<f64>>(),
+            (0..n).map(|i| (i as f64 * 0.3).powi(2)).collect(),
+        ];
+        let groups = Groups::new(of.clone(), 3);
+        let rows: Vec<usize> = (0..n).collect();
+        let design = Design::new(
+            groups,
+            extra_basis(&Groups::new(of.clone(), 3), &rows, &cols),
+        );
         let mut q = Vec::new();
-        push_v(
-            &mut q,
-            (0..n).map(|i| if i < 6 { 1.0 } else { 0.0 }).collect(),
-        );
-        push_v(
-            &mut q,
-            (0..n).map(|i| if i >= 6 { 1.0 } else { 0.0 }).collect(),
-        );
-        push_v(&mut q, (0..n).map(|i| (i as f64 * 0.7).sin()).collect());
+        for g in 0..3 {
+            push_v(&mut q, of.iter().map(|&k| f64::from(k == g)).collect());
+        }
+        for c in &cols {
+            push_v(&mut q, c.clone());
+        }
         let qm = DMatrix::from_fn(n, q.len(), |i, c| q[c][i]);
         let p = DMatrix::identity(n, n) - &qm * qm.transpose();
         let a = DMatrix::from_fn(n, n, |i, j| if i.abs_diff(j) == 1 { 0.5 } else { 0.0 });
-        let s = DMatrix::from_fn(n, n, |i, j| rho.powi(i.abs_diff(j) as i32));
-        let want = (&p * &a * &p * &s).trace() / (&p * &s).trace();
-        let got = Design::new(q, n).expected_ratio(rho);
-        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+        for rho in [-0.3_f64, 0.0, 0.55, 0.9] {
+            let s = DMatrix::from_fn(n, n, |i, j| rho.powi(i.abs_diff(j) as i32));
+            let want = (&p * &a * &p * &s).trace() / (&p * &s).trace();
+            let got = design.expected_ratio(rho);
+            assert!((got - want).abs() < 1e-12, "ρ {rho}: {got} vs {want}");
+        }
     }
 
     fn push_v(q: &mut Vec<Vec<f64>>, v: Vec<f64>) {
@@ -310,7 +423,8 @@ mod tests {
     fn ar1_product_matches_the_matrix() {
         let v = [1.0, -2.0, 0.5, 3.0];
         let rho: f64 = 0.7;
-        let got = ar1_times(&v, rho);
+        let mut got = [0.0; 4];
+        ar1_into(&v, rho, &mut got);
         for i in 0..4 {
             let want: f64 = (0..4)
                 .map(|j| rho.powi((i as i32 - j as i32).abs()) * v[j])

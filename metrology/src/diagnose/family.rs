@@ -1,6 +1,8 @@
 //! The candidate mean effects: their regressors (columns) and the grids their non-linear
 //! parameter is searched on (names and parameters of `docs/datasets.md`).
 
+use std::sync::Arc;
+
 use super::fit::Obs;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,12 +52,41 @@ impl Family {
         }
     }
 
+    /// A grid-searched family, whose columns are kept for the run ([`super::sums::Cache`]).
+    pub(super) fn is_searched_dense(self) -> bool {
+        matches!(self, Family::Warmup | Family::Cyclic | Family::Thermal)
+    }
+
+    /// The regressors of the effect with its parameter at `theta`.
     pub(super) fn columns(self, obs: &Obs, theta: f64) -> Vec<Vec<f64>> {
+        if self.is_searched_dense() {
+            obs.cache.columns(obs, self, theta).to_vec()
+        } else {
+            self.compute_columns(obs, theta)
+        }
+    }
+
+    /// [`Family::columns`], shared.
+    pub(super) fn columns_shared(self, obs: &Obs, theta: f64) -> Arc<Vec<Vec<f64>>> {
+        if self.is_searched_dense() {
+            obs.cache.columns(obs, self, theta)
+        } else {
+            Arc::new(self.compute_columns(obs, theta))
+        }
+    }
+
+    pub(super) fn compute_columns(self, obs: &Obs, theta: f64) -> Vec<Vec<f64>> {
         let warm = |t: f64| 1.0 - (-t / theta).exp();
         match self {
             Family::Linear => vec![obs.t.iter().map(|t| t / 3600.0).collect()],
             Family::Warmup => vec![obs.t.iter().map(|&t| warm(t)).collect()],
-            Family::Cyclic => obs.sin_cos(theta).to_vec(),
+            Family::Cyclic => {
+                let om = std::f64::consts::TAU / theta;
+                vec![
+                    obs.t.iter().map(|t| (om * t).sin()).collect(),
+                    obs.t.iter().map(|t| (om * t).cos()).collect(),
+                ]
+            }
             // Shift in µm of a scale of 1 ppm at position x: x_mm · 1e-3.
             Family::Thermal => {
                 vec![
@@ -118,24 +149,47 @@ impl Family {
                     .map(|k| lo * (hi / lo).powf(k as f64 / (n - 1) as f64))
                     .collect()
             }
-            Family::Cyclic => {
-                // Periods from three reading intervals (and at least 2 min: no thermal cycle of
-                // a machine is faster) to 1/1.2 of the run, uniform in frequency at 1/(3T).
-                let p_min = (3.0 * obs.dt_s).max(120.0_f64.min(d / 10.0));
-                let p_max = d / 1.2;
-                if p_min >= p_max {
-                    return Vec::new();
-                }
-                let (f_lo, f_hi) = (1.0 / p_max, 1.0 / p_min);
-                let df = 1.0 / (3.0 * d);
-                let n = (((f_hi - f_lo) / df).ceil() as usize).clamp(2, 4000);
-                (0..=n)
-                    .map(|k| 1.0 / (f_lo + (f_hi - f_lo) * k as f64 / n as f64))
+            Family::Cyclic => match cyclic_frequencies(obs) {
+                Some(f) => (0..=f.n)
+                    .map(|k| f.period(k))
                     .filter(|p| !aliases_structure(obs, *p))
-                    .collect()
-            }
+                    .collect(),
+                None => Vec::new(),
+            },
         }
     }
+}
+
+/// The frequencies a cyclic drift's period is searched over: periods from three reading
+/// intervals (and at least 2 min: no thermal cycle of a machine is faster) to 1/1.2 of the
+/// run, uniform in frequency at 1/(3T); those that alias the run's structure are then left
+/// out ([`aliases_structure`]).
+pub(super) struct Frequencies {
+    pub(super) lo: f64,
+    pub(super) hi: f64,
+    /// Steps from `lo` to `hi`.
+    pub(super) n: usize,
+}
+
+impl Frequencies {
+    /// The k-th period, s.
+    pub(super) fn period(&self, k: usize) -> f64 {
+        1.0 / (self.lo + (self.hi - self.lo) * k as f64 / self.n as f64)
+    }
+}
+
+/// [`Frequencies`] of the run (None when the run is too short for any).
+pub(super) fn cyclic_frequencies(obs: &Obs) -> Option<Frequencies> {
+    let d = obs.duration_s;
+    let p_min = (3.0 * obs.dt_s).max(120.0_f64.min(d / 10.0));
+    let p_max = d / 1.2;
+    if p_min >= p_max {
+        return None;
+    }
+    let (lo, hi) = (1.0 / p_max, 1.0 / p_min);
+    let df = 1.0 / (3.0 * d);
+    let n = (((hi - lo) / df).ceil() as usize).clamp(2, 4000);
+    Some(Frequencies { lo, hi, n })
 }
 
 /// Length of one bidirectional cycle, s: the median time between the starts of successive
@@ -159,7 +213,7 @@ pub(super) fn cycle_length_s(obs: &Obs) -> Option<f64> {
 /// per-direction baseline absorbs the sinusoid or turns it into a slow per-target pattern
 /// (`docs/methods.md`, "Diagnosis").
 pub(super) fn aliases_structure(obs: &Obs, period_s: f64) -> bool {
-    let Some(pc) = cycle_length_s(obs) else {
+    let Some(pc) = obs.cycle_s else {
         return false;
     };
     let (f, fc) = (1.0 / period_s, 1.0 / pc);

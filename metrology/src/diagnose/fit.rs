@@ -4,11 +4,11 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
-
 use nalgebra::{DMatrix, DVector};
 
+use super::family::cycle_length_s;
+use super::projector::Projector;
+use super::sums::Cache;
 use crate::positioning_data::{PositioningData, dir_slot};
 
 pub(super) struct Obs {
@@ -34,14 +34,12 @@ pub(super) struct Obs {
     pub(super) n_cycles: usize,
     /// Rows in time order (ties in row order).
     pub(super) time_order: Vec<usize>,
-    /// sin and cos of a cycle's phase at every row, by period (bits of θ): the parameter
-    /// searches visit the same grid periods many times, and the trigonometry was a third of a
-    /// long run's diagnosis. Bounded by [`TRIG_CACHE_MAX`] entries.
-    pub(super) trig: Mutex<HashMap<u64, Arc<[Vec<f64>; 2]>>>,
+    /// Columns of the searched effects and their weighted sums, kept for the run.
+    pub(super) cache: Cache,
+    /// Length of one bidirectional cycle, s ([`cycle_length_s`]): every period of a cyclic
+    /// drift's grid is checked against it.
+    pub(super) cycle_s: Option<f64>,
 }
-
-/// Most periods whose columns [`Obs::trig`] keeps (each 2·N values).
-const TRIG_CACHE_MAX: usize = 512;
 
 impl Obs {
     pub(super) fn new(data: &PositioningData, max_folds: usize) -> Self {
@@ -62,7 +60,7 @@ impl Obs {
             .iter()
             .all(|r| r.material_c.is_some())
             .then(|| r.iter().map(|r| r.material_c.unwrap_or(0.0)).collect());
-        Obs {
+        let mut obs = Obs {
             y: r.iter().map(|r| r.deviation_um).collect(),
             t: r.iter().map(|r| r.time_s).collect(),
             x_mm: r.iter().map(|r| r.target_mm).collect(),
@@ -90,8 +88,11 @@ impl Obs {
                 o.sort_by(|&a, &b| r[a].time_s.total_cmp(&r[b].time_s));
                 o
             },
-            trig: Mutex::default(),
-        }
+            cache: Cache::default(),
+            cycle_s: None,
+        };
+        obs.cycle_s = cycle_length_s(&obs);
+        obs
     }
 
     /// The same observations with folds dealt diagonally over (cycle, target): every held-out
@@ -112,113 +113,13 @@ impl Obs {
             dir_half: self.dir_half.clone(),
             cycle: self.cycle.clone(),
             time_order: self.time_order.clone(),
-            trig: Mutex::default(),
+            cache: Cache::default(),
             ..*self
         }
     }
     pub(super) fn len(&self) -> usize {
         self.y.len()
     }
-
-    /// sin(ωt) and cos(ωt) at every row for the period `theta` (ω = 2π/θ), computed once per
-    /// period (the cache is only a speed-up: the values are those computed directly).
-    pub(super) fn sin_cos(&self, theta: f64) -> Arc<[Vec<f64>; 2]> {
-        let key = theta.to_bits();
-        if let Some(v) = self.trig.lock().ok().and_then(|c| c.get(&key).cloned()) {
-            return v;
-        }
-        let om = std::f64::consts::TAU / theta;
-        let v = Arc::new([
-            self.t.iter().map(|t| (om * t).sin()).collect(),
-            self.t.iter().map(|t| (om * t).cos()).collect(),
-        ]);
-        if let Ok(mut c) = self.trig.lock()
-            && c.len() < TRIG_CACHE_MAX
-        {
-            c.insert(key, Arc::clone(&v));
-        }
-        v
-    }
-}
-
-/// Least squares of y on group constants plus fixed columns, over rows with weight > 0.
-pub(super) struct Projector {
-    pub(super) w: Vec<f64>,
-    pub(super) gsum: Vec<f64>,
-    pub(super) zc: Vec<Vec<f64>>,
-    pub(super) ginv: DMatrix<f64>,
-}
-
-impl Projector {
-    pub(super) fn new(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> Self {
-        let mut gsum = vec![0.0; obs.n_groups];
-        for (j, &g) in obs.group.iter().enumerate() {
-            gsum[g] += w[j];
-        }
-        let mut p = Projector {
-            w: w.to_vec(),
-            gsum,
-            zc: Vec::new(),
-            ginv: DMatrix::zeros(0, 0),
-        };
-        let zc: Vec<Vec<f64>> = cols.iter().map(|c| p.center(obs, c)).collect();
-        let k = zc.len();
-        let mut g = DMatrix::zeros(k, k);
-        for a in 0..k {
-            for b in a..k {
-                let v = dotw(&zc[a], &zc[b], w);
-                g[(a, b)] = v;
-                g[(b, a)] = v;
-            }
-        }
-        p.ginv = if k == 0 {
-            DMatrix::zeros(0, 0)
-        } else {
-            g.clone()
-                .try_inverse()
-                .or_else(|| g.pseudo_inverse(1e-12).ok())
-                .unwrap_or_else(|| DMatrix::zeros(k, k))
-        };
-        p.zc = zc;
-        p
-    }
-
-    pub(super) fn group_means(&self, obs: &Obs, v: &[f64]) -> Vec<f64> {
-        let mut s = vec![0.0; obs.n_groups];
-        for (j, &g) in obs.group.iter().enumerate() {
-            s[g] += self.w[j] * v[j];
-        }
-        s.iter()
-            .zip(&self.gsum)
-            .map(|(s, n)| if *n > 0.0 { s / n } else { 0.0 })
-            .collect()
-    }
-
-    pub(super) fn center(&self, obs: &Obs, v: &[f64]) -> Vec<f64> {
-        let m = self.group_means(obs, v);
-        v.iter().zip(&obs.group).map(|(v, &g)| v - m[g]).collect()
-    }
-
-    /// Coefficients of the fixed columns for `v` (already centred).
-    pub(super) fn coef(&self, vc: &[f64]) -> DVector<f64> {
-        let b = DVector::from_iterator(self.zc.len(), self.zc.iter().map(|z| dotw(z, vc, &self.w)));
-        &self.ginv * b
-    }
-
-    pub(super) fn residualize(&self, obs: &Obs, v: &[f64]) -> Vec<f64> {
-        let mut vc = self.center(obs, v);
-        let c = self.coef(&vc);
-        for (k, z) in self.zc.iter().enumerate() {
-            for (a, b) in vc.iter_mut().zip(z) {
-                *a -= c[k] * b;
-            }
-        }
-        vc
-    }
-}
-
-pub(super) fn dotw(a: &[f64], b: &[f64], w: &[f64]) -> f64 {
-    a.iter().zip(b).zip(w).map(|((a, b), w)| a * b * w).sum()
 }
 
 /// A fitted mean model: group intercepts and column coefficients; predicts any row.
@@ -232,18 +133,18 @@ pub(super) struct MeanFit {
 pub(super) fn fit_mean(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> MeanFit {
     let p = Projector::new(obs, w, cols);
     let yc = p.center(obs, &obs.y);
-    let beta = p.coef(&yc);
+    let beta = p.coef(obs, &yc);
     let gy = p.group_means(obs, &obs.y);
     let mut alpha = gy;
     for (k, c) in cols.iter().enumerate() {
-        let gc = p.group_means(obs, c);
+        let gc = p.fixed_group_means(obs, k, c);
         for (a, g) in alpha.iter_mut().zip(gc) {
             *a -= beta[k] * g;
         }
     }
     MeanFit {
         alpha,
-        has_group: p.gsum.iter().map(|s| *s > 0.0).collect(),
+        has_group: p.gsum().iter().map(|s| *s > 0.0).collect(),
         beta,
         cov_unscaled: p.ginv,
     }

@@ -34,8 +34,10 @@ mod family;
 mod fit;
 mod model;
 mod outliers;
+mod projector;
 mod report;
 mod search;
+mod sums;
 mod tails;
 mod verdict;
 
@@ -43,6 +45,7 @@ pub use model::{AxisTable, axis_model_from_toml, baseline_model, reproduction_ch
 
 use fit::{FinalFit, Obs, heldout_rms, in_sample_residuals, rms};
 use outliers::{flag_outliers, group_median_residuals, weights};
+use projector::Projector;
 use search::all_cols;
 
 /// Tuning of the diagnosis.
@@ -344,31 +347,52 @@ fn spread_of(
     let searched: Vec<usize> = (0..steps.len())
         .filter(|&j| j != i && steps[j].sel.theta.is_finite())
         .collect();
-    let fit_at = |t: f64| {
-        let cols_i = fam.columns(obs, t);
-        let mut cols: Vec<Vec<Vec<f64>>> = steps.iter().map(|s| s.sel.cols.clone()).collect();
+    let fit_all = |ts: &[f64]| {
+        let cols_i: Vec<Vec<Vec<f64>>> = ts.iter().map(|&t| fam.columns(obs, t)).collect();
+        // The model's columns by step, for each value of `ts`.
+        let mut cols: Vec<Vec<Vec<Vec<f64>>>> = ts
+            .iter()
+            .map(|_| steps.iter().map(|s| s.sel.cols.clone()).collect())
+            .collect();
         for &j in &searched {
-            let mut base: Vec<Vec<f64>> = (0..steps.len())
-                .filter(|&q| q != i && q != j)
-                .flat_map(|q| cols[q].clone())
+            let fits: Vec<(Projector, Vec<f64>)> = (0..ts.len())
+                .map(|k| {
+                    let mut base: Vec<Vec<f64>> = (0..steps.len())
+                        .filter(|&q| q != i && q != j)
+                        .flat_map(|q| cols[k][q].clone())
+                        .collect();
+                    base.extend(cols_i[k].iter().cloned());
+                    let p = Projector::new(obs, &fin.w, &base);
+                    let y = p.residualize(obs, &obs.y);
+                    (p, y)
+                })
                 .collect();
-            base.extend(cols_i.iter().cloned());
-            let p = fit::Projector::new(obs, &fin.w, &base);
-            let y = p.residualize(obs, &obs.y);
-            if let Some(c) = search::search(obs, &p, &y, steps[j].sel.family) {
-                cols[j] = steps[j].sel.family.columns(obs, c.theta);
+            let refs: Vec<(&Projector, &[f64])> =
+                fits.iter().map(|(p, y)| (p, y.as_slice())).collect();
+            let fam_j = steps[j].sel.family;
+            for (k, c) in search::search_many(obs, &refs, fam_j)
+                .into_iter()
+                .enumerate()
+            {
+                if let Some(c) = c {
+                    cols[k][j] = fam_j.columns(obs, c.theta);
+                }
             }
         }
-        let others: Vec<Vec<f64>> = (0..steps.len())
-            .filter(|&q| q != i)
-            .flat_map(|q| cols[q].clone())
-            .collect();
-        let p = fit::Projector::new(obs, &fin.w, &others);
-        let y = p.residualize(obs, &obs.y);
-        let (rss, x) = search::cols_fit(obs, &p, &y, &cols_i);
-        x.map(|x| (rss, x))
+        (0..ts.len())
+            .map(|k| {
+                let others: Vec<Vec<f64>> = (0..steps.len())
+                    .filter(|&q| q != i)
+                    .flat_map(|q| cols[k][q].clone())
+                    .collect();
+                let p = Projector::new(obs, &fin.w, &others);
+                let y = p.residualize(obs, &obs.y);
+                let (rss, x) = search::cols_fit(obs, &p, &y, &cols_i[k]);
+                x.map(|x| (rss, x))
+            })
+            .collect()
     };
-    search::theta_spread(obs, &fit_at, fam, st.sel.theta, st.u_theta, fin.sigma2)
+    search::theta_spread(obs, &fit_all, fam, st.sel.theta, st.u_theta, fin.sigma2)
 }
 
 /// A rival fitted in a finding's place, the rest of the model kept.

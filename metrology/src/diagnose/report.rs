@@ -7,8 +7,9 @@
 use std::collections::BTreeMap;
 
 use super::family::{Family, cycle_length_s};
-use super::fit::{FinalFit, Obs, Projector, fit_mean, heldout_residuals, heldout_rms};
+use super::fit::{FinalFit, Obs, fit_mean, heldout_residuals, heldout_rms};
 use super::outliers::weights;
+use super::projector::Projector;
 use super::search::{Spread, Step, search};
 use super::{Finding, Options};
 use crate::axis_model::Effect;

@@ -3,14 +3,16 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 use rayon::prelude::*;
 
 use super::Options;
 use super::correlation::design_lag1;
 use super::family::Family;
-use super::fit::{Obs, Projector, dotw, heldout_rms, in_sample_residuals};
+use super::fit::{Obs, heldout_rms, in_sample_residuals};
 use super::outliers::{flag_outliers, weights};
+use super::projector::{Projector, dotw};
+use super::sums::DenseSearch;
 
 #[derive(Debug, Clone)]
 pub(super) struct Selected {
@@ -32,7 +34,11 @@ pub(super) fn candidate_rss(
     fam: Family,
     theta: f64,
 ) -> f64 {
-    cols_rss(obs, p, y_perp, &fam.columns(obs, theta))
+    if fam.is_searched_dense() {
+        DenseSearch::new(obs, p, y_perp).rss(fam, theta)
+    } else {
+        cols_rss(obs, p, y_perp, &fam.columns(obs, theta))
+    }
 }
 
 /// RSS of y on baseline + `p`'s columns + `cols`.
@@ -48,26 +54,7 @@ pub(super) fn cols_fit(
     y_perp: &[f64],
     cols: &[Vec<f64>],
 ) -> (f64, Option<DVector<f64>>) {
-    let cp: Vec<Vec<f64>> = cols.iter().map(|c| p.residualize(obs, c)).collect();
-    let k = cp.len();
-    let mut a = DMatrix::zeros(k, k);
-    let mut b = DVector::zeros(k);
-    for i in 0..k {
-        b[i] = dotw(&cp[i], y_perp, &p.w);
-        for j in i..k {
-            let v = dotw(&cp[i], &cp[j], &p.w);
-            a[(i, j)] = v;
-            a[(j, i)] = v;
-        }
-    }
-    let y2 = dotw(y_perp, y_perp, &p.w);
-    match a.cholesky() {
-        Some(ch) => {
-            let x = ch.solve(&b);
-            ((y2 - b.dot(&x)).max(0.0), Some(x))
-        }
-        None => (y2, None),
-    }
+    p.fit_cols(obs, y_perp, cols)
 }
 
 /// What not knowing a searched parameter exactly adds to the uncertainties: the parameter
@@ -85,13 +72,21 @@ pub(super) struct Spread {
 /// A parameter value tried, the RSS there and the linear coefficients.
 type TriedPoint = (f64, f64, DVector<f64>);
 
+/// What [`theta_spread`] fits at a batch of parameter values: the RSS and the effect's linear
+/// coefficients at each (None where they cannot be fitted).
+pub(super) type FitAll<'a> = dyn Fn(&[f64]) -> Vec<Option<(f64, DVector<f64>)>> + Sync + 'a;
+
+/// Most parameter values [`theta_spread`] hands its fit at once (a step's spread tries every
+/// reading; each value holds a model's columns).
+const SPREAD_BATCH: usize = 64;
+
 /// [`Spread`] of `fam` at `theta`: over its own grid for a step (every reading), over ±4
-/// curvature uncertainties (`u_theta`) around `theta` otherwise. `fit_at(t)` is the RSS and
-/// the effect's linear coefficients with its parameter at `t` (the rest of the model refitted
-/// as the caller decides).
+/// curvature uncertainties (`u_theta`) around `theta` otherwise. `fit_all(ts)` is the RSS and
+/// the effect's linear coefficients with its parameter at each of `ts` (the rest of the model
+/// refitted as the caller decides).
 pub(super) fn theta_spread(
     obs: &Obs,
-    fit_at: &(dyn Fn(f64) -> Option<(f64, DVector<f64>)> + Sync),
+    fit_all: &FitAll,
     fam: Family,
     theta: f64,
     u_theta: Option<f64>,
@@ -106,8 +101,13 @@ pub(super) fn theta_spread(
         _ => return None,
     };
     let fits: Vec<TriedPoint> = points
-        .iter()
-        .filter_map(|&t| fit_at(t).map(|(rss, x)| (t, rss, x)))
+        .chunks(SPREAD_BATCH)
+        .flat_map(|ts| {
+            ts.iter()
+                .zip(fit_all(ts))
+                .filter_map(|(&t, f)| f.map(|(rss, x)| (t, rss, x)))
+                .collect::<Vec<_>>()
+        })
         .collect();
     let rss_min = fits.iter().map(|f| f.1).fold(f64::INFINITY, f64::min);
     if !(rss_min.is_finite() && s2 > 0.0) {
@@ -178,15 +178,67 @@ fn prefer_pair(
     }
 }
 
+/// The best value of `fam`'s parameter: the lowest RSS over its grid, refined between the
+/// grid points either side of the best one.
 pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> Option<Candidate> {
+    search_many(obs, &[(p, y_perp)], fam).pop().flatten()
+}
+
+/// [`search`] for several fits (a projector and its y⊥) at once: the grid's values are
+/// visited once for all of them, so that a period's columns are read from memory once, not
+/// once per fit (a parameter's spread searches another effect beside 33 values of it).
+pub(super) fn search_many(
+    obs: &Obs,
+    fits: &[(&Projector, &[f64])],
+    fam: Family,
+) -> Vec<Option<Candidate>> {
     let grid = fam.grid(obs);
     if grid.is_empty() {
-        return None;
+        return fits.iter().map(|_| None).collect();
     }
-    let rss: Vec<f64> = grid
-        .par_iter()
-        .map(|&th| candidate_rss(obs, p, y_perp, fam, th))
-        .collect();
+    if fam.is_searched_dense() {
+        if fam == Family::Cyclic {
+            obs.cache.fill_cyclic_grid(obs);
+        }
+        let ds: Vec<DenseSearch> = fits
+            .iter()
+            .map(|(p, y)| DenseSearch::new(obs, p, y))
+            .collect();
+        let table: Vec<Vec<f64>> = grid
+            .par_iter()
+            .map(|&th| ds.iter().map(|d| d.rss(fam, th)).collect())
+            .collect();
+        return ds
+            .iter()
+            .enumerate()
+            .map(|(k, d)| {
+                let rss: Vec<f64> = table.iter().map(|r| r[k]).collect();
+                Some(refine_best(&grid, &rss, |th| d.rss(fam, th)))
+            })
+            .collect();
+    }
+    fits.iter()
+        .map(|&(p, y_perp)| {
+            let eval = |th: f64| candidate_rss(obs, p, y_perp, fam, th);
+            let rss: Vec<f64> = if fam == Family::Step {
+                p.step_rss(obs, y_perp, &grid)
+            } else {
+                grid.iter().map(|&th| eval(th)).collect()
+            };
+            // A step from any time up to the last grid time is the step at the next grid
+            // time (the grid holds every reading time in between): its RSS is the grid's.
+            let rss_at = |th: f64| match grid.partition_point(|g| *g < th) {
+                i if fam == Family::Step && i < grid.len() => rss[i],
+                _ => eval(th),
+            };
+            Some(refine_best(&grid, &rss, rss_at))
+        })
+        .collect()
+}
+
+/// The grid value of the lowest RSS (`rss` on `grid`), refined between the grid values
+/// either side of it (`eval` the RSS at any value).
+fn refine_best(grid: &[f64], rss: &[f64], eval: impl Fn(f64) -> f64) -> Candidate {
     let (mut best_k, mut best) = (0, f64::INFINITY);
     for (k, r) in rss.iter().enumerate() {
         if *r < best {
@@ -196,19 +248,18 @@ pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> O
     }
     let mut theta = grid[best_k];
     if grid.len() > 2 {
-        // Refine between the neighbours of the best grid point.
         let lo = grid[best_k.saturating_sub(1)];
         let hi = grid[(best_k + 1).min(grid.len() - 1)];
         for s in 0..=24 {
             let th = lo + (hi - lo) * s as f64 / 24.0;
-            let r = candidate_rss(obs, p, y_perp, fam, th);
+            let r = eval(th);
             if r < best {
                 best = r;
                 theta = th;
             }
         }
     }
-    Some(Candidate { theta, rss: best })
+    Candidate { theta, rss: best }
 }
 
 /// Uncertainty of a grid-searched parameter from the curvature of the RSS profile:

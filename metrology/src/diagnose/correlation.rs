@@ -227,7 +227,7 @@ impl Design {
     /// AR(1) recursion over the positions, a vector over the groups): K_gh = 1_g'Σ1_h is the
     /// sum of the forward part over h's positions plus its transpose; 1_g'AΣ1_g sums s_k at
     /// the neighbours k of g's positions; 1_g'A1_h counts the neighbouring positions of g and
-    /// h. O(N·G) per ρ instead of the O(N·G) per group of dense indicator columns.
+    /// h. The indicators as dense columns needed Q(Q'AQ) over all of them, O(N·G²) to set up.
     fn group_terms(&self, rho: f64) -> (f64, f64, f64) {
         let (g, inv) = (&self.groups.of, &self.groups.inv);
         let (n, ng) = (self.n, self.groups.len());
@@ -273,8 +273,8 @@ impl Design {
         for c in 0..self.q.len() {
             ar1_into(&self.q[c], rho, &mut s);
             let by_group = self.groups.sums(&s);
-            // (U'Aq_c)'(U'Σq_c): twice in tr(BB'ABB'Σ), once with −2 in tr(BB'AΣ) ... as
-            // tr(Q'AUU'ΣQ) − tr(Q'AΣQ) terms.
+            // (U'Aq_c)'(U'Σq_c), this column's share of tr(Q'AUU'ΣQ), which tr(BB'ABB'Σ)
+            // holds twice.
             let cross: f64 = (0..self.groups.len())
                 .map(|k| self.aq_by_group[c][k] * by_group[k] * self.groups.inv[k])
                 .sum();

@@ -334,6 +334,16 @@ pub(super) fn forward_select(
         let partners: Vec<(Family, f64)> = cands.iter().map(|c| (c.0, c.1.theta)).collect();
         let mut added = None;
         for (fam, cand, _) in cands {
+            // Short of the threshold whatever the noise's correlation (the discount is at most
+            // 1): its ρ, and the partner that ρ is also read with, need not be computed.
+            if cand.rss > 0.0
+                && (0..2)
+                    .map(|k| gain_at(obs, &w, rss0, &cand, fam, 0.95 * k as f64))
+                    .fold(f64::NEG_INFINITY, f64::max)
+                    < opt.min_bic_gain
+            {
+                continue;
+            }
             let new = Selected {
                 family: fam,
                 theta: cand.theta,
@@ -523,16 +533,21 @@ fn discounted_gain(
     if cand.rss <= 0.0 {
         return None;
     }
-    let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
     let (_, r) = in_sample_residuals(obs, w, cols_after);
     let mut rho = design_lag1(obs, w, cols_after, &r);
     if let Some(cols) = with_partner {
         let (_, r2) = in_sample_residuals(obs, w, cols);
         rho = rho.min(design_lag1(obs, w, cols, &r2));
     }
-    let rho = rho.clamp(0.0, 0.95);
+    Some(gain_at(obs, w, rss0, cand, fam, rho.clamp(0.0, 0.95)))
+}
+
+/// The BIC gain of a candidate with a lag-1 correlation `rho` of the noise (in [0, 0.95]; the
+/// most it can be is at one end).
+fn gain_at(obs: &Obs, w: &[f64], rss0: f64, cand: &Candidate, fam: Family, rho: f64) -> f64 {
+    let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
     let lr = n_eff * (rss0 / cand.rss).ln();
-    Some(lr * (1.0 - rho) / (1.0 + rho) - fam.n_params(obs) as f64 * (obs.len() as f64).ln())
+    lr * (1.0 - rho) / (1.0 + rho) - fam.n_params(obs) as f64 * (obs.len() as f64).ln()
 }
 
 /// An effect the per-target, per-direction constants mostly absorb: less than 30 % of its

@@ -313,7 +313,7 @@ impl<'a> Context<'a> {
         }
         let with = [base, &cols[..]].concat();
         let ho = if g == Family::CycleOffsets {
-            &obs.with_diagonal_folds()
+            obs.diagonal()
         } else {
             obs
         };

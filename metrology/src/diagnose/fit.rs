@@ -4,10 +4,12 @@
 
 #![allow(clippy::needless_range_loop)]
 
+use std::sync::OnceLock;
+
 use nalgebra::{DMatrix, DVector};
 
 use super::family::cycle_length_s;
-use super::projector::Projector;
+use super::projector::{Fixed, Projector};
 use super::sums::Cache;
 use crate::positioning_data::{PositioningData, dir_slot};
 
@@ -39,6 +41,8 @@ pub(super) struct Obs {
     /// Length of one bidirectional cycle, s ([`cycle_length_s`]): every period of a cyclic
     /// drift's grid is checked against it.
     pub(super) cycle_s: Option<f64>,
+    /// The same observations with diagonal folds ([`Obs::diagonal`]).
+    diagonal: OnceLock<Box<Obs>>,
 }
 
 impl Obs {
@@ -90,33 +94,39 @@ impl Obs {
             },
             cache: Cache::default(),
             cycle_s: None,
+            diagonal: OnceLock::new(),
         };
         obs.cycle_s = cycle_length_s(&obs);
         obs
     }
 
-    /// The same observations with folds dealt diagonally over (cycle, target): every held-out
-    /// reading then has readings of its own cycle and of its own target in the training set,
-    /// which an effect per cycle (`cycle_offsets`) needs to be predicted at all.
-    pub(super) fn with_diagonal_folds(&self) -> Obs {
-        let fold = (0..self.len())
-            .map(|j| (self.cycle[j] + self.target[j]) % self.n_folds)
-            .collect();
-        Obs {
-            y: self.y.clone(),
-            t: self.t.clone(),
-            x_mm: self.x_mm.clone(),
-            temp_c: self.temp_c.clone(),
-            group: self.group.clone(),
-            target: self.target.clone(),
-            fold,
-            dir_half: self.dir_half.clone(),
-            cycle: self.cycle.clone(),
-            time_order: self.time_order.clone(),
-            cache: Cache::default(),
-            ..*self
-        }
+    /// The same observations with folds dealt diagonally over (cycle, target), made when
+    /// first needed: every held-out reading then has readings of its own cycle and of its
+    /// own target in the training set, which an effect per cycle (`cycle_offsets`) needs to
+    /// be checked on at all.
+    pub(super) fn diagonal(&self) -> &Obs {
+        self.diagonal.get_or_init(|| {
+            let fold = (0..self.len())
+                .map(|j| (self.cycle[j] + self.target[j]) % self.n_folds)
+                .collect();
+            Box::new(Obs {
+                y: self.y.clone(),
+                t: self.t.clone(),
+                x_mm: self.x_mm.clone(),
+                temp_c: self.temp_c.clone(),
+                group: self.group.clone(),
+                target: self.target.clone(),
+                fold,
+                dir_half: self.dir_half.clone(),
+                cycle: self.cycle.clone(),
+                time_order: self.time_order.clone(),
+                cache: Cache::default(),
+                diagonal: OnceLock::new(),
+                ..*self
+            })
+        })
     }
+
     pub(super) fn len(&self) -> usize {
         self.y.len()
     }
@@ -128,6 +138,16 @@ pub(super) struct MeanFit {
     pub(super) has_group: Vec<bool>,
     pub(super) beta: DVector<f64>,
     pub(super) cov_unscaled: DMatrix<f64>,
+    /// With offsets per cycle in the model: the column of each cycle's offset (None for the
+    /// reference cycle), the cycles with weight in the fit, and the mean offset of those.
+    cycles: Option<CycleFit>,
+}
+
+/// Offsets per cycle in a fitted model ([`MeanFit`]).
+struct CycleFit {
+    column: Vec<Option<usize>>,
+    seen: Vec<bool>,
+    mean: f64,
 }
 
 pub(super) fn fit_mean(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> MeanFit {
@@ -142,12 +162,39 @@ pub(super) fn fit_mean(obs: &Obs, w: &[f64], cols: &[Vec<f64>]) -> MeanFit {
             *a -= beta[k] * g;
         }
     }
+    let cycles = cycle_fit(obs, &p, &beta);
     MeanFit {
         alpha,
         has_group: p.gsum().iter().map(|s| *s > 0.0).collect(),
         beta,
         cov_unscaled: p.ginv,
+        cycles,
     }
+}
+
+/// The offsets per cycle of a fit, if its model has them. A cycle without weight in the fit
+/// (held out whole) has no offset of its own there: it is predicted at the mean offset of the
+/// cycles fitted, which is identified even where the training cycles' indicators add up to
+/// the group constants (the reference cycle held out).
+fn cycle_fit(obs: &Obs, p: &Projector, beta: &DVector<f64>) -> Option<CycleFit> {
+    let mut column = vec![None; obs.n_cycles];
+    for (k, f) in p.fixed().iter().enumerate() {
+        if let Fixed::Cycle(c) = f {
+            column[*c] = Some(k);
+        }
+    }
+    if column.iter().all(Option::is_none) {
+        return None;
+    }
+    let seen: Vec<bool> = (0..obs.n_cycles)
+        .map(|c| p.counts.cycle_weight(c) > 0.0)
+        .collect();
+    let offsets: Vec<f64> = (0..obs.n_cycles)
+        .filter(|c| seen[*c])
+        .map(|c| column[c].map_or(0.0, |k| beta[k]))
+        .collect();
+    let mean = offsets.iter().sum::<f64>() / offsets.len().max(1) as f64;
+    Some(CycleFit { column, seen, mean })
 }
 
 impl MeanFit {
@@ -156,14 +203,19 @@ impl MeanFit {
         if !self.has_group[g] {
             return None;
         }
-        Some(
-            self.alpha[g]
-                + cols
-                    .iter()
-                    .enumerate()
-                    .map(|(k, c)| self.beta[k] * c[j])
-                    .sum::<f64>(),
-        )
+        let mut v = self.alpha[g]
+            + cols
+                .iter()
+                .enumerate()
+                .map(|(k, c)| self.beta[k] * c[j])
+                .sum::<f64>();
+        if let Some(cy) = &self.cycles
+            && !cy.seen[obs.cycle[j]]
+        {
+            let own = cy.column[obs.cycle[j]].map_or(0.0, |k| self.beta[k]);
+            v += cy.mean - own;
+        }
+        Some(v)
     }
 }
 

@@ -72,6 +72,11 @@ impl Counts {
         c
     }
 
+    /// Weight of cycle `c`.
+    pub(super) fn cycle_weight(&self, c: usize) -> f64 {
+        self.cycle[c]
+    }
+
     /// Group g's mean of the indicator of cycle `c` (the share of its weight in that cycle).
     pub(super) fn share(&self, g: usize, c: usize) -> f64 {
         let nc = self.n_cycles;
@@ -177,6 +182,50 @@ fn gram(obs: &Obs, c: &Counts, w: &[f64], a: &Fixed, b: &Fixed) -> f64 {
     }
 }
 
+/// A column is collinear with the ones before it when less than this share of its weighted
+/// sum of squares is left after them (a Cholesky pivot over its diagonal element).
+const COLLINEAR: f64 = 1e-10;
+
+/// Inverse of a Gram matrix; a pseudo-inverse when columns are collinear.
+///
+/// Whether an LU or Cholesky inversion of a singular Gram matrix fails or returns huge values
+/// depends on rounding, so a matrix whose smallest Cholesky pivot is below [`COLLINEAR`] of
+/// its diagonal element is inverted in its eigenvectors, scaled to a unit diagonal (each
+/// column's own units), with eigenvalues below [`COLLINEAR`] of the largest dropped: collinear
+/// columns share their coefficient, a column of zeros gets 0, and the fit is the same.
+pub(super) fn gram_inverse(g: DMatrix<f64>) -> DMatrix<f64> {
+    let k = g.nrows();
+    let full_rank = g.clone().cholesky().filter(|ch| {
+        let l = ch.l_dirty();
+        (0..k).all(|i| l[(i, i)] * l[(i, i)] > COLLINEAR * g[(i, i)])
+    });
+    if let Some(ch) = full_rank {
+        return ch.inverse();
+    }
+    let top = (0..k).map(|i| g[(i, i)]).fold(0.0, f64::max);
+    let scale: Vec<f64> = (0..k)
+        .map(|i| {
+            let d = g[(i, i)];
+            if d > COLLINEAR * top {
+                1.0 / d.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let scaled = DMatrix::from_fn(k, k, |a, b| g[(a, b)] * scale[a] * scale[b]);
+    let eig = scaled.symmetric_eigen();
+    let lmax = eig.eigenvalues.iter().fold(0.0, |m: f64, v| m.max(*v));
+    let mut inv = DMatrix::zeros(k, k);
+    for (i, &l) in eig.eigenvalues.iter().enumerate() {
+        if l > COLLINEAR * lmax {
+            let v = eig.eigenvectors.column(i);
+            inv += (v * v.transpose()) / l;
+        }
+    }
+    DMatrix::from_fn(k, k, |a, b| inv[(a, b)] * scale[a] * scale[b])
+}
+
 /// Least squares of y on group constants plus fixed columns, over rows with weight > 0.
 pub(super) struct Projector {
     pub(super) w: Vec<f64>,
@@ -199,14 +248,7 @@ impl Projector {
                 g[(b, a)] = v;
             }
         }
-        let ginv = if k == 0 {
-            DMatrix::zeros(0, 0)
-        } else {
-            g.clone()
-                .try_inverse()
-                .or_else(|| g.pseudo_inverse(1e-12).ok())
-                .unwrap_or_else(|| DMatrix::zeros(k, k))
-        };
+        let ginv = gram_inverse(g);
         Projector {
             w: w.to_vec(),
             counts,
@@ -504,5 +546,55 @@ pub(super) mod tests {
                 );
             }
         }
+    }
+
+    /// Collinear columns (one a sum of others, one all zeros) fit as the columns they span,
+    /// and the full-rank path gives the inverse.
+    #[test]
+    fn collinear_columns_fit_as_their_span() {
+        let obs = run();
+        let w = vec![1.0; obs.len()];
+        let a = Family::Linear.columns(&obs, f64::NAN).remove(0);
+        let b: Vec<f64> = obs.t.iter().map(|t| (t / 700.0).sin()).collect();
+        let sum: Vec<f64> = a.iter().zip(&b).map(|(x, y)| 3.0 * x - y).collect();
+        let zero = vec![0.0; obs.len()];
+        let span = Projector::new(&obs, &w, &[a.clone(), b.clone()]);
+        let want = span.residualize(&obs, &obs.y);
+        let p = Projector::new(&obs, &w, &[a.clone(), sum, b, zero]);
+        let got = p.residualize(&obs, &obs.y);
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-9, "{g} vs {w}");
+        }
+        let g = DMatrix::from_row_slice(2, 2, &[4.0, 1.0, 1.0, 3.0]);
+        let inv = gram_inverse(g.clone());
+        assert!((g * inv - DMatrix::identity(2, 2)).norm() < 1e-12);
+    }
+
+    /// A model with offsets per cycle predicts a cycle held out whole at the mean offset of
+    /// the cycles it was fitted on (here: exactly what the baseline predicts), whichever cycle
+    /// is the reference; on diagonal folds it predicts every reading of such a run exactly.
+    #[test]
+    fn a_cycle_held_out_whole_is_predicted_at_the_mean_offset() {
+        use crate::diagnose::fit::{heldout_residuals, heldout_rms};
+        let mut obs = run();
+        let offset = [0.0, 3.0, -1.0, 4.0, 2.0, -2.0];
+        obs.y = (0..obs.len())
+            .map(|j| 2.0 * obs.target[j] as f64 + offset[obs.cycle[j]])
+            .collect();
+        let w = vec![1.0; obs.len()];
+        let eval = vec![true; obs.len()];
+        let offsets = Family::CycleOffsets.columns(&obs, f64::NAN);
+        // 6 cycles in 5 folds: fold 0 holds cycles 0 (the reference) and 5.
+        for (r, j) in heldout_residuals(&obs, &w, &offsets, &eval) {
+            let f = obs.fold[j];
+            let trained: Vec<f64> = (0..6).filter(|c| c % 5 != f).map(|c| offset[c]).collect();
+            let mean = trained.iter().sum::<f64>() / trained.len() as f64;
+            let want = offset[obs.cycle[j]] - mean;
+            assert!((r - want).abs() < 1e-9, "fold {f}: {r} vs {want}");
+        }
+        let diag = obs.diagonal();
+        assert_ne!(diag.fold, obs.fold);
+        assert!(heldout_rms(diag, &w, &offsets, &eval) < 1e-9);
+        assert!(heldout_rms(diag, &w, &[], &eval) > 1.0);
     }
 }

@@ -79,10 +79,15 @@ pub(super) fn mean_finding(
         theta: st.sel.theta,
         u_theta,
     };
-    let before = heldout_rms(obs, &fin.w, &st.before_cols, &fin.eval);
     let mut after_cols = st.before_cols.clone();
     after_cols.extend(st.sel.cols.iter().cloned());
-    let after = heldout_rms(obs, &fin.w, &after_cols, &fin.eval);
+    let ho = if st.sel.family == Family::CycleOffsets {
+        obs.diagonal()
+    } else {
+        obs
+    };
+    let before = heldout_rms(ho, &fin.w, &st.before_cols, &fin.eval);
+    let after = heldout_rms(ho, &fin.w, &after_cols, &fin.eval);
     let (params, params_u, cause, effect) = match st.sel.family {
         Family::Linear => linear(&c, data.has_times),
         Family::Warmup => warmup(&c, data.has_times),

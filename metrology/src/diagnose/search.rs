@@ -312,7 +312,6 @@ pub(super) fn forward_select(
 ) -> Vec<Step> {
     let m = obs.n_targets;
     let var_factor = vec![1.0; m];
-    let diag = obs.with_diagonal_folds();
     let mut selected: Vec<Selected> = Vec::new();
     let mut steps: Vec<Step> = Vec::new();
     loop {
@@ -390,7 +389,7 @@ pub(super) fn forward_select(
             let eval: Vec<bool> = out.iter().map(|o| !o).collect();
             // An offset per cycle cannot be predicted for a cycle held out whole.
             let ho = if fam == Family::CycleOffsets {
-                &diag
+                obs.diagonal()
             } else {
                 obs
             };

@@ -213,7 +213,7 @@ pub(super) fn search_many(
             .enumerate()
             .map(|(k, d)| {
                 let rss: Vec<f64> = table.iter().map(|r| r[k]).collect();
-                Some(refine_best(&grid, &rss, |th| d.rss(fam, th)))
+                Some(refine_best(&grid, &rss, true, |th| d.rss(fam, th)))
             })
             .collect();
     }
@@ -231,14 +231,16 @@ pub(super) fn search_many(
                 i if fam == Family::Step && i < grid.len() => rss[i],
                 _ => eval(th),
             };
-            Some(refine_best(&grid, &rss, rss_at))
+            Some(refine_best(&grid, &rss, fam != Family::Step, rss_at))
         })
         .collect()
 }
 
 /// The grid value of the lowest RSS (`rss` on `grid`), refined between the grid values
-/// either side of it (`eval` the RSS at any value).
-fn refine_best(grid: &[f64], rss: &[f64], eval: impl Fn(f64) -> f64) -> Candidate {
+/// either side of it (`eval` the RSS at any value): the best of 25 values there, then, for a
+/// `smooth` RSS profile, the minimum between that value's neighbours by golden-section search
+/// (the 25 values alone leave a period as coarse as its own uncertainty on a long run).
+fn refine_best(grid: &[f64], rss: &[f64], smooth: bool, eval: impl Fn(f64) -> f64) -> Candidate {
     let (mut best_k, mut best) = (0, f64::INFINITY);
     for (k, r) in rss.iter().enumerate() {
         if *r < best {
@@ -250,9 +252,17 @@ fn refine_best(grid: &[f64], rss: &[f64], eval: impl Fn(f64) -> f64) -> Candidat
     if grid.len() > 2 {
         let lo = grid[best_k.saturating_sub(1)];
         let hi = grid[(best_k + 1).min(grid.len() - 1)];
+        let step = (hi - lo) / 24.0;
         for s in 0..=24 {
-            let th = lo + (hi - lo) * s as f64 / 24.0;
+            let th = lo + step * s as f64;
             let r = eval(th);
+            if r < best {
+                best = r;
+                theta = th;
+            }
+        }
+        if smooth && step.abs() > 0.0 {
+            let (th, r) = golden_min(theta - step, theta + step, &eval);
             if r < best {
                 best = r;
                 theta = th;
@@ -260,6 +270,26 @@ fn refine_best(grid: &[f64], rss: &[f64], eval: impl Fn(f64) -> f64) -> Candidat
         }
     }
     Candidate { theta, rss: best }
+}
+
+/// The minimum of `f` between `a` and `b` by golden-section search (40 steps shrink the
+/// interval by 10⁻⁸), and the value there.
+fn golden_min(mut a: f64, mut b: f64, f: &impl Fn(f64) -> f64) -> (f64, f64) {
+    let g = (5.0_f64.sqrt() - 1.0) / 2.0;
+    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+    let (mut fc, mut fd) = (f(c), f(d));
+    for _ in 0..40 {
+        if fc < fd {
+            (b, d, fd) = (d, c, fc);
+            c = b - g * (b - a);
+            fc = f(c);
+        } else {
+            (a, c, fc) = (c, d, fd);
+            d = a + g * (b - a);
+            fd = f(d);
+        }
+    }
+    if fc < fd { (c, fc) } else { (d, fd) }
 }
 
 /// Uncertainty of a grid-searched parameter from the curvature of the RSS profile:
@@ -571,4 +601,26 @@ pub(super) fn absorbed_by_baseline(obs: &Obs, p: &Projector, cols: &[Vec<f64>]) 
         kept += dotw(&cc, &cc, &p.w);
     }
     total > 0.0 && kept < 0.3 * total
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On a grid as coarse as the parameter's uncertainty, the 25 values between the best
+    /// one's neighbours leave the minimum up to 1/24 of a spacing off; the golden-section
+    /// search finds it, and a profile that is not smooth (a step's) keeps the scan's value.
+    #[test]
+    fn a_smooth_profile_is_refined_to_its_minimum() {
+        let grid: Vec<f64> = (0..10).map(f64::from).collect();
+        let f = |x: f64| 1.0 + (x - 4.0137).powi(2);
+        let rss: Vec<f64> = grid.iter().map(|&x| f(x)).collect();
+        let c = refine_best(&grid, &rss, true, f);
+        assert!((c.theta - 4.0137).abs() < 1e-6, "{}", c.theta);
+        assert!((c.rss - 1.0).abs() < 1e-12);
+        let coarse = refine_best(&grid, &rss, false, f);
+        assert!((coarse.theta - 4.0).abs() < 1e-12, "{}", coarse.theta);
+        let (x, fx) = golden_min(-3.0, 2.0, &|x: f64| (x + 1.25).powi(2));
+        assert!((x + 1.25).abs() < 1e-6 && fx < 1e-12, "{x} {fx}");
+    }
 }

@@ -272,13 +272,14 @@ fn refine_best(grid: &[f64], rss: &[f64], smooth: bool, eval: impl Fn(f64) -> f6
     Candidate { theta, rss: best }
 }
 
-/// The minimum of `f` between `a` and `b` by golden-section search (40 steps shrink the
-/// interval by 10⁻⁸), and the value there.
+/// The minimum of `f` between `a` and `b` by golden-section search, and the value there: 12
+/// steps shrink the interval to 0.3 % (between a grid value's neighbours after the scan, that
+/// is 1/2000 of a grid spacing, far below a parameter's uncertainty).
 fn golden_min(mut a: f64, mut b: f64, f: &impl Fn(f64) -> f64) -> (f64, f64) {
     let g = (5.0_f64.sqrt() - 1.0) / 2.0;
     let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
     let (mut fc, mut fd) = (f(c), f(d));
-    for _ in 0..40 {
+    for _ in 0..12 {
         if fc < fd {
             (b, d, fd) = (d, c, fc);
             c = b - g * (b - a);
@@ -616,11 +617,11 @@ mod tests {
         let f = |x: f64| 1.0 + (x - 4.0137).powi(2);
         let rss: Vec<f64> = grid.iter().map(|&x| f(x)).collect();
         let c = refine_best(&grid, &rss, true, f);
-        assert!((c.theta - 4.0137).abs() < 1e-6, "{}", c.theta);
-        assert!((c.rss - 1.0).abs() < 1e-12);
+        assert!((c.theta - 4.0137).abs() < 2e-3, "{}", c.theta);
+        assert!((c.rss - 1.0).abs() < 4e-6);
         let coarse = refine_best(&grid, &rss, false, f);
         assert!((coarse.theta - 4.0).abs() < 1e-12, "{}", coarse.theta);
         let (x, fx) = golden_min(-3.0, 2.0, &|x: f64| (x + 1.25).powi(2));
-        assert!((x + 1.25).abs() < 1e-6 && fx < 1e-12, "{x} {fx}");
+        assert!((x + 1.25).abs() < 0.02 && fx < 4e-4, "{x} {fx}");
     }
 }

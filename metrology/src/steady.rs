@@ -482,7 +482,10 @@ impl SteadyDetector {
     /// The first steady window ending at `from_end` or later whose samples all lie at or
     /// before `t_max_ns`.
     fn first_steady(&self, start: u64, from_end: u64, t_max_ns: u64) -> Option<Window> {
-        let mut e = from_end.max(start + self.cfg.samples as u64 - 1);
+        // No window ends before the oldest kept sample's n-th (the history may have been
+        // trimmed past `start`: times that step back, a long dwell).
+        let n = self.cfg.samples as u64;
+        let mut e = from_end.max(start + n - 1).max(self.base + n - 1);
         while e < self.end() {
             if self.times[(e - self.base) as usize] > t_max_ns {
                 break;

@@ -209,7 +209,8 @@ pub(super) fn cycle_length_s(obs: &Obs) -> Option<f64> {
 }
 
 /// A period tied to the run's structure rather than to time: within half a beat over the run
-/// of a harmonic of the cycle length (the pass is half a cycle), where the per-target,
+/// (a whole beat in a run measured in blocks: [`Obs::alias_beats`]) of a harmonic of the cycle
+/// length (the pass is half a cycle), where the per-target,
 /// per-direction baseline absorbs the sinusoid or turns it into a slow per-target pattern
 /// (`docs/methods.md`, "Diagnosis").
 pub(super) fn aliases_structure(obs: &Obs, period_s: f64) -> bool {
@@ -218,5 +219,5 @@ pub(super) fn aliases_structure(obs: &Obs, period_s: f64) -> bool {
     };
     let (f, fc) = (1.0 / period_s, 1.0 / pc);
     let k = (f / fc).round();
-    k >= 1.0 && (f - k * fc).abs() < 0.5 / obs.duration_s
+    k >= 1.0 && (f - k * fc).abs() < obs.alias_beats / obs.duration_s
 }

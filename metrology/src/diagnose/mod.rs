@@ -29,6 +29,7 @@ use crate::axis_model::{AxisModel, Effect};
 use crate::positioning_data::PositioningData;
 
 mod alternatives;
+mod blocks;
 mod correlation;
 mod family;
 mod fit;
@@ -257,6 +258,7 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
             res.rho.min(0.95)
         ));
     }
+    notes.extend(blocks::within_block_trend(&obs, &fin));
     let unexplained = res.unexplained();
     match report::outlier_finding(&obs, &fin, anomaly.as_ref()) {
         Some(o) if !res.heavy_tails && !unexplained => found.push(o),

@@ -210,9 +210,8 @@ mod tests {
     }
 
     /// A creep of 0.6 σ per approach in blocks is described in 20 of 20 runs and never named
-    /// as a periodic cause (it repeats with each pair of blocks, 720 s here: with the band of
-    /// half a beat that an interleaved run gets around its cycle's harmonics, 10 of the 20
-    /// named a cyclic drift at 640–830 s);
+    /// as a periodic cause (it repeats with each pair of blocks, 720 s here: with the cycle
+    /// length taken as for an interleaved run, 18 of the 20 named a cyclic drift near it);
     /// noise alone in blocks gets the note at most once in 20 (its level is 10⁻³), and an
     /// interleaved run never.
     #[test]

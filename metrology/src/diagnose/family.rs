@@ -149,11 +149,10 @@ impl Family {
                     .map(|k| lo * (hi / lo).powf(k as f64 / (n - 1) as f64))
                     .collect()
             }
+            // Periods tied to the run's structure are searched too: when one of them fits
+            // best, the search gives no cycle ([`super::search::search_many`]).
             Family::Cyclic => match cyclic_frequencies(obs) {
-                Some(f) => (0..=f.n)
-                    .map(|k| f.period(k))
-                    .filter(|p| !aliases_structure(obs, *p))
-                    .collect(),
+                Some(f) => (0..=f.n).map(|k| f.period(k)).collect(),
                 None => Vec::new(),
             },
         }
@@ -162,8 +161,8 @@ impl Family {
 
 /// The frequencies a cyclic drift's period is searched over: periods from three reading
 /// intervals (and at least 2 min: no thermal cycle of a machine is faster) to 1/1.2 of the
-/// run, uniform in frequency at 1/(3T); those that alias the run's structure are then left
-/// out ([`aliases_structure`]).
+/// run, uniform in frequency at 1/(3T); a best period that aliases the run's structure
+/// ([`aliases_structure`]) is no cycle.
 pub(super) struct Frequencies {
     pub(super) lo: f64,
     pub(super) hi: f64,
@@ -209,8 +208,8 @@ pub(super) fn cycle_length_s(obs: &Obs) -> Option<f64> {
 }
 
 /// A period tied to the run's structure rather than to time: within half a beat over the run
-/// (a whole beat in a run measured in blocks: [`Obs::alias_beats`]) of a harmonic of the cycle
-/// length (the pass is half a cycle), where the per-target,
+/// of a harmonic of the cycle length (the pass is half a cycle; a run measured in blocks
+/// repeats with each pair of blocks), where the per-target,
 /// per-direction baseline absorbs the sinusoid or turns it into a slow per-target pattern
 /// (`docs/methods.md`, "Diagnosis").
 pub(super) fn aliases_structure(obs: &Obs, period_s: f64) -> bool {
@@ -219,5 +218,5 @@ pub(super) fn aliases_structure(obs: &Obs, period_s: f64) -> bool {
     };
     let (f, fc) = (1.0 / period_s, 1.0 / pc);
     let k = (f / fc).round();
-    k >= 1.0 && (f - k * fc).abs() < obs.alias_beats / obs.duration_s
+    k >= 1.0 && (f - k * fc).abs() < 0.5 / obs.duration_s
 }

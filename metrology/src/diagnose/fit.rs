@@ -43,11 +43,6 @@ pub(super) struct Obs {
     /// run measured in blocks ([`block_pair_s`]): every period of a cyclic drift's grid is
     /// checked against it.
     pub(super) cycle_s: Option<f64>,
-    /// Half-width of the bands around the harmonics of `cycle_s` left out of a cyclic
-    /// drift's grid, in beats over the run: ½ for an interleaved run; 1 (the whole main lobe
-    /// of a pattern that repeats only a few times) for a run in blocks, whose pattern is not
-    /// a sinusoid and repeats with each pair of blocks.
-    pub(super) alias_beats: f64,
     /// The same observations with diagonal folds ([`Obs::diagonal`]).
     diagonal: OnceLock<Box<Obs>>,
 }
@@ -101,12 +96,9 @@ impl Obs {
             },
             cache: Cache::default(),
             cycle_s: None,
-            alias_beats: 0.5,
             diagonal: OnceLock::new(),
         };
-        let pair = block_pair_s(&obs);
-        obs.alias_beats = if pair.is_some() { 1.0 } else { 0.5 };
-        obs.cycle_s = pair.or_else(|| cycle_length_s(&obs));
+        obs.cycle_s = block_pair_s(&obs).or_else(|| cycle_length_s(&obs));
         obs
     }
 

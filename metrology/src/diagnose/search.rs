@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::Options;
 use super::correlation::design_lag1;
-use super::family::Family;
+use super::family::{Family, aliases_structure};
 use super::fit::{Obs, heldout_rms, in_sample_residuals};
 use super::outliers::{flag_outliers, weights};
 use super::projector::{Projector, dotw};
@@ -213,7 +213,11 @@ pub(super) fn search_many(
             .enumerate()
             .map(|(k, d)| {
                 let rss: Vec<f64> = table.iter().map(|r| r[k]).collect();
-                Some(refine_best(&grid, &rss, true, |th| d.rss(fam, th)))
+                let best = refine_best(&grid, &rss, true, |th| d.rss(fam, th));
+                // What fits best at a period tied to the run's structure is that structure
+                // (the baseline absorbs it, or a pattern per target mimics it); a period just
+                // beside it would only be its leakage: no cycle is proposed.
+                (fam != Family::Cyclic || !aliases_structure(obs, best.theta)).then_some(best)
             })
             .collect();
     }

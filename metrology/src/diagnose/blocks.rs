@@ -7,6 +7,7 @@
 
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
+use super::family::median_step;
 use super::fit::{FinalFit, Obs};
 
 /// A trend within the blocks is reported when a common slope per direction explains more
@@ -43,13 +44,7 @@ fn blocks(obs: &Obs) -> Option<Vec<Vec<usize>>> {
 /// drift at it or its harmonics is the run's structure, not a temperature cycle.
 pub(super) fn block_pair_s(obs: &Obs) -> Option<f64> {
     let starts: Vec<f64> = blocks(obs)?.iter().map(|b| obs.t[b[0]]).collect();
-    let mut d: Vec<f64> = starts
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .filter(|d| *d > 0.0)
-        .collect();
-    d.sort_by(f64::total_cmp);
-    d.get(d.len() / 2).map(|d| 2.0 * d)
+    median_step(&starts).map(|d| 2.0 * d)
 }
 
 /// A slope per direction of the residuals against the approach's number within its block.

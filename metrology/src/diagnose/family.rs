@@ -198,7 +198,13 @@ pub(super) fn cycle_length_s(obs: &Obs) -> Option<f64> {
     for j in 0..obs.len() {
         start[obs.cycle[j]] = start[obs.cycle[j]].min(obs.t[j]);
     }
-    let mut d: Vec<f64> = start
+    median_step(&start)
+}
+
+/// The median of the positive, finite differences between successive values of `v` (None
+/// when there are none): the pace of readings, cycles or blocks.
+pub(super) fn median_step(v: &[f64]) -> Option<f64> {
+    let mut d: Vec<f64> = v
         .windows(2)
         .map(|w| w[1] - w[0])
         .filter(|d| d.is_finite() && *d > 0.0)

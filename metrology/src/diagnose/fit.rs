@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 use nalgebra::{DMatrix, DVector};
 
 use super::blocks::block_pair_s;
-use super::family::cycle_length_s;
+use super::family::{cycle_length_s, median_step};
 use super::projector::{Fixed, Projector};
 use super::sums::Cache;
 use crate::positioning_data::{PositioningData, dir_slot};
@@ -54,13 +54,7 @@ impl Obs {
         let t1 = r.iter().map(|r| r.time_s).fold(f64::NEG_INFINITY, f64::max);
         let mut ts: Vec<f64> = r.iter().map(|r| r.time_s).collect();
         ts.sort_by(f64::total_cmp);
-        let mut gaps: Vec<f64> = ts
-            .windows(2)
-            .map(|w| w[1] - w[0])
-            .filter(|g| *g > 0.0)
-            .collect();
-        gaps.sort_by(f64::total_cmp);
-        let dt_s = gaps.get(gaps.len() / 2).copied().unwrap_or(1.0);
+        let dt_s = median_step(&ts).unwrap_or(1.0);
         let n_folds = data.n_cycles().clamp(2, max_folds.max(2));
         let temp_c = r
             .iter()

@@ -13,12 +13,12 @@
 
 use std::path::Path;
 
-use metrology::capball::{CapballRecord, CapballSetup};
-use metrology::kinematics::{Machine, Pose};
+use geometry::capball::{CapballRecord, CapballSetup};
+use geometry::kinematics::{Machine, Pose};
 use nalgebra::Vector3;
 
 use super::{AnalysisError, LogContents, is_ok};
-use drivers::Instrument;
+use types::Instrument;
 
 /// The CapBall dataset of a log.
 #[derive(Debug, Clone)]
@@ -47,7 +47,7 @@ pub fn machine_candidates() -> Vec<(String, Machine)> {
     let mut cfg = CapballSetup::paper_machine_config();
     cfg.axes.insert(
         "Y".into(),
-        metrology::kinematics::AxisConfig {
+        geometry::kinematics::AxisConfig {
             direction: Some([0.0, -1.0, 0.0]),
             pivot_mm: None,
         },
@@ -264,7 +264,7 @@ pub fn identify_subset(
     poses: &[Pose],
     measured_um: &[[f64; 3]],
 ) -> Result<SubsetIdentification, AnalysisError> {
-    use metrology::capball::{CapballError, PARAM_NAMES};
+    use geometry::capball::{CapballError, PARAM_NAMES};
     use nalgebra::{DMatrix, DVector};
     let n = poses.len();
     if measured_um.len() != n {

@@ -2,8 +2,8 @@
 
 use std::fmt::Write as _;
 
-use metrology::capball_diagnosis::CapballDiagnosis;
-use metrology::diagnose::Diagnosis;
+use diagnose::axis::Diagnosis;
+use diagnose::capball::CapballDiagnosis;
 
 /// The human-readable diagnosis.
 pub fn positioning_text(d: &Diagnosis) -> String {

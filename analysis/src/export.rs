@@ -5,9 +5,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use metrology::iso230::TargetStats;
-use metrology::positioning_data::PositioningData;
-use metrology::standards::StandardResult;
+use positioning::iso230::TargetStats;
+use positioning::positioning_data::PositioningData;
+use positioning::standards::StandardResult;
 
 /// A number for people: fixed decimals, never "-0.000".
 pub fn num(v: f64, decimals: usize) -> String {

@@ -8,10 +8,10 @@
 
 use std::fmt::Write as _;
 
-use metrology::axis_model::Direction;
-use metrology::positioning_data::PositioningData;
-use metrology::standards::StandardResult;
-use metrology::units::Units;
+use positioning::axis_model::Direction;
+use positioning::positioning_data::PositioningData;
+use positioning::standards::StandardResult;
+use positioning::units::Units;
 
 use crate::export::num;
 use crate::positioning_report::PositioningAnalysis;

@@ -8,7 +8,7 @@
 //! - [`psd_from_log`]: a PSD straightness segment, offset and slope removed;
 //! - [`demo_report`]: all of it as the compact text the `demo` command prints at its end.
 //!
-//! [`PositioningData`]: metrology::positioning_data::PositioningData
+//! [`PositioningData`]: ::positioning::positioning_data::PositioningData
 
 pub mod capball;
 pub mod diagnosis_text;
@@ -24,14 +24,14 @@ pub mod report;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use drivers::Instrument;
 use metrolog_log::topics::{Decoded, EnvironmentMsg, LogMessage, PoseMsg, decode_message};
 use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use metrolog_log::{
     CONFIG_ATTACHMENT, LogError, RUN_METADATA, ReadSummary, TRAJECTORY_ATTACHMENT,
     read_log_progress,
 };
-use metrology::steady::PoseStatus;
+use types::Instrument;
+use types::PoseStatus;
 
 pub use capball::{CapballFromLog, capball_from_log};
 pub use positioning::{PositioningOptions, parse_pose_range, positioning_from_log};
@@ -68,10 +68,10 @@ pub enum AnalysisError {
     BadOption(String),
     /// {0}
     #[error("{0}")]
-    Dataset(#[from] metrology::positioning_data::DatasetError),
+    Dataset(#[from] ::positioning::positioning_data::DatasetError),
     /// {0}
     #[error("{0}")]
-    Capball(#[from] metrology::capball::CapballError),
+    Capball(#[from] geometry::capball::CapballError),
 }
 
 /// One `/pose` value with the log time it was written at.

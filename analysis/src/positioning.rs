@@ -34,13 +34,13 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use metrology::axis_model::Direction;
-use metrology::positioning_data::{PositioningData, Reading};
+use positioning::axis_model::Direction;
+use positioning::positioning_data::{PositioningData, Reading};
 
 use super::{AnalysisError, LogContents, is_ok};
-use drivers::Instrument;
 use metrolog_log::topics::PoseMsg;
 use metrolog_log::trajectory::TrajectoryRow;
+use types::Instrument;
 
 /// Options of [`positioning_from_log`].
 #[derive(Debug, Clone, Default)]
@@ -343,7 +343,7 @@ mod tests {
     use super::*;
     use crate::LoggedPose;
     use metrolog_log::topics::PoseMsg;
-    use metrology::steady::PoseStatus;
+    use types::PoseStatus;
 
     /// A log in memory: trajectory of x values (y = z = 0), interferometer value at each pose
     /// = `pos_um(pose)` (None: never steady), pose k measured at k seconds.

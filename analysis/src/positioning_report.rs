@@ -4,9 +4,9 @@
 
 use std::fmt::Write as _;
 
-use metrology::drift::{self, DriftReport};
-use metrology::iso230::{self, Iso230Report};
-use metrology::positioning_data::{PositioningData, dir_sign};
+use positioning::drift::{self, DriftReport};
+use positioning::iso230::{self, Iso230Report};
+use positioning::positioning_data::{PositioningData, dir_sign};
 
 /// Everything `analyze positioning` computes.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -28,11 +28,11 @@ pub struct PositioningAnalysis {
 
 /// The LI-80 length budget attached to the ISO 230-2 results: the uncertainty of a single
 /// compensated reading at each target from the environment sensors, the expansion coefficient,
-/// the dead path and the cosine error (`metrology::uncertainty::length`). The budget's sensor
+/// the dead path and the cosine error (`uncertainty::length`). The budget's sensor
 /// accuracies are the defaults documented there; the material temperature and α are the run's.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct MeasurementUncertainty {
-    pub budget: metrology::uncertainty::length::LengthBudget,
+    pub budget: uncertainty::length::LengthBudget,
     /// Per target (in target order): standard uncertainty u and expanded U (k = 2), µm.
     pub u_um: Vec<f64>,
     #[serde(rename = "U_k2_um")]
@@ -45,7 +45,7 @@ fn measurement_uncertainty(data: &PositioningData) -> Option<MeasurementUncertai
     if !data.units().is_default() {
         return None;
     }
-    let mut budget = metrology::uncertainty::length::LengthBudget::default();
+    let mut budget = uncertainty::length::LengthBudget::default();
     if let Some(a) = data.alpha_um_per_m_k {
         budget.alpha_per_k = a * 1e-6;
     }
@@ -347,7 +347,7 @@ fn render_drift_direction(s: &mut String, an: &PositioningAnalysis, dd: &drift::
     );
     let classic = |i: usize| {
         an.targets.get(i).and_then(|t| {
-            if dd.direction == metrology::axis_model::Direction::Up {
+            if dd.direction == positioning::axis_model::Direction::Up {
                 t.s_up_um
             } else {
                 t.s_down_um

@@ -15,8 +15,8 @@
 use std::path::Path;
 
 use super::{AnalysisError, LogContents, is_ok};
-use drivers::Instrument;
 use metrolog_log::trajectory::TrajectoryRow;
+use types::Instrument;
 
 /// One PSD point of the segment.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]

@@ -3,10 +3,10 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use metrology::capball::CapballSetup;
-use metrology::diagnose::{self, Options};
-use metrology::kinematics::Pose;
-use metrology::positioning_data::PositioningData;
+use diagnose::axis::{self, Options};
+use geometry::capball::CapballSetup;
+use geometry::kinematics::Pose;
+use positioning::positioning_data::PositioningData;
 
 use super::capball::identify_subset;
 use super::{AnalysisError, LogContents, PositioningOptions};
@@ -76,7 +76,7 @@ fn positioning_section(log: &LogContents, s: &mut String) {
 }
 
 fn diagnosis_section(data: &PositioningData, s: &mut String) {
-    match diagnose::diagnose(data, &Options::default()) {
+    match axis::diagnose(data, &Options::default()) {
         Err(e) => {
             let _ = writeln!(s, "\nDiagnosis: not available: {e}");
         }
@@ -186,7 +186,7 @@ fn capball_section(log: &LogContents, s: &mut String) {
 /// The CapBall diagnosis (`metrolog diagnose --capball`) when the log holds an identification
 /// run and a validation run (A reversed).
 fn capball_diagnosis_section(cb: &super::capball::CapballFromLog, s: &mut String) {
-    use metrology::capball_diagnosis::{self, runs_from_records};
+    use diagnose::capball::{self, runs_from_records};
     let Ok((ident, validation)) = runs_from_records(&cb.records) else {
         let _ = writeln!(
             s,
@@ -198,12 +198,12 @@ fn capball_diagnosis_section(cb: &super::capball::CapballFromLog, s: &mut String
     let d = CapballSetup::with_ball_from_poses(cb.machine.clone(), &ident.poses)
         .map_err(AnalysisError::from)
         .and_then(|setup| {
-            capball_diagnosis::diagnose(
+            capball::diagnose(
                 &setup,
                 &ident,
                 &validation,
                 None,
-                &capball_diagnosis::Options::default(),
+                &capball::Options::default(),
             )
             .map_err(AnalysisError::from)
         });

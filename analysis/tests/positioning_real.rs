@@ -2,11 +2,11 @@
 //! sweep is evaluated and says why the repeatability values are missing.
 
 use metrolog_analysis::positioning_report::{analyze_positioning, render_text};
-use metrology::positioning_data::PositioningData;
+use positioning::positioning_data::PositioningData;
 
 fn load(name: &str) -> PositioningData {
     let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../metrology/tests/data/real")
+        .join("../positioning/tests/data/real")
         .join(name);
     PositioningData::from_csv_path(&p).expect("real fixture reads")
 }

@@ -11,11 +11,12 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use detect::SteadyDetector;
 use drivers::DriverEvent;
+use drivers::synthetic::SyntheticRun;
 use metrolog::acquire::recorder::Recorder;
-use metrolog_log::synthetic::SyntheticRun;
 use metrolog_log::{DetectorSettings, LogOptions, LogWriter, RunMetadata};
-use metrology::steady::{SteadyConfig, SteadyDetector, TriggerKind};
+use types::{SteadyConfig, TriggerEvent};
 
 fn event_ns(e: &DriverEvent, now: u64) -> u64 {
     match e {
@@ -121,7 +122,7 @@ fn detector(c: &mut Criterion) {
     g.bench_function("3_channels_in_dwell", |b| {
         b.iter(|| {
             let mut d = SteadyDetector::new(SteadyConfig::default(), 3).unwrap();
-            d.push_trigger(TriggerKind::ExactStop, 1, 0);
+            d.push_trigger(TriggerEvent::ExactStop, 1, 0);
             let mut k = 0usize;
             for i in 0..n {
                 // A slow oscillation that never settles: the worst case, a test per sample.

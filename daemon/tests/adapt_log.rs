@@ -7,13 +7,13 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use drivers::Instrument;
+use geometry::capball::{CapballErrors, CapballSetup, TrajectorySpec};
+use geometry::kinematics::Pose;
 use metrolog_analysis::{self as analysis, PositioningOptions};
 use metrolog_log::topics::{EnvironmentMsg, PoseMsg};
 use metrolog_log::{LogOptions, LogWriter, RunMetadata};
-use metrology::axis_model::Direction;
-use metrology::capball::{CapballErrors, CapballSetup, TrajectorySpec};
-use metrology::kinematics::Pose;
-use metrology::steady::PoseStatus;
+use positioning::axis_model::Direction;
+use types::PoseStatus;
 
 const T0_NS: u64 = 1_795_305_600_000_000_000;
 const TARGETS_MM: [f64; 5] = [2.312, 101.871, 198.544, 302.197, 399.050];

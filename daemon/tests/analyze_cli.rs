@@ -3,8 +3,8 @@
 use std::path::Path;
 use std::process::Command;
 
-use metrology::axis_model::{AxisModel, Effect};
-use metrology::positioning_data::{simulate, standard_schedule};
+use positioning::axis_model::{AxisModel, Effect};
+use positioning::positioning_data::{simulate, standard_schedule};
 
 fn metrolog(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
@@ -191,7 +191,7 @@ fn bad_input_gets_a_clear_error() {
 #[test]
 fn a_rotary_run_is_reported_in_its_own_units() {
     let f = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../metrology/tests/data/real/bifrost_vactank_rotary_repeat.csv");
+        .join("../positioning/tests/data/real/bifrost_vactank_rotary_repeat.csv");
     let f = f.to_str().expect("utf-8 path");
     for args in [vec!["analyze", "positioning", f], vec!["diagnose", f]] {
         let (ok, out, err) = metrolog(&args);
@@ -212,7 +212,7 @@ fn a_rotary_run_is_reported_in_its_own_units() {
 #[test]
 fn units_given_on_the_command_line() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../metrology/tests/data/real/bifrost_vactank_rotary_repeat.csv");
+        .join("../positioning/tests/data/real/bifrost_vactank_rotary_repeat.csv");
     let text = std::fs::read_to_string(&src).unwrap();
     let bare: String = text
         .lines()
@@ -265,7 +265,7 @@ fn units_given_on_the_command_line() {
 #[cfg_attr(not(feature = "plot"), ignore = "draws charts: needs --features plot")]
 fn a_rotary_runs_report_and_charts_are_in_its_own_units() {
     let f = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../metrology/tests/data/real/bifrost_vactank_rotary_repeat.csv");
+        .join("../positioning/tests/data/real/bifrost_vactank_rotary_repeat.csv");
     let f = f.to_str().expect("utf-8 path");
     let dir = tempfile::tempdir().unwrap();
     let html = dir.path().join("r.html");

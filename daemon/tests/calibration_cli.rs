@@ -7,12 +7,12 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use metrology::positioning_data::PositioningData;
-use metrology::standards::{Standard, evaluate};
+use positioning::positioning_data::PositioningData;
+use positioning::standards::{Standard, evaluate};
 
 const RUN: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../metrology/tests/data/psi_ecmc_iso230.csv"
+    "/../positioning/tests/data/psi_ecmc_iso230.csv"
 );
 
 mod cli_common;

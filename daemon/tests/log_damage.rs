@@ -6,9 +6,9 @@ mod log_common;
 use std::path::Path;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use drivers::synthetic::SyntheticRun;
 use metrolog::cmd::info::inspect;
 use metrolog::cmd::replay::{ReplayOptions, replay};
-use metrolog_log::synthetic::SyntheticRun;
 use metrolog_log::{LogError, LogOptions, LogWriter, RunMetadata};
 
 fn short_run() -> SyntheticRun {

@@ -7,7 +7,7 @@ mod log_common;
 use std::collections::BTreeMap;
 use std::process::Command;
 
-use metrolog_log::synthetic::SyntheticRun;
+use drivers::synthetic::SyntheticRun;
 
 const SCRIPT: &str = r#"
 import json, sys

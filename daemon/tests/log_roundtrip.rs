@@ -4,12 +4,12 @@ mod log_common;
 
 use std::collections::BTreeMap;
 
+use drivers::synthetic::SyntheticRun;
 use drivers::{DriverEvent, Instrument};
 use metrolog::cmd::replay::{ReplayOptions, replay};
-use metrolog_log::synthetic::SyntheticRun;
 use metrolog_log::topics::{LogMessage, decode_message};
 use metrolog_log::{LogItem, RUN_METADATA, RunMetadata, read_log};
-use metrology::steady::PoseStatus;
+use types::PoseStatus;
 
 #[test]
 fn every_topic_round_trips() {
@@ -287,8 +287,8 @@ fn trigger_free_run_finds_the_plateaus() {
     assert!(w.poses.is_empty(), "{:?}", w.poses);
     // Replay in plateau mode through the library: the interferometer finds the 5 stops.
     let mut settings = metrolog_log::DetectorSettings::default();
-    settings.interferometer.mode = metrology::steady::DetectorMode::Plateaus;
-    let mut engine = metrolog::acquire::detect::PoseEngine::new(&settings).unwrap();
+    settings.interferometer.mode = types::DetectorMode::Plateaus;
+    let mut engine = detect::PoseEngine::new(&settings).unwrap();
     let mut found = Vec::new();
     for e in &w.events {
         if let DriverEvent::Sample(s) = e {

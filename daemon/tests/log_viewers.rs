@@ -15,8 +15,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use drivers::synthetic::SyntheticRun;
 use drivers::{DriverEvent, SampleValues};
-use metrolog_log::synthetic::SyntheticRun;
 use serde_json::Value;
 
 fn npm_dir() -> PathBuf {

@@ -12,11 +12,11 @@ use regex::Regex;
 
 const PSI: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../metrology/tests/data/psi_ecmc_iso230.csv"
+    "/../positioning/tests/data/psi_ecmc_iso230.csv"
 );
 const ESS_B02: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../metrology/tests/data/real/ess_target_b02_x.csv"
+    "/../positioning/tests/data/real/ess_target_b02_x.csv"
 );
 
 mod cli_common;

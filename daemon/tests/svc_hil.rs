@@ -402,7 +402,7 @@ fn arrival_model_in_this_run(log: &Path, record: &sim::Record) -> (Vec<(u16, f64
         .map(|(_, p)| serde_json::to_value(p).unwrap())
         .collect();
     let (_, wrong) = check_poses(&poses, record);
-    let mut nc = drivers::NcClock::default();
+    let mut nc = detect::NcClock::default();
     let mut delays = Vec::new();
     let _ = metrolog_log::reader::read_log_until(log, |item| {
         if let metrolog_log::reader::LogItem::Message {

@@ -3,15 +3,15 @@
 
 use std::sync::{Arc, Mutex};
 
+use detect::PoseEngine;
 use drivers::{DriverEvent, HostClock, Instrument, Sample, SampleValues, Trigger};
-use metrolog::acquire::detect::PoseEngine;
 use metrolog::acquire::pipeline::{
     DetectOnly, EventSink, Pipeline, PipelineConfig, Status, StopReason,
 };
 use metrolog_log::DetectorSettings;
 use metrolog_log::topics::PoseMsg;
-use metrology::steady::PoseStatus;
 use protocol::can::TriggerEvent;
+use types::PoseStatus;
 
 #[derive(Default)]
 struct Seen {

@@ -11,11 +11,11 @@ use std::time::Duration;
 use protocol::convert::Li80Compensation;
 use protocol::li80::{Decoder, Line};
 
-use crate::clock::Unwrap;
 use crate::sample_path::{FrameConverter, Reading, SamplePath};
 use crate::serial_driver::{SerialDriver, SerialSession, idle_timeout, is_ok};
 use crate::stamper::SampleStamper;
 use crate::{DriverError, Instrument, Sample, SampleValues};
+use detect::Unwrap;
 
 /// What the daemon configures for the LI-80.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]

@@ -12,10 +12,10 @@
 //! - [`spawn_li80`], [`spawn_cb3`], [`spawn_psd`], [`spawn_slcan`], [`spawn_socketcan`] with
 //!   their configurations — start a driver task;
 //! - [`trigger_from_frame`] and [`from_socketcan`] — the one decoding path of SLCAN and
-//!   SocketCAN frames; [`trigger_kind`] / [`trigger_event`] — CAN trigger events to the pose
-//!   detector's `metrology::steady::TriggerKind` and back;
-//! - [`HostClock`] — the host monotonic clock as ns since the Unix epoch; [`NcClock`] — the
-//!   CNC's clock of the trigger frames fitted against it (the pose engine's trigger times).
+//!   SocketCAN frames (the CAN trigger event is the one enum `protocol::can::TriggerEvent`,
+//!   which the pose detector takes as it is);
+//! - [`HostClock`] — the host monotonic clock as ns since the Unix epoch (`metrolog-types`);
+//!   the clock fits the stamper uses are `metrolog-detect`'s.
 //!
 //! A sample's way through a serial driver is one direction (docs/design.md):
 //!
@@ -38,11 +38,8 @@
 //! stream and still delivers every sample sent before the device's answer.
 
 mod cb3;
-mod clock;
 mod error;
 mod event;
-mod host_clock;
-mod instrument;
 mod li80;
 mod psd;
 mod reporter;
@@ -50,17 +47,17 @@ mod sample_path;
 mod serial_driver;
 mod serial_link;
 mod stamper;
+#[doc(hidden)]
+pub mod synthetic;
 mod trigger;
 
 pub use cb3::{Cb3Config, spawn_cb3};
-pub use clock::{NcClock, NcPoint};
 pub use error::DriverError;
-pub use event::{Counters, DriverEvent, EventSender, Sample, SampleValues, Trigger};
-pub use host_clock::HostClock;
-pub use instrument::Instrument;
+pub use event::{DriverEvent, EventSender};
 pub use li80::{Li80Config, spawn_li80};
 pub use psd::{HeadCorrection, PsdAxis, PsdConfig, spawn_psd};
 pub use trigger::{
-    SlcanConfig, SocketCanConfig, from_socketcan, spawn_slcan, spawn_socketcan, trigger_event,
-    trigger_from_frame, trigger_kind,
+    SlcanConfig, SocketCanConfig, from_socketcan, spawn_slcan, spawn_socketcan, trigger_from_frame,
 };
+/// The shared vocabulary the drivers' events are made of (`metrolog-types`).
+pub use types::{Counters, HostClock, Instrument, Sample, SampleValues, Trigger};

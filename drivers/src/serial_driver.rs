@@ -27,7 +27,7 @@ const BATCH_BYTES: usize = 2048;
 const BATCH_WAIT: Duration = Duration::from_millis(10);
 /// Every this many batched reads, one read waits for the next bytes without the batching
 /// pause: its arrival time is then the write time plus the wake-up latency only, which gives
-/// the clock fit ([`crate::clock`]) the least-delayed points it needs (a batched read dates
+/// the clock fit ([`detect::ClockFit`]) the least-delayed points it needs (a batched read dates
 /// everything in it by the read, up to `BATCH_WAIT` late).
 const PROBE_EVERY: u32 = 2;
 

@@ -1,8 +1,8 @@
 //! Stamping a sample: its wrapping sequence number and device clock unwrapped to u64, the gaps
 //! and restarts they show, and the device time mapped onto the host axis by the clock fit
-//! ([`crate::clock`]). Pure bookkeeping: no I/O, no events.
+//! ([`detect::ClockFit`]). Pure bookkeeping: no I/O, no events.
 
-use crate::clock::{ClockFit, Unwrap};
+use detect::{ClockFit, Unwrap};
 
 /// What the stamper made of one data frame.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -7,8 +7,7 @@
 
 use std::time::Duration;
 
-use metrology::steady::TriggerKind;
-use protocol::can::{TriggerError, TriggerEvent, TriggerFrame};
+use protocol::can::{TriggerError, TriggerFrame};
 use protocol::slcan::{CanFrame, Decoder, Message};
 
 use crate::sample_path::{FrameConverter, Reading, SamplePath};
@@ -47,37 +46,6 @@ pub fn trigger_from_frame(
         nc_ms: t.nc_ms,
         host_ns,
     }))
-}
-
-/// The pose detector's kind of a CAN trigger event (`metrology::steady`, one to one).
-pub fn trigger_kind(event: TriggerEvent) -> TriggerKind {
-    match event {
-        TriggerEvent::MotionStart => TriggerKind::MotionStart,
-        TriggerEvent::ExactStop => TriggerKind::ExactStop,
-        TriggerEvent::DwellEnd => TriggerKind::DwellEnd,
-        TriggerEvent::ProgramStart => TriggerKind::ProgramStart,
-        TriggerEvent::ProgramEnd => TriggerKind::ProgramEnd,
-        TriggerEvent::FeedHold => TriggerKind::FeedHold,
-    }
-}
-
-/// The CAN trigger event of a pose detector's trigger kind (inverse of [`trigger_kind`]).
-pub fn trigger_event(kind: TriggerKind) -> TriggerEvent {
-    match kind {
-        TriggerKind::MotionStart => TriggerEvent::MotionStart,
-        TriggerKind::ExactStop => TriggerEvent::ExactStop,
-        TriggerKind::DwellEnd => TriggerEvent::DwellEnd,
-        TriggerKind::ProgramStart => TriggerEvent::ProgramStart,
-        TriggerKind::ProgramEnd => TriggerEvent::ProgramEnd,
-        TriggerKind::FeedHold => TriggerEvent::FeedHold,
-    }
-}
-
-impl Trigger {
-    /// This trigger's kind as the pose detector takes it.
-    pub fn kind(&self) -> TriggerKind {
-        trigger_kind(self.event)
-    }
 }
 
 /// What a CAN frame means: nothing when it is not ours, else a trigger or a bad payload.
@@ -270,6 +238,7 @@ mod tests {
     use super::*;
     use crate::sample_path::reject_kind;
     use protocol::RejectKind;
+    use protocol::can::TriggerEvent;
 
     fn frame(id: u32, extended: bool, data: Vec<u8>) -> CanFrame {
         CanFrame {
@@ -349,18 +318,5 @@ mod tests {
             Some(&1)
         );
         assert!(matches!(rx.try_recv(), Ok(crate::DriverEvent::Trigger(t)) if t.pose == 0));
-    }
-
-    #[test]
-    fn trigger_kinds_are_the_events_by_name() {
-        for e in TriggerEvent::ALL {
-            let k = trigger_kind(e);
-            assert_eq!(trigger_event(k), e);
-            // Same serde name on both sides: the log stores one, the detector takes the other.
-            assert_eq!(
-                serde_json::to_value(e).unwrap(),
-                serde_json::to_value(k).unwrap()
-            );
-        }
     }
 }

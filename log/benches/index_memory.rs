@@ -15,7 +15,7 @@
 mod counting_alloc;
 
 use drivers::DriverEvent;
-use metrolog_log::synthetic::SyntheticRun;
+use drivers::synthetic::SyntheticRun;
 use metrolog_log::{LogOptions, LogWriter, RunMetadata};
 
 #[global_allocator]

@@ -3,24 +3,22 @@
 //! - [`topics`]: the message of each topic (JSON, with a JSON schema per topic);
 //! - [`writer::LogWriter`]: writes a log (zstd chunks closed and fsynced at least once a
 //!   second, attachments, metadata);
-//! - [`poses::PoseEngine`]: the steady-value detectors of the three instruments, fed the same
-//!   way live and in replay; [`poses::Recorder`]: writer + engine + `/status`, fed
-//!   `DriverEvent`s — what the acquisition pipeline uses;
 //! - [`reader::read_log`]: reads a log record by record and stops at the first damaged byte,
 //!   so the intact prefix of a file whose writer was killed is read;
 //! - [`trajectory`]: the pose table of a run (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`), stored in
 //!   the log as the [`TRAJECTORY_ATTACHMENT`]; the one parser of that format.
 //!
-//! The steady-value detection that produces `/pose` is not here: it runs in the acquisition
-//! service (`metrolog::acquire`), which hands its pose values to the writer.
+//! The steady-value detection that produces `/pose` is not here: it is `metrolog-detect`'s
+//! `PoseEngine`, run by the acquisition service and by replay, which hand its pose values to
+//! the writer. This crate links no serial or CAN I/O and no maths: `protocol` and `types` only.
 //!
 //! # Use
 //!
 //! ```no_run
 //! use metrolog_log::{LogOptions, LogWriter, RunMetadata};
-//! # fn samples() -> Vec<drivers::Sample> { Vec::new() }
+//! # fn samples() -> Vec<types::Sample> { Vec::new() }
 //! # fn main() -> Result<(), metrolog_log::LogError> {
-//! let clock = drivers::HostClock::new();
+//! let clock = types::HostClock::new();
 //! let meta = RunMetadata { machine: "mill-1".into(), started_ns: clock.now_ns(), ..Default::default() };
 //! let mut log = LogWriter::create_in_dir("/var/lib/metrolog".as_ref(), &meta, LogOptions::default())?;
 //! log.attach_file("/etc/metrolog/metrolog.toml".as_ref(), "application/toml", clock.now_ns())?;
@@ -46,7 +44,6 @@ mod prescan;
 pub mod raw;
 pub mod reader;
 pub mod recover;
-pub mod synthetic;
 pub mod topics;
 pub mod trajectory;
 pub mod writer;
@@ -54,12 +51,11 @@ pub mod writer;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use metrology::steady::SteadyConfig;
-use serde::{Deserialize, Serialize};
-
 pub use reader::{
     LogItem, ReadSummary, read_log, read_log_progress, read_log_until, read_run_metadata,
 };
+/// The detector settings a run stores (`metrolog-types`), re-exported for the log's readers.
+pub use types::{DetectorSettings, NC_SETTLE_US, TriggerTime};
 pub use writer::{ChannelSpec, LogOptions, LogWriter, MessageTap, channel_specs};
 
 /// Name of the metadata record describing the run.
@@ -81,75 +77,6 @@ pub const LOG_FORMAT: u32 = 3;
 pub const CAPBALL_CALIBRATION_KEY: &str = "capball_calibration";
 /// Key of the detector settings (JSON of [`DetectorSettings`]) in the run metadata.
 pub const DETECTOR_KEY: &str = "detector";
-
-/// Steady-value detector settings of each instrument.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct DetectorSettings {
-    /// The instruments of the run: only these get pose values (an instrument that is not
-    /// part of the run would otherwise get a `device_away` at every pose).
-    pub instruments: Vec<drivers::Instrument>,
-    pub interferometer: SteadyConfig,
-    pub capball: SteadyConfig,
-    pub psd: SteadyConfig,
-    /// Which time of a CNC trigger opens and closes the dwells. Logs written before this
-    /// setting existed used the arrival time, and replay must reproduce them: a missing key
-    /// reads as [`TriggerTime::Arrival`]; new runs write [`TriggerTime::NcClockSettled`].
-    #[serde(default = "TriggerTime::arrival")]
-    pub trigger_time: TriggerTime,
-}
-
-/// Which time of a CNC trigger places the dwells on the host axis, where the samples sit at
-/// their clock-fitted device times (docs/design.md, timing model).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TriggerTime {
-    /// The frame's NC clock (`nc_ms`) fitted against the host clock (`drivers::NcClock`):
-    /// when the NC says the event happened; each trigger placed with the fit as it stood when
-    /// its frame came. Runs of version 0.1 before the settled placement.
-    NcClock,
-    /// As [`TriggerTime::NcClock`], but a trigger is placed once the fit is settled (it has its
-    /// line) or the NC clock has run [`NC_SETTLE_US`] past it, with the fit as it then stands:
-    /// frames that came in one late burst at the start of a program, before any prompt frame,
-    /// are placed by the later prompt ones instead of at the burst's arrival.
-    #[default]
-    NcClockSettled,
-    /// The host arrival time of the frame: late by the adapter's, the link's and the
-    /// scheduler's delays (hundreds of ms on a loaded host). Only for replaying old logs.
-    Arrival,
-}
-
-/// How far the NC clock must run past an unsettled trigger before it is placed anyway, µs:
-/// one window of the NC clock fit.
-pub const NC_SETTLE_US: u64 = 2_000_000;
-
-impl TriggerTime {
-    fn arrival() -> TriggerTime {
-        TriggerTime::Arrival
-    }
-}
-
-impl Default for DetectorSettings {
-    fn default() -> Self {
-        DetectorSettings {
-            instruments: drivers::Instrument::POSE_VALUED.to_vec(),
-            interferometer: SteadyConfig::default(),
-            capball: SteadyConfig::default(),
-            psd: SteadyConfig::default(),
-            trigger_time: TriggerTime::NcClockSettled,
-        }
-    }
-}
-
-impl DetectorSettings {
-    /// Same settings, `samples` changed for every instrument.
-    pub fn with_samples(mut self, samples: usize) -> Self {
-        self.interferometer.samples = samples;
-        self.capball.samples = samples;
-        self.psd.samples = samples;
-        self
-    }
-}
 
 /// What a run is: stored as the `metrolog.run` metadata record.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -290,7 +217,7 @@ pub enum LogError {
     BadMetadata { key: String, reason: String },
     /// invalid detector settings: {0}
     #[error("invalid detector settings: {0}")]
-    Detector(#[from] metrology::steady::SteadyError),
+    Detector(#[from] types::SteadyError),
 }
 
 #[cfg(test)]

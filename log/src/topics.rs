@@ -13,11 +13,12 @@
 
 use std::collections::BTreeMap;
 
-use drivers::{Counters, Instrument, Sample, SampleValues, Trigger};
-use metrology::steady::{PoseStatus, PoseValue};
 use protocol::can::TriggerEvent;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
+use types::{Counters, Instrument, Sample, SampleValues, Trigger};
+/// The `/pose` message and its time stamp are the detector's output type (`metrolog-types`).
+pub use types::{PoseMsg, Stamp};
 
 /// A message type bound to one topic.
 pub trait TopicMessage: Serialize + DeserializeOwned + JsonSchema {
@@ -184,105 +185,9 @@ pub struct TriggerMsg {
 }
 topic!(TriggerMsg, "/cnc/trigger", "metrolog.Trigger");
 
-/// `/pose`: the steady value of one instrument at one pose.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-pub struct PoseMsg {
-    /// One of the instruments that give pose values (`Instrument::POSE_VALUED`).
-    pub instrument: Instrument,
-    pub pose: u32,
-    pub status: PoseStatus,
-    /// Samples averaged (0 when no value).
-    pub n: u64,
-    /// Mean per channel, by channel name (`position_um`; `ex_um`, `ey_um`, `ez_um`; `x_um`,
-    /// `y_um`); empty when no value.
-    #[schemars(schema_with = "channel_map")]
-    pub mean: BTreeMap<String, f64>,
-    /// Sample standard deviation per channel.
-    #[schemars(schema_with = "channel_map")]
-    pub std: BTreeMap<String, f64>,
-    /// First and last averaged sample (or the dwell bounds), ns since the Unix epoch; in the
-    /// JSON `t_first`/`t_last` as `{sec, nsec}` (the Foxglove time convention: a JavaScript
-    /// viewer would round an integer of ns); format-1 logs wrote `t_first_ns`/`t_last_ns`.
-    #[serde(rename = "t_first", alias = "t_first_ns", with = "stamp")]
-    #[schemars(with = "Stamp")]
-    pub t_first_ns: u64,
-    #[serde(rename = "t_last", alias = "t_last_ns", with = "stamp")]
-    #[schemars(with = "Stamp")]
-    pub t_last_ns: u64,
-}
-
-/// A time in the Foxglove JSON convention: seconds and nanoseconds since the Unix epoch.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-pub struct Stamp {
-    pub sec: u32,
-    pub nsec: u32,
-}
-
-/// ns since the epoch as a [`Stamp`]; read back from a `Stamp` or a plain integer of ns
-/// (format-1 logs).
-mod stamp {
-    use super::Stamp;
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub fn serialize<S: Serializer>(ns: &u64, s: S) -> Result<S::Ok, S::Error> {
-        let st = Stamp {
-            sec: u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX),
-            nsec: (ns % 1_000_000_000) as u32,
-        };
-        serde::Serialize::serialize(&st, s)
-    }
-
-    #[derive(Deserialize)]
-    #[serde(untagged)]
-    enum Either {
-        Ns(u64),
-        Stamp(Stamp),
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
-        Ok(match Either::deserialize(d)? {
-            Either::Ns(ns) => ns,
-            Either::Stamp(st) => u64::from(st.sec) * 1_000_000_000 + u64::from(st.nsec),
-        })
-    }
-}
-
-/// Schema of a per-channel map of `/pose`: every channel name of every instrument, as an
-/// optional number (viewers list an object's fields from `properties`).
-fn channel_map(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
-    let props: serde_json::Map<String, serde_json::Value> = Instrument::POSE_VALUED
-        .iter()
-        .flat_map(|i| i.detector_channels())
-        .map(|c| (c.to_string(), serde_json::json!({"type": "number"})))
-        .collect();
-    schemars::json_schema!({"type": "object", "properties": props})
-}
 topic!(PoseMsg, "/pose", "metrolog.Pose");
 
-impl PoseMsg {
-    pub fn from_value(instrument: Instrument, v: &PoseValue) -> PoseMsg {
-        let names = instrument.detector_channels();
-        let map = |xs: &[f64]| {
-            names
-                .iter()
-                .zip(xs)
-                .map(|(n, x)| (n.to_string(), *x))
-                .collect::<BTreeMap<_, _>>()
-        };
-        PoseMsg {
-            instrument,
-            pose: v.pose,
-            status: v.status,
-            n: v.n as u64,
-            mean: map(&v.mean),
-            std: map(&v.std),
-            t_first_ns: v.t_first_ns,
-            t_last_ns: v.t_last_ns,
-        }
-    }
-}
-
-/// Counters of one instrument (see `drivers::Counters`).
+/// Counters of one instrument (see `types::Counters`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct CountersMsg {
     pub samples: u64,

@@ -14,32 +14,6 @@ pub struct TrajectoryRow {
     pub c_deg: Option<f64>,
 }
 
-impl TrajectoryRow {
-    /// Row `pose` (1-based) of a machine pose; A and C are written (B is not part of the format).
-    pub fn from_pose(pose: u32, p: &metrology::kinematics::Pose) -> TrajectoryRow {
-        TrajectoryRow {
-            pose,
-            x_mm: p.x_mm,
-            y_mm: p.y_mm,
-            z_mm: p.z_mm,
-            a_deg: Some(p.a_deg),
-            c_deg: Some(p.c_deg),
-        }
-    }
-
-    /// The machine pose of the row; A and C are 0 in a three-column trajectory.
-    pub fn to_pose(&self) -> metrology::kinematics::Pose {
-        metrology::kinematics::Pose {
-            x_mm: self.x_mm,
-            y_mm: self.y_mm,
-            z_mm: self.z_mm,
-            a_deg: self.a_deg.unwrap_or(0.0),
-            b_deg: 0.0,
-            c_deg: self.c_deg.unwrap_or(0.0),
-        }
-    }
-}
-
 /// Parses the trajectory CSV; the error says which line and what is wrong.
 pub fn parse_trajectory(text: &str) -> Result<Vec<TrajectoryRow>, String> {
     let mut rdr = csv::ReaderBuilder::new()

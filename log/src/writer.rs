@@ -16,9 +16,9 @@ use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use drivers::{Sample, Trigger};
 use mcap::records::{MessageHeader, Metadata};
 use mcap::{Attachment, Compression, McapError, WriteOptions};
+use types::{Sample, Trigger};
 
 use super::raw::{self, Builder};
 use super::topics::{self, PoseMsg, StatusMsg, TopicMessage, TriggerMsg};

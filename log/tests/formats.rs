@@ -4,9 +4,9 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use drivers::Sample;
 use metrolog_log::topics::{LogMessage, PoseMsg, decode_message};
 use metrolog_log::{LOG_FORMAT_KEY, LogItem, ReadSummary, read_log, read_run_metadata};
+use types::Sample;
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

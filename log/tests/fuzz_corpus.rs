@@ -9,7 +9,7 @@
 
 use std::path::PathBuf;
 
-use metrolog_log::synthetic::SyntheticRun;
+use drivers::synthetic::SyntheticRun;
 use metrolog_log::{LogOptions, LogWriter, RunMetadata, fuzzcheck};
 
 fn corpus(target: &str) -> Vec<(String, PathBuf)> {

@@ -6,7 +6,7 @@
 #[path = "support/counting_alloc.rs"]
 mod counting_alloc;
 
-use metrolog_log::synthetic::SyntheticRun;
+use drivers::synthetic::SyntheticRun;
 use metrolog_log::{LogOptions, LogWriter, RunMetadata, read_log};
 
 #[global_allocator]

@@ -47,7 +47,7 @@
 //!
 //! # The physics
 //! See [`physics`]: machine position along an S-shaped move profile, damped ringing after each
-//! exact stop, the X axis deviation from `metrology::axis_model::AxisModel` (one random draw
+//! exact stop, the X axis deviation from `positioning::axis_model::AxisModel` (one random draw
 //! per visit, since repeatability belongs to the positioning), the LI-80's reading in air
 //! (`raw = n·L20/(1 − α(T_mat − 20))`, so the host's `raw/n` and material compensation give
 //! the 20 °C length back), the CapBall error from a [`CapballTruth`] (by default

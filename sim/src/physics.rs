@@ -3,14 +3,14 @@
 //! sample's value depends only on the instant its device clock stamps, never on when the
 //! device task happened to run.
 
-use metrology::axis_model::{AxisModel, Direction};
+use positioning::axis_model::{AxisModel, Direction};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use crate::scenario::{Axis, Capball, CapballModel, Coords, Program, Psd, Scenario};
-use metrology::capball::CapballSetup;
-use metrology::kinematics::Pose;
+use geometry::capball::CapballSetup;
+use geometry::kinematics::Pose;
 
 /// Timing of one pose, real seconds after the program start.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -99,7 +99,7 @@ pub fn metrology_pose(c: &Coords) -> Pose {
 }
 
 /// metrology's forward chain at the sim's axis positions, ball under the tool, µm.
-fn chain_error_um(errors: &metrology::capball::CapballErrors, pose: &Coords) -> [f64; 3] {
+fn chain_error_um(errors: &geometry::capball::CapballErrors, pose: &Coords) -> [f64; 3] {
     let e = capball_setup()
         .machine
         .volumetric_error_um(&metrology_pose(pose), errors, None);
@@ -111,7 +111,7 @@ impl CapballModel {
     /// measuring loop (linear and cyclic, by time), axis harmonics (by angle), then the gain
     /// of the reading. The per-visit scatter is the device's (it needs the visit).
     fn add_drift(&self, e: [f64; 3], pose: &Coords, t_s: f64) -> [f64; 3] {
-        use metrology::capball_diagnosis::{RotaryAxis, axis_harmonic_um};
+        use diagnose::capball::{RotaryAxis, axis_harmonic_um};
         let h = t_s / 3600.0;
         let mut out = [0, 1, 2].map(|k| e[k] + self.drift_um_per_h[k] * h);
         if let Some(c) = &self.cyclic_drift {
@@ -137,7 +137,7 @@ impl CapballModel {
 }
 
 impl CapballTruth for CapballModel {
-    /// metrology's exact forward model ([`metrology::capball::forward_um`]: the rigid-body
+    /// metrology's exact forward model ([`geometry::capball::forward_um`]: the rigid-body
     /// chain of [`CapballSetup::paper_default`] with these link and setup errors), plus drift.
     ///
     /// `forward_um` evaluates `p_tool − p_ball` for the ball at its nominal place; here the
@@ -157,7 +157,7 @@ impl CapballTruth for CapballModel {
 /// values as the model (the drift is added per call).
 pub struct CachedCapballModel {
     model: CapballModel,
-    errors: metrology::capball::CapballErrors,
+    errors: geometry::capball::CapballErrors,
     /// The last few (pose, chain error) pairs; a move needs its two end poses.
     cache: std::sync::Mutex<Vec<([f64; 5], [f64; 3])>>,
 }

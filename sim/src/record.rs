@@ -2,7 +2,7 @@
 
 use std::collections::BTreeMap;
 
-use metrology::axis_model::Direction;
+use positioning::axis_model::Direction;
 use protocol::can::TriggerEvent;
 use serde::Serialize;
 

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use metrology::axis_model::AxisModel;
+use positioning::axis_model::AxisModel;
 use protocol::can::TriggerEvent;
 use serde::{Deserialize, Serialize};
 
@@ -354,16 +354,16 @@ impl Default for Capball {
     }
 }
 
-/// The machine's true CapBall errors, in the parameters of [`metrology::capball`] (paper 001):
+/// The machine's true CapBall errors, in the parameters of [`geometry::capball`] (paper 001):
 /// the eight link errors and six setup errors of its `WCAYFXZT` machine
-/// ([`metrology::capball::CapballSetup::paper_default`]: A about X and C about Z through the
+/// ([`geometry::capball::CapballSetup::paper_default`]: A about X and C about Z through the
 /// origin, ball at (120, 80, 100) mm on the table), by their names there, plus an optional
 /// drift of the measuring loop. The simulator evaluates the analysis's own forward model
-/// ([`metrology::capball::forward_um`] geometry), so simulation and identification share one
+/// ([`geometry::capball::forward_um`] geometry), so simulation and identification share one
 /// geometry: `metrolog identify capball` on the per-pose truth of poses that hold the tool on
 /// the ball recovers these 14 values (without drift).
 ///
-/// Sign conventions are those of [`metrology::kinematics`]: errors of the relative motion of
+/// Sign conventions are those of [`geometry::kinematics`]: errors of the relative motion of
 /// the tool against the workpiece; the volumetric error is `p_tool − p_ball` in the machine
 /// frame, µm.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -443,8 +443,8 @@ pub struct CapballAxisHarmonic {
 
 impl CapballModel {
     /// The 14 parameters as metrology's types.
-    pub fn errors(&self) -> metrology::capball::CapballErrors {
-        use metrology::capball::{CapballErrors, LinkErrors, SetupErrors};
+    pub fn errors(&self) -> geometry::capball::CapballErrors {
+        use geometry::capball::{CapballErrors, LinkErrors, SetupErrors};
         CapballErrors {
             link: LinkErrors {
                 ec0y_urad: self.ec0y_urad,
@@ -468,7 +468,7 @@ impl CapballModel {
     }
 
     /// A model from metrology's parameters, without drift.
-    pub fn from_errors(e: &metrology::capball::CapballErrors) -> Self {
+    pub fn from_errors(e: &geometry::capball::CapballErrors) -> Self {
         let (l, s) = (&e.link, &e.setup);
         CapballModel {
             ec0y_urad: l.ec0y_urad,
@@ -494,9 +494,9 @@ impl CapballModel {
     /// The model a CapBall diagnosis found (`metrolog diagnose --write-model`): the 14
     /// parameters identified with the effects modelled, plus the effects as this scenario
     /// section takes them; times are those of the diagnosed dataset's clock.
-    pub fn from_diagnosis(d: &metrology::capball_diagnosis::CapballDiagnosis) -> Self {
+    pub fn from_diagnosis(d: &diagnose::capball::CapballDiagnosis) -> Self {
         use serde_json::Value;
-        let mut m = Self::from_errors(&metrology::capball::CapballErrors::from_slice(
+        let mut m = Self::from_errors(&geometry::capball::CapballErrors::from_slice(
             &d.params_extended,
         ));
         let xyz = |v: &Value| ["x", "y", "z"].map(|k| v[k].as_f64().unwrap_or(0.0));
@@ -963,7 +963,7 @@ impl Scenario {
     fn validate_capball_truth(&self) -> Result<(), ScenarioError> {
         let bad = |m: String| Err(ScenarioError::Invalid(m));
         let truth = self.capball.truth.errors().to_vector();
-        for (name, v) in metrology::capball::PARAM_NAMES.iter().zip(truth) {
+        for (name, v) in geometry::capball::PARAM_NAMES.iter().zip(truth) {
             // The sensors read ±100 µm: errors beyond a millimetre are a typo (mm for µm).
             if !(v.is_finite() && v.abs() <= 1000.0) {
                 return bad(format!(

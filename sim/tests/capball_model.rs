@@ -4,8 +4,8 @@
 
 use std::sync::Arc;
 
-use metrology::capball::{self, CapballSetup, N_PARAMS, PARAM_NAMES};
-use metrology::kinematics::Pose;
+use geometry::capball::{self, CapballSetup, N_PARAMS, PARAM_NAMES};
+use geometry::kinematics::Pose;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sim::physics::World;
@@ -145,8 +145,8 @@ fn small_errors_are_recovered_to_1e_6_relative() {
 /// comparison from a real run; this keeps it in CI without a 60 s timing-dependent test.
 #[test]
 fn demo_capball_diagnosis_finds_the_cooling_cycle() {
-    use metrology::capball::CapballRecord;
-    use metrology::capball_diagnosis::{self, Options, runs_from_records};
+    use diagnose::capball::{self, Options, runs_from_records};
+    use geometry::capball::CapballRecord;
     use rand_distr::{Distribution, Normal};
 
     let sc = Scenario::demo();
@@ -177,8 +177,7 @@ fn demo_capball_diagnosis_finds_the_cooling_cycle() {
     let poses: Vec<Pose> = ident.poses.clone();
     let setup =
         CapballSetup::with_ball_from_poses(CapballSetup::paper_default().machine, &poses).unwrap();
-    let d = capball_diagnosis::diagnose(&setup, &ident, &validation, None, &Options::default())
-        .unwrap();
+    let d = capball::diagnose(&setup, &ident, &validation, None, &Options::default()).unwrap();
     let found = d.report.effects();
     assert_eq!(found, ["cyclic_drift"], "{:#?}", d.report.findings);
     let f = &d.report.findings[0];

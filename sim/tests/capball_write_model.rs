@@ -3,8 +3,8 @@
 //! diagnosed, the extended model is simulated over the same poses and times, and the two
 //! datasets' baseline residuals (what the 14-parameter model leaves) are compared.
 
-use metrology::capball::{CapballSetup, TrajectorySpec};
-use metrology::capball_diagnosis::{CapballRun, Options, diagnose};
+use diagnose::capball::{CapballRun, Options, diagnose};
+use geometry::capball::{CapballSetup, TrajectorySpec};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use sim::CapballTruth;

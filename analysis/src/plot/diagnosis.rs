@@ -4,11 +4,11 @@
 use std::path::Path;
 
 use anyhow::Context as _;
-use metrology::axis_model::Direction;
-use metrology::diagnose::Diagnosis;
-use metrology::positioning_data::PositioningData;
+use diagnose::axis::Diagnosis;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use positioning::axis_model::Direction;
+use positioning::positioning_data::PositioningData;
 
 use super::positioning::{DOWN, UP};
 use super::{FONT, LABELS, e, padded_range, ticks, with_backend};

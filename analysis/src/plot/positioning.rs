@@ -6,12 +6,12 @@
 use std::path::Path;
 
 use anyhow::Context as _;
-use metrology::axis_model::Direction;
-use metrology::positioning_data::PositioningData;
-use metrology::units::Units;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
+use positioning::axis_model::Direction;
+use positioning::positioning_data::PositioningData;
+use positioning::units::Units;
 
 use super::{FONT, LABELS, Mark, e, padded_range, side_column, ticks, with_backend};
 use crate::export::num;

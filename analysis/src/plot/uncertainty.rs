@@ -3,10 +3,10 @@
 
 use std::path::Path;
 
-use metrology::uncertainty::{GumResult, McResult};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
+use uncertainty::{GumResult, McResult};
 
 use super::{FONT, LABELS, Mark, e, side_column, ticks, with_backend};
 use crate::export::num;

@@ -23,7 +23,7 @@ pub const DEFAULT_CB3_RATE_HZ: u32 = 1000;
 pub const DEFAULT_PSD_RATE_HZ: u32 = 100;
 pub const DEFAULT_PSD_MIN_SUM_PA: f64 = 100_000.0;
 
-/// The steady test needs a variance of successive differences (metrology::steady): 3 at least.
+/// The steady test needs a variance of successive differences (metrolog-detect): 3 at least.
 pub const DETECTOR_SAMPLES: (usize, usize) = (3, 1_000_000);
 
 /// A configuration error. Each message says which file and line and what to fix.

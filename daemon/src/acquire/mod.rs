@@ -5,13 +5,13 @@
 //!   one bounded queue;
 //! - [`pipeline`]: takes the events off the queue on its own thread and hands each to the
 //!   [`recorder::Recorder`], keeps the [`pipeline::Status`] for systemd and the log;
-//! - [`detect`]: the steady-value detectors of the three instruments (the same code replay runs);
+//! - the pose engine (crate `metrolog-detect`): the steady-value detectors of the three
+//!   instruments (the same code replay runs);
 //! - [`recorder`]: writes raw topics, the detectors' pose values, `/event` and `/status` through
 //!   the log writer (crate `metrolog-log`);
 //! - [`service`]: systemd integration (READY/STATUS/STOPPING, watchdog), signals, tracing.
 
 pub mod config;
-pub mod detect;
 pub mod pipeline;
 pub mod recorder;
 pub mod service;

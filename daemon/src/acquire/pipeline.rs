@@ -22,10 +22,10 @@ use tokio_util::sync::CancellationToken;
 
 use metrolog_log::DetectorSettings;
 use metrolog_log::topics::PoseMsg;
-use metrology::steady::PoseStatus;
+use types::PoseStatus;
 
-use super::detect::PoseEngine;
 use crate::acquire::service::{Notifier, Watchdog};
+use detect::PoseEngine;
 
 /// Capacity of the queue from the drivers to the pipeline: one second of every instrument at
 /// its highest rate (10 kHz + 20 kHz + 1 kHz) plus margin, so a log flush of up to a second
@@ -627,7 +627,7 @@ pub fn detector_settings(cfg: &crate::acquire::config::Config) -> DetectorSettin
     });
     if cfg.trigger.is_none() {
         for c in [&mut s.interferometer, &mut s.capball, &mut s.psd] {
-            c.mode = metrology::steady::DetectorMode::Plateaus;
+            c.mode = types::DetectorMode::Plateaus;
         }
     }
     s

@@ -10,7 +10,7 @@ use metrolog_log::{
     DetectorSettings, INSTRUMENT_METADATA, LogError, LogOptions, LogWriter, RunMetadata,
 };
 
-use super::detect::PoseEngine;
+use detect::PoseEngine;
 
 /// The log of a run fed with driver events: raw topics, `/pose` from the [`PoseEngine`],
 /// `/event`, and `/status` once a second.

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use metrolog_analysis::positioning_report::{analyze_positioning, render_text};
-use metrology::iso230;
+use positioning::iso230;
 
 use crate::cmd::input::load_positioning_with;
 
@@ -39,7 +39,7 @@ pub struct PositioningArgs {
     /// Also evaluate by these standards (repeat or comma-separate): iso230-2:2014,
     /// iso230-2:2006, iso230-2:1997, iso230-2:1988, vdi3441, asme-b5.54, jis-b6192, gb17421.2.
     #[arg(long, value_delimiter = ',')]
-    pub standard: Vec<metrology::standards::Standard>,
+    pub standard: Vec<positioning::standards::Standard>,
     /// Also write readings.csv, targets.csv and results.csv (every standard's parameters) here.
     #[arg(long, value_name = "DIR")]
     pub csv: Option<PathBuf>,
@@ -106,7 +106,7 @@ fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
     let standards: Vec<_> = a
         .standard
         .iter()
-        .map(|s| metrology::standards::evaluate(&data, *s))
+        .map(|s| positioning::standards::evaluate(&data, *s))
         .collect();
     if let Some(dir) = &a.csv {
         metrolog_analysis::export::write_csv_dir(dir, &data, &an.targets, &standards)

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use metrology::compensation::{Dialect, Mode, Options, build, verify};
+use positioning::compensation::{Dialect, Mode, Options, build, verify};
 
 use crate::cmd::input::{load_positioning, print_out};
 

@@ -20,7 +20,7 @@ use crate::acquire::pipeline::Status;
 use crate::acquire::service::Notifier;
 use crate::cmd::run::{Acquire, RunReport, acquire};
 use metrolog_log::topics::PoseMsg;
-use metrology::steady::PoseStatus;
+use types::PoseStatus;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -64,7 +64,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 fn print_capball_truth() {
     let t = Scenario::demo().capball.truth;
     let e = t.errors().to_vector();
-    let params: Vec<String> = metrology::capball::PARAM_NAMES
+    let params: Vec<String> = geometry::capball::PARAM_NAMES
         .iter()
         .zip(e)
         .map(|(n, v)| format!("{n} {v:.2}"))

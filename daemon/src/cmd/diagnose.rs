@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use metrology::diagnose::{self, Diagnosis, Options};
+use diagnose::axis::{self, Diagnosis, Options};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -39,17 +39,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let mut data = crate::cmd::input::load_positioning(&args.input)?;
     args.units.apply(&mut data)?;
-    let mut d: Diagnosis = diagnose::diagnose(&data, &Options::default())
+    let mut d: Diagnosis = axis::diagnose(&data, &Options::default())
         .with_context(|| format!("diagnosing {}", args.input.display()))?;
-    d.report.reproduction = Some(diagnose::reproduction_check(
-        &data,
-        &d.model,
-        args.check_seeds,
-    ));
+    d.report.reproduction = Some(axis::reproduction_check(&data, &d.model, args.check_seeds));
     if let Some(p) = &args.write_model {
         // The `[axis]` table of a simulator scenario (sim's `Scenario::axis`), so it can
         // replace that table as it is.
-        let toml = toml::to_string_pretty(&metrology::diagnose::AxisTable {
+        let toml = toml::to_string_pretty(&axis::AxisTable {
             axis: d.model.clone(),
         })
         .context("serialising the model")?;

@@ -4,11 +4,12 @@
 use std::path::Path;
 
 use anyhow::Context as _;
-use metrology::capball::{self, CapballRecord, CapballSetup};
-use metrology::capball_diagnosis::{
-    self, CapballDiagnosis, DriftRecord, Options, parse_drift_record, runs_from_records,
+use diagnose::capball::{
+    self as capball_diagnosis, CapballDiagnosis, DriftRecord, Options, parse_drift_record,
+    runs_from_records,
 };
-use metrology::kinematics::Machine;
+use geometry::capball::{self, CapballRecord, CapballSetup};
+use geometry::kinematics::Machine;
 
 /// Whether `path` holds CapBall data: a CSV whose header names `ex_um` (an MCAP log is
 /// CapBall data only when asked for with `--capball`).

@@ -4,10 +4,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use geometry::capball::{self, CapballSetup, Identification, PARAM_NAMES, TrajectorySpec};
+use geometry::kinematics::{Machine, Pose};
+use geometry::psd_frame::{self, PsdLayout};
 use metrolog_log::trajectory::{TrajectoryRow, write_trajectory};
-use metrology::capball::{self, CapballSetup, Identification, PARAM_NAMES, TrajectorySpec};
-use metrology::kinematics::{Machine, Pose};
-use metrology::psd_frame::{self, PsdLayout};
 use nalgebra::Vector3;
 
 #[derive(Debug, clap::Subcommand)]
@@ -438,7 +438,7 @@ fn run_trajectory(a: TrajectoryArgs) -> anyhow::Result<()> {
     let poses = setup.trajectory(&spec);
     let rows: Vec<TrajectoryRow> = (1..)
         .zip(&poses)
-        .map(|(k, p)| TrajectoryRow::from_pose(k, p))
+        .map(|(k, p)| trajectory_row(k, p))
         .collect();
     std::fs::write(&a.out, write_trajectory(&rows))
         .with_context(|| format!("writing {}", a.out.display()))?;
@@ -618,4 +618,17 @@ fn run_psd(a: PsdArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Row `pose` (1-based) of the trajectory format for a machine pose; A and C are written (B is
+/// not part of the format).
+fn trajectory_row(pose: u32, p: &geometry::kinematics::Pose) -> TrajectoryRow {
+    TrajectoryRow {
+        pose,
+        x_mm: p.x_mm,
+        y_mm: p.y_mm,
+        z_mm: p.z_mm,
+        a_deg: Some(p.a_deg),
+        c_deg: Some(p.c_deg),
+    }
 }

@@ -8,14 +8,14 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use metrology::capball::CapballRecord;
-use metrology::kinematics::Machine;
-use metrology::uncertainty::capball::{
+use geometry::capball::CapballRecord;
+use geometry::kinematics::Machine;
+use serde::Serialize;
+use uncertainty::capball::{
     self as ucb, CapballSources, CoverageCheck, CyclicDrift, DriftModel, MeasuredCapball,
     SourceWidths,
 };
-use metrology::uncertainty::mc::{McOptions, McResult};
-use serde::Serialize;
+use uncertainty::mc::{McOptions, McResult};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum UncertaintyMethod {
@@ -135,7 +135,7 @@ pub fn run(
         ..McOptions::default()
     };
     let bar = super::uncertainty::progress_bar(&opts);
-    let cb = |p: &metrology::uncertainty::McProgress| super::uncertainty::update_bar(&bar, p);
+    let cb = |p: &uncertainty::McProgress| super::uncertainty::update_bar(&bar, p);
     // The per-point Gaussian noise is drawn in parameter space: the same distribution of the
     // outputs at a fraction of the cost (CapballMc::with_reduced_noise).
     let build = |s: &CapballSources| measured.model(s).map(|m| m.with_reduced_noise());

@@ -7,11 +7,11 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use metrology::psd_frame::{PsdErrors, PsdLayout};
-use metrology::uncertainty::mc::McOptions;
-use metrology::uncertainty::psd::{self, Table4Study};
-use metrology::uncertainty::psd_budget::PsdBudget;
+use geometry::psd_frame::{PsdErrors, PsdLayout};
 use serde::Serialize;
+use uncertainty::mc::McOptions;
+use uncertainty::psd::{self, Table4Study};
+use uncertainty::psd_budget::PsdBudget;
 
 use super::identify_mc::UncertaintyMethod;
 
@@ -88,7 +88,7 @@ pub fn run(
         ..McOptions::default()
     };
     let bar = super::uncertainty::progress_bar(&opts);
-    let cb = |p: &metrology::uncertainty::McProgress| super::uncertainty::update_bar(&bar, p);
+    let cb = |p: &uncertainty::McProgress| super::uncertainty::update_bar(&bar, p);
     let study = psd::table4(layout, &budget, &opts, lever, Some(&cb))
         .with_context(|| path.display().to_string())?;
     bar.finish_and_clear();

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use anyhow::Context as _;
-use metrology::positioning_data::PositioningData;
+use positioning::positioning_data::PositioningData;
 
 /// Reads a positioning run from a CSV dataset or an MCAP log (see
 /// [`metrolog_analysis::positioning`] for how the run is found in a log).
@@ -52,7 +52,7 @@ impl UnitArgs {
         };
         for (key, unit) in [("target_unit", target), ("deviation_unit", deviation)] {
             anyhow::ensure!(
-                metrology::units::is_plain_unit(unit),
+                positioning::units::is_plain_unit(unit),
                 "--units {spec}: `{unit}` is not a unit name (1 to 12 letters, digits or the \
                  signs µ ° ' \" / · ^ -)"
             );

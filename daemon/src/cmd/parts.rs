@@ -41,11 +41,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let read = |p: &PathBuf, which: &str| -> anyhow::Result<Vec<f64>> {
         let text =
             std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-        Ok(metrology::parts::parse_sample(which, &text)?)
+        Ok(positioning::parts::parse_sample(which, &text)?)
     };
     let before = read(&args.before, "before")?;
     let after = read(&args.after, "after")?;
-    let r = metrology::parts::compare(&before, &after, lo, hi)?;
+    let r = positioning::parts::compare(&before, &after, lo, hi)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
         return Ok(());

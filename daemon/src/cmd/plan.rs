@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use metrolog_log::trajectory::{TrajectoryRow, write_trajectory};
-use metrology::plan::{Dialect, PlanOptions, plan};
+use positioning::plan::{Dialect, PlanOptions, plan};
 
 #[derive(Debug, clap::Subcommand)]
 pub enum Command {

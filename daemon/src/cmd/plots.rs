@@ -17,10 +17,10 @@ pub use without::{draw_diagnosis, draw_positioning, draw_uncertainty};
 mod without {
     use std::path::Path;
 
+    use diagnose::axis::Diagnosis;
     use metrolog_analysis::positioning_report::PositioningAnalysis;
-    use metrology::diagnose::Diagnosis;
-    use metrology::positioning_data::PositioningData;
-    use metrology::uncertainty::{GumResult, McResult};
+    use positioning::positioning_data::PositioningData;
+    use uncertainty::{GumResult, McResult};
 
     fn no_plots(path: &Path) -> anyhow::Error {
         anyhow::anyhow!(

@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use metrolog_log::topics::{LogMessage, PoseMsg, TopicMessage, decode_message};
 
-use crate::acquire::detect::PoseEngine;
+use detect::PoseEngine;
 use metrolog_log::{
     DetectorSettings, LogItem, LogOptions, LogWriter, RUN_METADATA, ReadSummary, RunMetadata,
     TriggerTime, read_log_progress, read_run_metadata,

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use metrolog_analysis::html_report::{ReportHeader, positioning_html};
 use metrolog_analysis::positioning_report::analyze_positioning;
-use metrology::standards::{Standard, evaluate};
+use positioning::standards::{Standard, evaluate};
 
 use crate::cmd::input::{load_positioning, print_out};
 

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use indicatif::{ProgressBar, ProgressStyle};
-use metrology::uncertainty::{Budget, McOptions, McProgress, Method, Report};
+use uncertainty::{Budget, McOptions, McProgress, Method, Report};
 
 /// Which method(s) to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

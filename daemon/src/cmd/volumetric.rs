@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use metrology::kinematics::Machine;
-use metrology::volumetric::{self, ComponentErrors, GridSpec};
+use geometry::kinematics::Machine;
+use geometry::volumetric::{self, ComponentErrors, GridSpec};
 
 /// Volumetric error over the working volume and its compensation tables.
 ///

@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use drivers::DriverEvent;
+use drivers::synthetic::SyntheticRun;
 use metrolog::acquire::recorder::Recorder;
-use metrolog_log::synthetic::SyntheticRun;
 use metrolog_log::topics::PoseMsg;
 use metrolog_log::{DetectorSettings, LogOptions, LogWriter, RunMetadata};
 

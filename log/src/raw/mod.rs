@@ -17,11 +17,11 @@
 pub mod v2;
 pub mod v3;
 
-use drivers::{Sample, SampleValues};
 use prost::Message;
 use prost_types::field_descriptor_proto::{Label, Type};
 use prost_types::{DescriptorProto, FieldDescriptorProto, FileDescriptorProto, FileDescriptorSet};
 use protocol::convert::CapBallCalibration;
+use types::{Sample, SampleValues};
 
 /// Topics of the raw samples (the same names as the JSON topics of older logs).
 pub const POSITION_TOPIC: &str = "/interferometer/position";
@@ -342,9 +342,9 @@ pub fn descriptor_set() -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use drivers::Instrument;
     use protocol::cb3::code_volts;
     use protocol::convert::{CapBallPoly, CapBallTransform};
+    use types::Instrument;
 
     fn sample(instrument: Instrument, values: SampleValues, k: u64) -> Sample {
         Sample {

@@ -2,9 +2,9 @@
 //! `google.protobuf.Timestamp` per sample and the CapBall as nine doubles per sample. Logs of
 //! this format are read, no longer written (format 3, [`super`]).
 
-use drivers::{Instrument, Sample, SampleValues};
 use prost::Message;
 use prost_types::Timestamp;
+use types::{Instrument, Sample, SampleValues};
 
 use super::{CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC};
 

@@ -6,11 +6,11 @@
 //! itself, except for the two time columns, whose first entry is 0 and whose base is the
 //! `Timestamp` in the header (no integer beyond 2^53 reaches a JavaScript viewer).
 
-use drivers::{Instrument, Sample, SampleValues};
 use prost::Message;
 use prost_types::Timestamp;
 use protocol::cb3::volts_code;
 use protocol::convert::{CapBallCalibration, CapBallPoly, CapBallTransform};
+use types::{Instrument, Sample, SampleValues};
 
 use super::v2::{timestamp, timestamp_ns};
 use super::{CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC};

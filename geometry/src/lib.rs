@@ -1,0 +1,12 @@
+//! Machine geometry, pure maths with no I/O (papers 001, 003, 004):
+//!
+//! - [`kinematics`]: machine poses, axes and the kinematic chain with its link errors;
+//! - [`capball`]: the CapBall model, its identification, sensor-frame calibration,
+//!   trajectories and dataset;
+//! - [`psd_frame`]: the PSD laser frame and its 13 errors;
+//! - [`volumetric`]: volumetric errors of a machine from its error model.
+
+pub mod capball;
+pub mod kinematics;
+pub mod psd_frame;
+pub mod volumetric;

@@ -1,0 +1,91 @@
+//! SINUMERIK CEC tables from a volumetric grid: enabled by SD41300, within the 828D's eight
+//! tables, and stating the tool offset they are valid for (`docs/methods.md`
+//! "Pitch-error compensation").
+
+use geometry::kinematics::Machine;
+use geometry::volumetric::*;
+
+/// A separable grid (positioning and straightness only): X→X, X→Y, Y→Z and Z→X carry
+/// corrections, the five other tables are zero.
+fn grid() -> (Vec<GridPoint>, GridSpec) {
+    let m = Machine::from_chain("WYFXZT").unwrap();
+    let e = ComponentErrors::from_csv(
+        "error,position_mm,value\nEXX,0,0\nEXX,400,8\nEYX,0,0\nEYX,200,3\nEYX,400,0\nEZY,0,0\nEZY,300,-5\nEXZ,0,1\nEXZ,200,-1\n",
+    )
+    .unwrap();
+    let g = GridSpec::parse("0:400:5,0:300:4,0:200:3").unwrap();
+    (volumetric_grid(&m, &e, &g).unwrap(), g)
+}
+
+/// The table numbers each `$AN_CEC_INPUT_AXIS[t]` / `$SN_CEC_TABLE_ENABLE[t]=1` line names.
+fn numbers(ini: &str, prefix: &str) -> Vec<usize> {
+    ini.lines()
+        .filter_map(|l| l.strip_prefix(prefix))
+        .map(|r| r[..r.find(']').unwrap()].parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn every_table_written_is_enabled() {
+    let (pts, g) = grid();
+    let cec = siemens_cec(&pts, &g, ["AX1", "AX2", "AX3"]);
+    let tables = numbers(&cec.ini, "$AN_CEC_INPUT_AXIS[");
+    assert_eq!(tables, (0..9).collect::<Vec<_>>());
+    let enabled: Vec<usize> = cec
+        .ini
+        .lines()
+        .filter(|l| l.starts_with("$SN_CEC_TABLE_ENABLE[") && l.ends_with("]=1"))
+        .map(|l| l[21..l.find(']').unwrap()].parse().unwrap())
+        .collect();
+    assert_eq!(enabled, tables);
+    assert!(cec.ini.contains("tool offset not stated"));
+    assert!(cec.omitted.is_empty());
+}
+
+#[test]
+fn sinumerik_828d_gets_at_most_eight_tables_and_the_cost_is_reported() {
+    let (pts, g) = grid();
+    let o = CecOptions {
+        axis_names: ["X1", "Y1", "Z1"],
+        max_tables: CEC_TABLES_828D,
+        tool_offset_mm: Some([0.0, 0.0, -150.0]),
+    };
+    let cec = siemens_cec_for(&pts, &g, &o);
+    let tables = numbers(&cec.ini, "$AN_CEC_INPUT_AXIS[");
+    assert_eq!(tables, (0..8).collect::<Vec<_>>());
+    assert_eq!(numbers(&cec.ini, "$SN_CEC_TABLE_ENABLE[").len(), 8);
+    // The table left out is one of the zero tables: nothing is lost.
+    assert_eq!(cec.omitted.len(), 1);
+    assert!(cec.omitted[0].contains("0.00 µm"), "{:?}", cec.omitted);
+    assert!(cec.max_separation_residual_um < 1e-6);
+    assert!(
+        cec.ini
+            .contains("valid for the tool offset (0.000, 0.000, -150.000) mm")
+    );
+    // Only four tables carry corrections: keeping three loses the smallest, and says so.
+    let o3 = CecOptions { max_tables: 3, ..o };
+    let cec3 = siemens_cec_for(&pts, &g, &o3);
+    assert_eq!(numbers(&cec3.ini, "$AN_CEC_INPUT_AXIS[").len(), 3);
+    assert!(
+        cec3.max_separation_residual_um > 0.5,
+        "{}",
+        cec3.max_separation_residual_um
+    );
+    let lost = cec3
+        .omitted
+        .iter()
+        .map(|s| {
+            s.split("up to ")
+                .nth(1)
+                .unwrap()
+                .trim_end_matches(" µm)")
+                .parse::<f64>()
+                .unwrap()
+        })
+        .fold(0.0f64, f64::max);
+    assert!(
+        (cec3.max_separation_residual_um - lost).abs() < 0.01,
+        "{:?}",
+        cec3.omitted
+    );
+}

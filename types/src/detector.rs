@@ -1,0 +1,164 @@
+//! Settings of the steady-value detector (docs/design.md; their meaning in `metrolog-detect`).
+
+use serde::{Deserialize, Serialize};
+
+/// What delimits the poses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DetectorMode {
+    /// The CNC's triggers (exact stop opens a dwell; motion start / dwell end close it).
+    #[default]
+    Triggers,
+    /// No triggers: standstill plateaus found in the signal, numbered 1, 2, 3, …; triggers
+    /// pushed in this mode are ignored.
+    Plateaus,
+}
+
+/// Settings of the steady-value detector (see the module documentation for their meaning and
+/// the reasons for the defaults).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SteadyConfig {
+    pub mode: DetectorMode,
+    /// Samples averaged per pose (and size of the tested window).
+    pub samples: usize,
+    /// Largest R statistic of a steady window.
+    pub r_crit: f64,
+    /// Largest deviation from the window mean, in units of the successive-difference sigma.
+    pub outlier_k: f64,
+    /// A channel whose window std is at most this (channel units) is stationary.
+    pub std_floor: f64,
+    /// Trigger-free mode: smallest move of the mean that ends a plateau (channel units).
+    pub min_step: f64,
+    /// Most samples kept for late triggers and missing-trigger recovery (2¹⁸: 13 s at
+    /// 20 kHz, 260 s at 1 kHz — longer than a motion plus dwell).
+    pub max_history: usize,
+}
+
+impl Default for SteadyConfig {
+    fn default() -> Self {
+        SteadyConfig {
+            mode: DetectorMode::Triggers,
+            samples: 150,
+            r_crit: 1.5,
+            outlier_k: 5.0,
+            std_floor: 0.0,
+            min_step: 0.0,
+            max_history: 1 << 18,
+        }
+    }
+}
+
+/// A detector setting that cannot work.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SteadyError {
+    /// detector `samples` is {0}; it must be at least 3 (the steady test needs a variance of
+    /// successive differences)
+    #[error(
+        "detector `samples` is {0}; it must be at least 3 (the steady test needs a variance of successive differences)"
+    )]
+    TooFewSamples(usize),
+    /// detector `{0}` is {1}; it must be a finite number > 0
+    #[error("detector `{0}` is {1}; it must be a finite number > 0")]
+    BadThreshold(&'static str, f64),
+    /// detector `{0}` is {1}; it must be a finite number >= 0
+    #[error("detector `{0}` is {1}; it must be a finite number >= 0")]
+    Negative(&'static str, f64),
+    /// detector `max_history` is {0}; it must be at least `samples` ({1})
+    #[error("detector `max_history` is {0}; it must be at least `samples` ({1})")]
+    HistoryTooShort(usize, usize),
+    /// the detector needs at least one channel
+    #[error("the detector needs at least one channel")]
+    NoChannels,
+}
+
+impl SteadyConfig {
+    pub fn validate(&self) -> Result<(), SteadyError> {
+        if self.samples < 3 {
+            return Err(SteadyError::TooFewSamples(self.samples));
+        }
+        for (name, v) in [("r_crit", self.r_crit), ("outlier_k", self.outlier_k)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(SteadyError::BadThreshold(name, v));
+            }
+        }
+        for (name, v) in [("std_floor", self.std_floor), ("min_step", self.min_step)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(SteadyError::Negative(name, v));
+            }
+        }
+        if self.max_history < self.samples {
+            return Err(SteadyError::HistoryTooShort(self.max_history, self.samples));
+        }
+        Ok(())
+    }
+}
+
+/// Steady-value detector settings of each instrument.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DetectorSettings {
+    /// The instruments of the run: only these get pose values (an instrument that is not
+    /// part of the run would otherwise get a `device_away` at every pose).
+    pub instruments: Vec<crate::Instrument>,
+    pub interferometer: SteadyConfig,
+    pub capball: SteadyConfig,
+    pub psd: SteadyConfig,
+    /// Which time of a CNC trigger opens and closes the dwells. Logs written before this
+    /// setting existed used the arrival time, and replay must reproduce them: a missing key
+    /// reads as [`TriggerTime::Arrival`]; new runs write [`TriggerTime::NcClockSettled`].
+    #[serde(default = "TriggerTime::arrival")]
+    pub trigger_time: TriggerTime,
+}
+
+/// Which time of a CNC trigger places the dwells on the host axis, where the samples sit at
+/// their clock-fitted device times (docs/design.md, timing model).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TriggerTime {
+    /// The frame's NC clock (`nc_ms`) fitted against the host clock (`metrolog_detect::NcClock`):
+    /// when the NC says the event happened; each trigger placed with the fit as it stood when
+    /// its frame came. Runs of version 0.1 before the settled placement.
+    NcClock,
+    /// As [`TriggerTime::NcClock`], but a trigger is placed once the fit is settled (it has its
+    /// line) or the NC clock has run [`NC_SETTLE_US`] past it, with the fit as it then stands:
+    /// frames that came in one late burst at the start of a program, before any prompt frame,
+    /// are placed by the later prompt ones instead of at the burst's arrival.
+    #[default]
+    NcClockSettled,
+    /// The host arrival time of the frame: late by the adapter's, the link's and the
+    /// scheduler's delays (hundreds of ms on a loaded host). Only for replaying old logs.
+    Arrival,
+}
+
+/// How far the NC clock must run past an unsettled trigger before it is placed anyway, µs:
+/// one window of the NC clock fit.
+pub const NC_SETTLE_US: u64 = 2_000_000;
+
+impl TriggerTime {
+    fn arrival() -> TriggerTime {
+        TriggerTime::Arrival
+    }
+}
+
+impl Default for DetectorSettings {
+    fn default() -> Self {
+        DetectorSettings {
+            instruments: crate::Instrument::POSE_VALUED.to_vec(),
+            interferometer: SteadyConfig::default(),
+            capball: SteadyConfig::default(),
+            psd: SteadyConfig::default(),
+            trigger_time: TriggerTime::NcClockSettled,
+        }
+    }
+}
+
+impl DetectorSettings {
+    /// Same settings, `samples` changed for every instrument.
+    pub fn with_samples(mut self, samples: usize) -> Self {
+        self.interferometer.samples = samples;
+        self.capball.samples = samples;
+        self.psd.samples = samples;
+        self
+    }
+}

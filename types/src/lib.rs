@@ -1,0 +1,23 @@
+//! The vocabulary every metrolog crate shares, and nothing else: which instruments there are,
+//! what a driver hands on (a [`Sample`], a [`Trigger`], [`Counters`]), what the steady-value
+//! detector gives ([`PoseValue`], [`PoseMsg`]) and its settings ([`SteadyConfig`],
+//! [`DetectorSettings`]), and the host clock every time is stamped with. Plain data with serde
+//! (JSON schemas behind the `schemars` feature); the CNC trigger events and the decoders'
+//! rejection kinds are the wire contract's own enums (`protocol`), re-exported here.
+#![warn(unreachable_pub)]
+
+mod detector;
+mod host_clock;
+mod instrument;
+mod pose;
+mod sample;
+
+pub use detector::{
+    DetectorMode, DetectorSettings, NC_SETTLE_US, SteadyConfig, SteadyError, TriggerTime,
+};
+pub use host_clock::HostClock;
+pub use instrument::Instrument;
+pub use pose::{PoseMsg, PoseStatus, PoseValue, Stamp};
+pub use protocol::RejectKind;
+pub use protocol::can::TriggerEvent;
+pub use sample::{Counters, Sample, SampleValues, Trigger};

@@ -1,6 +1,6 @@
 //! Analysis inputs from a run's MCAP log: the adapters between the log (`/pose` values,
 //! `/interferometer/environment`, the trajectory and config attachments) and the pure
-//! analyses of the `metrology` crate.
+//! analyses of the maths crates (`positioning`, `geometry`, `diagnose`, `uncertainty`).
 //!
 //! - [`positioning_from_log`]: the ISO 230-2 positioning run on X as a [`PositioningData`]
 //!   (`analyze positioning`, `diagnose`);

@@ -1,4 +1,4 @@
-//! `analyze positioning` on real runs (fixtures of metrology/tests/data/real/): a single-pass
+//! `analyze positioning` on real runs (fixtures of positioning/tests/data/real/): a single-pass
 //! sweep is evaluated and says why the repeatability values are missing.
 
 use metrolog_analysis::positioning_report::{analyze_positioning, render_text};

@@ -1,6 +1,6 @@
 //! The laser calibration of an axis from the command line: `plan` → (run) → `analyze
 //! --standard` / `report` → `compensate`, on the published measured run
-//! (`metrology/tests/data/psi_ecmc_iso230.csv`). The report is rendered by headless Chromium
+//! (`positioning/tests/data/psi_ecmc_iso230.csv`). The report is rendered by headless Chromium
 //! when it is installed (`.ci/run` installs it as root) and its DOM checked for the key numbers;
 //! the screenshot stays in the target directory as an artifact.
 

@@ -1,7 +1,7 @@
 //! CapBall diagnosis against runs with hidden effects from a generator whose forward model is
 //! written separately in this test (`support/capball_gen.rs`), cross-checked against
 //! metrology's chain and analytic Jacobian. The sweep over ≥ 100 datasets per class is
-//! `#[ignore]`d (`cargo test --release -p metrolog-metrology --test capball_diagnosis -- --ignored --nocapture`);
+//! `#[ignore]`d (`cargo test --release -p metrolog-diagnose --test capball_diagnosis -- --ignored --nocapture`);
 //! CI runs a small sample.
 
 #[path = "support/capball_gen.rs"]

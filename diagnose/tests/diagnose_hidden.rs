@@ -18,7 +18,7 @@
 //! reference: the reference jumps by 30–300 σ at random moments (3–10 % of readings) and stays.
 //!
 //! CI runs a few datasets per class; the full table (≥ 200 per class):
-//! `cargo test --release -p metrolog-metrology --test diagnose_hidden -- --ignored --nocapture`
+//! `cargo test --release -p metrolog-diagnose --test diagnose_hidden -- --ignored --nocapture`
 //! (`CLASS=` one class, `PER_CLASS=` the count, `SHOW_MISSES=1` the misses and extra names,
 //! `SHOW_PARAMS=1` the parameters outside 2 u). Its columns: detection (every hidden effect
 //! named; for a no-effect class, no finding); the same counting an effect the report names as
@@ -596,7 +596,7 @@ fn pct(a: usize, b: usize) -> String {
     }
 }
 
-/// The full table: `cargo test --release -p metrolog-metrology --test diagnose_hidden --
+/// The full table: `cargo test --release -p metrolog-diagnose --test diagnose_hidden --
 /// --ignored --nocapture` (PER_CLASS overrides the 200 datasets per class).
 #[test]
 #[ignore = "≥ 200 datasets per class; run with --release"]
@@ -696,7 +696,7 @@ fn a_long_linear_drift_rarely_gets_an_alternative() {
     assert!(t.detected >= 36 && t.with_alt <= 6, "{t:?}");
 }
 /// One dataset of the table, its truth and findings: `SEED=847345 CLASS=step+linear cargo test
-/// --release -p metrolog-metrology --test diagnose_hidden one_dataset -- --ignored --nocapture`
+/// --release -p metrolog-diagnose --test diagnose_hidden one_dataset -- --ignored --nocapture`
 /// (the seeds are those `SHOW_MISSES=1` prints).
 #[test]
 #[ignore = "needs SEED and CLASS"]

@@ -1,5 +1,5 @@
 //! Writes the example inputs under `examples/models/` from the models themselves (run with
-//! `cargo test -p metrolog-metrology --test models_examples -- --ignored`), and checks that the
+//! `cargo test -p metrolog-geometry --test models_examples -- --ignored`), and checks that the
 //! committed examples still parse.
 
 // Parallel arrays indexed together read more plainly with an index.

@@ -3,7 +3,7 @@
 //! machine, as trials per CPU-second of one thread (the machine is shared, so wall-clock rates
 //! would measure the other jobs too).
 //!
-//!     cargo bench -p metrolog-metrology --bench capball_vs_numpy
+//!     cargo bench -p metrolog-uncertainty --bench capball_vs_numpy
 //!
 //! Two Rust figures: the per-point path (every trial draws the 2421 per-point normals and
 //! projects them with the precomputed pseudo-inverse, batched into matrix products: the same

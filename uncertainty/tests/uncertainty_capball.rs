@@ -431,7 +431,7 @@ fn simulated_runs(
     records
 }
 
-/// `cargo test -p metrolog-metrology --test uncertainty_capball -- --ignored` regenerates the
+/// `cargo test -p metrolog-uncertainty --test uncertainty_capball -- --ignored` regenerates the
 /// example files of `metrolog identify capball --uncertainty mc` (README).
 #[test]
 #[ignore = "writes examples/budgets/capball_runs.csv and capball_drift_record.csv"]

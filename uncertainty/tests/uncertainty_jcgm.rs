@@ -344,7 +344,7 @@ fn validation_verdicts_are_the_guides_for_20_seeds() {
     );
 }
 
-/// `cargo test --release -p metrolog-metrology --test uncertainty_jcgm -- --ignored`
+/// `cargo test --release -p metrolog-uncertainty --test uncertainty_jcgm -- --ignored`
 #[test]
 #[ignore = "long: 20 seeds × ~3·10⁶ trials; run with --release"]
 fn validation_verdict_of_9_2_3_for_20_seeds() {

@@ -24,7 +24,7 @@ pub enum Command {
     /// at y_hi, S3 along Y at x_hi, S4 along X at y_lo, S5 along Z), point 1..n in ascending
     /// coordinate (S1: 7 points = the first 7 Y positions of S3; others 11), (r1, r2) =
     /// (ex, ez) on S1/S3, (ey, ez) on S2/S4, (ex, ey) on S5, µm. See
-    /// metrology/src/psd_frame.md for the model.
+    /// geometry/src/psd_frame.md for the model.
     Psd(PsdArgs),
     /// Write a CapBall identification trajectory (`pose,x_mm,y_mm,z_mm,a_deg,c_deg`).
     Trajectory(TrajectoryArgs),

@@ -7,12 +7,12 @@ drift's projection (3 harmonics, random phase per trial). Vectorised NumPy in ba
 how one would write it in NumPy. The Jacobian is a random 2421 x 14 matrix: the cost does not
 depend on its values.
 
-    python3 metrology/benches/py/capball_mc.py [--trials 200000] [--threads 1] [--reduced]
+    python3 uncertainty/benches/py/capball_mc.py [--trials 200000] [--threads 1] [--reduced]
 
 `--reduced` draws the per-point noise in parameter space instead (14 normals times a square
 root of J+ Sigma J+^T, exact for Gaussian per-point noise), the same shortcut as the Rust
 `CapballMc::with_reduced_noise`. Prints trials per CPU-second;
-`cargo bench -p metrolog-metrology --bench capball_vs_numpy` runs this script and the Rust code
+`cargo bench -p metrolog-uncertainty --bench capball_vs_numpy` runs this script and the Rust code
 in one run and prints the ratios.
 """
 

@@ -45,5 +45,10 @@ fn a_closed_pipe_is_an_io_error_not_a_panic() {
     assert!(!err.contains("panicked"), "stderr: {err}");
     // As Unix tools do (cli.rs restores SIGPIPE for the analysis commands).
     use std::os::unix::process::ExitStatusExt as _;
-    assert_eq!(out.status.signal(), Some(13), "status {:?}, stderr: {err}", out.status);
+    assert_eq!(
+        out.status.signal(),
+        Some(13),
+        "status {:?}, stderr: {err}",
+        out.status
+    );
 }

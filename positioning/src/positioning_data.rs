@@ -83,7 +83,37 @@ pub enum DatasetError {
     /// the dataset is inconsistent: {0}
     #[error("the dataset is inconsistent: {0}")]
     Inconsistent(String),
+    /// the dataset holds more than {0} readings
+    #[error(
+        "the dataset holds more than {0} readings; a positioning run has a few hundred to a few \
+         thousand (split the file by run)"
+    )]
+    TooLarge(usize),
 }
+
+/// The most readings a dataset may hold: far beyond any positioning run (ISO 230-2: 5 to 50
+/// targets, 5 bidirectional cycles), and what the analyses handle in well under 1 GB.
+pub const MAX_READINGS: usize = 100_000;
+
+/// The physical range of a numeric column (its unit in its name): a number outside it is a
+/// damaged file or a unit mistake, refused where it is read rather than let into a result.
+fn column_range(name: &str) -> Option<(f64, f64, &'static str)> {
+    match name {
+        "target_mm" => Some((-1e6, 1e6, "a target (±1 km, or ±10⁶ of the target unit)")),
+        "deviation_um" => Some((
+            -1e6,
+            1e6,
+            "a deviation (±1 m, or ±10⁶ of the deviation unit)",
+        )),
+        "time_s" => Some((-1e9, 1e9, "a time since the start (±30 years)")),
+        "air_c" => Some((-60.0, 100.0, "an air temperature (°C)")),
+        "material_c" => Some((-60.0, 200.0, "a material temperature (°C)")),
+        _ => None,
+    }
+}
+
+/// The largest expansion coefficient accepted, µm/(m·K) (polymers reach about 200).
+const MAX_ALPHA_UM_PER_M_K: f64 = 1000.0;
 
 impl PositioningData {
     /// Units of the target and deviation columns: metadata `target_unit` and
@@ -109,8 +139,32 @@ impl PositioningData {
         Self::from_csv_str(&text)
     }
 
-    /// Reads a dataset from CSV text (`docs/datasets.md`).
+    /// Reads a dataset from a CSV file, with the notes on its shape ([`Self::from_csv_str_noted`]).
+    pub fn from_csv_path_noted(
+        path: &std::path::Path,
+    ) -> Result<(Self, Vec<String>), DatasetError> {
+        let text = std::fs::read_to_string(path)?;
+        Self::from_csv_str_noted(&text)
+    }
+
+    /// Reads a dataset from CSV text, with what a metrologist should know about its shape:
+    /// cycle or target numbers that do not count 1, 2, 3, … (renumbered in their order, said
+    /// how), and passes that visit their targets against their direction (swapped labels?).
+    pub fn from_csv_str_noted(text: &str) -> Result<(Self, Vec<String>), DatasetError> {
+        let mut data = Self::from_csv_str_raw(text)?;
+        let mut notes = renumber(&mut data.readings);
+        data.validate()?;
+        notes.extend(data.pass_direction_notes());
+        Ok((data, notes))
+    }
+
+    /// Reads a dataset from CSV text (`docs/datasets.md`); the notes on its shape are dropped
+    /// (see [`Self::from_csv_str_noted`]), the renumbering is not.
     pub fn from_csv_str(text: &str) -> Result<Self, DatasetError> {
+        Self::from_csv_str_noted(text).map(|(d, _)| d)
+    }
+
+    fn from_csv_str_raw(text: &str) -> Result<Self, DatasetError> {
         let mut metadata = BTreeMap::new();
         for line in text.lines() {
             let t = line.trim_start();
@@ -131,6 +185,7 @@ impl PositioningData {
         if headers.is_empty() || headers.iter().all(|h| h.is_empty()) {
             return Err(DatasetError::NoHeader);
         }
+        check_unique_columns(&headers)?;
         let col = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
         let need = |name: &'static str| col(name).ok_or(DatasetError::MissingColumn(name));
         let c_cycle = need("cycle")?;
@@ -144,6 +199,9 @@ impl PositioningData {
 
         let mut readings = Vec::new();
         for (row_no, rec) in rdr.records().enumerate() {
+            if readings.len() >= MAX_READINGS {
+                return Err(DatasetError::TooLarge(MAX_READINGS));
+            }
             // Line numbers from byte offsets: the csv crate's own count skips comment lines.
             let line_of = |byte: u64| {
                 let bytes = text.as_bytes();
@@ -189,7 +247,12 @@ impl PositioningData {
                 if !v.is_finite() {
                     return Err(bad(format!("`{name}` is `{s}`, expected a finite number")));
                 }
-                Ok(v)
+                match column_range(name) {
+                    Some((lo, hi, what)) if !(lo..=hi).contains(&v) => Err(bad(format!(
+                        "`{name}` is `{s}`, outside the range of {what}: {lo} to {hi}"
+                    ))),
+                    _ => Ok(v),
+                }
             };
             let int = |c: usize, name: &str| -> Result<usize, DatasetError> {
                 let s = field(c, name)?;
@@ -231,14 +294,7 @@ impl PositioningData {
                 material_c: opt(c_mat, "material_c")?,
             });
         }
-        let alpha_um_per_m_k = match metadata.get("alpha_um_per_m_k") {
-            Some(v) => Some(v.parse::<f64>().map_err(|_| DatasetError::BadMetadata {
-                key: "alpha_um_per_m_k".into(),
-                value: v.clone(),
-                message: "expected a number".into(),
-            })?),
-            None => None,
-        };
+        let alpha_um_per_m_k = parse_alpha(&metadata)?;
         for key in ["target_unit", "deviation_unit"] {
             if let Some(v) = metadata.get(key)
                 && !crate::units::is_plain_unit(v)
@@ -258,16 +314,60 @@ impl PositioningData {
                 .as_deref(),
             Some("off" | "false" | "no")
         );
-        let data = PositioningData {
+        if readings.is_empty() {
+            return Err(DatasetError::Empty);
+        }
+        Ok(PositioningData {
             axis: metadata.get("axis").cloned(),
             alpha_um_per_m_k,
             material_compensation,
             has_times: c_time.is_some(),
             metadata,
             readings,
-        };
-        data.validate()?;
-        Ok(data)
+        })
+    }
+
+    /// Passes that visit their targets against their direction: a `+` pass must visit them
+    /// upwards (docs/datasets.md, "Direction labels").
+    /// Only runs with real times whose passes are taken in one go are judged: in row order (no
+    /// times) a pass may be listed in any order, and a run that repeats each target before the
+    /// next has no passes.
+    pub fn pass_direction_notes(&self) -> Vec<String> {
+        if !self.has_times {
+            return Vec::new();
+        }
+        let mut order: Vec<&Reading> = self.readings.iter().collect();
+        order.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+        let mut passes: BTreeMap<(usize, usize), Vec<(usize, f64)>> = BTreeMap::new();
+        for (rank, r) in order.iter().enumerate() {
+            passes
+                .entry((r.cycle, dir_slot(r.direction)))
+                .or_default()
+                .push((rank, r.target_mm));
+        }
+        let mut against = Vec::new();
+        for ((cycle, slot), pass) in passes {
+            let in_one_go = pass.last().map(|l| l.0) == pass.first().map(|f| f.0 + pass.len() - 1);
+            if !in_one_go {
+                continue;
+            }
+            let sign = if slot == 0 { 1.0 } else { -1.0 };
+            let steps = pass.windows(2).map(|w| sign * (w[1].1 - w[0].1));
+            let (up, down) = steps.fold((0, 0), |(u, d), s| {
+                (u + usize::from(s > 0.0), d + usize::from(s < 0.0))
+            });
+            if pass.len() >= 3 && down > up {
+                against.push(format!("{cycle}{}", if slot == 0 { "+" } else { "-" }));
+            }
+        }
+        if against.is_empty() {
+            return Vec::new();
+        }
+        vec![format!(
+            "the passes {} visit their targets against their direction (a `+` pass goes up): \
+             are the direction labels swapped? (docs/datasets.md, \"Direction labels\")",
+            against.join(", ")
+        )]
     }
 
     /// Checks what the analysis relies on: readings exist, a target number always names the
@@ -315,6 +415,7 @@ impl PositioningData {
                 )));
             }
         }
+        check_distinct_targets(&pos)?;
         if let Some((index, d)) = self.direction_target_offset() {
             let t = self.targets_mm();
             let spacing = t
@@ -472,6 +573,112 @@ impl PositioningData {
 }
 
 /// `0` for up, `1` for down: the slot of a direction in per-direction arrays.
+/// A header that names a column twice is ambiguous (which `deviation_um` is meant?).
+fn check_unique_columns(headers: &csv::StringRecord) -> Result<(), DatasetError> {
+    for (i, h) in headers.iter().enumerate() {
+        if h.is_empty() {
+            continue;
+        }
+        if let Some(j) = headers
+            .iter()
+            .skip(i + 1)
+            .position(|o| o.eq_ignore_ascii_case(h))
+        {
+            return Err(DatasetError::Inconsistent(format!(
+                "the header names `{h}` twice (columns {} and {}): which one holds the data?",
+                i + 1,
+                i + j + 2
+            )));
+        }
+    }
+    Ok(())
+}
+
+fn parse_alpha(metadata: &BTreeMap<String, String>) -> Result<Option<f64>, DatasetError> {
+    let Some(v) = metadata.get("alpha_um_per_m_k") else {
+        return Ok(None);
+    };
+    match v.parse::<f64>() {
+        Ok(a) if a.is_finite() && a.abs() <= MAX_ALPHA_UM_PER_M_K => Ok(Some(a)),
+        _ => Err(DatasetError::BadMetadata {
+            key: "alpha_um_per_m_k".into(),
+            value: v.clone(),
+            message: format!(
+                "expected a finite number of µm/(m·K), at most {MAX_ALPHA_UM_PER_M_K} in size \
+                 (steel 11.7, aluminium 23)"
+            ),
+        }),
+    }
+}
+
+/// Renumbers cycles and targets 1, 2, 3, … in the order of their numbers when the file's do
+/// not count so (cycles 10…50 would otherwise be read as 50 cycles, 9 of them missing), and
+/// says how.
+fn renumber(readings: &mut [Reading]) -> Vec<String> {
+    let mut notes = Vec::new();
+    for (what, get) in [
+        (
+            "cycle",
+            (|r: &mut Reading| &mut r.cycle) as fn(&mut Reading) -> &mut usize,
+        ),
+        ("target", |r: &mut Reading| &mut r.index),
+    ] {
+        let mut numbers: Vec<usize> = readings.iter_mut().map(|r| *get(r)).collect();
+        numbers.sort_unstable();
+        numbers.dedup();
+        if numbers.iter().enumerate().all(|(k, n)| *n == k + 1) {
+            continue;
+        }
+        let to_new: BTreeMap<usize, usize> = numbers
+            .iter()
+            .enumerate()
+            .map(|(k, n)| (*n, k + 1))
+            .collect();
+        for r in readings.iter_mut() {
+            let n = get(r);
+            *n = to_new.get(n).copied().unwrap_or(*n);
+        }
+        notes.push(format!(
+            "{what} numbers {} do not count 1, 2, 3, …: read as {what}s 1 to {} in their order",
+            number_list(&numbers),
+            numbers.len()
+        ));
+    }
+    notes
+}
+
+/// `3, 5, 6, …, 50` — the numbers of a list, shortened.
+fn number_list(numbers: &[usize]) -> String {
+    let shown: Vec<String> = numbers.iter().take(4).map(|n| n.to_string()).collect();
+    match numbers.last() {
+        Some(last) if numbers.len() > 5 => format!("{}, …, {last}", shown.join(", ")),
+        _ => numbers
+            .iter()
+            .map(|n| n.to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+    }
+}
+
+/// Two target numbers at one position in one direction are one target given twice.
+fn check_distinct_targets(pos: &BTreeMap<(usize, usize), f64>) -> Result<(), DatasetError> {
+    let mut by_dir: [Vec<(f64, usize)>; 2] = [Vec::new(), Vec::new()];
+    for ((index, slot), p) in pos {
+        by_dir[*slot].push((*p, *index));
+    }
+    for targets in &mut by_dir {
+        targets.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some(w) = targets.windows(2).find(|w| (w[1].0 - w[0].0).abs() < 1e-6) {
+            return Err(DatasetError::Inconsistent(format!(
+                "targets {} and {} are both at {} mm: each target number must name its own \
+                 position",
+                w[0].1, w[1].1, w[0].0
+            )));
+        }
+    }
+    Ok(())
+}
+
 pub fn dir_slot(d: Direction) -> usize {
     match d {
         Direction::Up => 0,
@@ -658,5 +865,95 @@ mod tests {
         let text = "cycle,direction,target_mm,deviation_um\n1,+,0,1\n";
         let e = PositioningData::from_csv_str(text).unwrap_err().to_string();
         assert!(e.contains("`index`"), "{e}");
+    }
+
+    /// Two cycles of three targets, `+` up then `-` down, with the given cycle and target
+    /// numbers.
+    fn run(cycles: [usize; 2], targets: [usize; 3]) -> String {
+        let mut t = String::from("cycle,direction,index,target_mm,deviation_um,time_s\n");
+        let mut time = 0;
+        for c in cycles {
+            for (dir, order) in [("+", [0, 1, 2]), ("-", [2, 1, 0])] {
+                for k in order {
+                    time += 1;
+                    t += &format!("{c},{dir},{},{},1.5,{time}\n", targets[k], 100 * k);
+                }
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn cycles_and_targets_that_do_not_count_from_one_are_renumbered_and_said_so() {
+        let (d, notes) = PositioningData::from_csv_str_noted(&run([10, 50], [1, 2, 3])).unwrap();
+        assert_eq!(d.n_cycles(), 2);
+        assert!(d.missing().is_empty(), "{:?}", d.missing());
+        assert!(
+            notes.iter().any(|n| n.contains("cycle numbers 10, 50")),
+            "{notes:?}"
+        );
+        let (d, notes) = PositioningData::from_csv_str_noted(&run([1, 2], [1, 2, 4])).unwrap();
+        assert_eq!(d.n_targets(), 3);
+        assert!(d.targets_mm().iter().all(|t| t.is_finite()));
+        assert!(
+            notes.iter().any(|n| n.contains("target numbers 1, 2, 4")),
+            "{notes:?}"
+        );
+        let (_, notes) = PositioningData::from_csv_str_noted(&run([1, 2], [1, 2, 3])).unwrap();
+        assert!(notes.is_empty(), "{notes:?}");
+    }
+
+    #[test]
+    fn passes_against_their_direction_are_noted() {
+        let swapped = run([1, 2], [1, 2, 3])
+            .replace(",+,", ",x,")
+            .replace(",-,", ",+,")
+            .replace(",x,", ",-,");
+        let (_, notes) = PositioningData::from_csv_str_noted(&swapped).unwrap();
+        assert!(notes.iter().any(|n| n.contains("swapped")), "{notes:?}");
+    }
+
+    #[test]
+    fn numbers_outside_their_physical_range_are_refused_with_the_line() {
+        let huge = run([1, 2], [1, 2, 3]).replacen(",1.5,", ",1e155,", 1);
+        let e = PositioningData::from_csv_str(&huge)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2") && e.contains("deviation"), "{e}");
+        let far = run([1, 2], [1, 2, 3]).replacen(",100,", ",1e308,", 1);
+        let e = PositioningData::from_csv_str(&far).unwrap_err().to_string();
+        assert!(e.contains("target_mm"), "{e}");
+        let alpha = format!("# alpha_um_per_m_k: NaN\n{}", run([1, 2], [1, 2, 3]));
+        let e = PositioningData::from_csv_str(&alpha)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("alpha_um_per_m_k") && e.contains("finite"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_column_named_twice_and_targets_at_one_position_are_refused() {
+        let twice = run([1, 2], [1, 2, 3]).replacen("time_s", "deviation_um", 1);
+        let e = PositioningData::from_csv_str(&twice)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`deviation_um` twice"), "{e}");
+        let one_place = run([1, 2], [1, 2, 3]).replace(",200,", ",100,");
+        let e = PositioningData::from_csv_str(&one_place)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("both at 100 mm"), "{e}");
+    }
+
+    #[test]
+    fn a_dataset_past_the_size_limit_is_refused() {
+        let mut t = String::from("cycle,direction,index,target_mm,deviation_um\n");
+        for k in 0..=MAX_READINGS {
+            t += &format!("1,+,{},{k},0\n", k + 1);
+        }
+        let e = PositioningData::from_csv_str(&t).unwrap_err();
+        assert!(matches!(e, DatasetError::TooLarge(MAX_READINGS)), "{e}");
     }
 }

@@ -9,8 +9,11 @@
 //! ([`iso230_3`]).
 #![warn(unreachable_pub)]
 
+mod cv;
 mod dataset;
 mod error;
+mod filter;
 
+pub use cv::{GainRule, HeldOutGain};
 pub use dataset::ThermalDataset;
 pub use error::ThermalError;

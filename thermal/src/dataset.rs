@@ -142,6 +142,43 @@ impl ThermalDataset {
         })
     }
 
+    /// The inputs (time, speed, temperatures) of `self` followed by those of `next`, whose
+    /// sensors are looked up by name; no displacement.
+    pub fn join_inputs(&self, next: &ThermalDataset) -> Result<Self, ThermalError> {
+        let mismatch = |what: String| ThermalError::Mismatch { what };
+        if let (Some(a), Some(b)) = (self.time_s.last(), next.time_s.first())
+            && b <= a
+        {
+            return Err(mismatch(format!(
+                "the data start at {b} s, not after the history's end at {a} s"
+            )));
+        }
+        let mut temps = vec![];
+        for (name, t) in self.sensor_names.iter().zip(&self.temperatures_c) {
+            let j = next.sensor_index(name).ok_or_else(|| {
+                mismatch(format!("sensor `{name}` of the history is not in the data"))
+            })?;
+            temps.push(t.iter().chain(&next.temperatures_c[j]).copied().collect());
+        }
+        let rpm = match (&self.spindle_rpm, &next.spindle_rpm) {
+            (Some(a), Some(b)) => Some(a.iter().chain(b).copied().collect()),
+            (None, None) => None,
+            _ => {
+                return Err(mismatch(
+                    "`spindle_rpm` is in only one of history and data".into(),
+                ));
+            }
+        };
+        Ok(Self {
+            time_s: self.time_s.iter().chain(&next.time_s).copied().collect(),
+            spindle_rpm: rpm,
+            sensor_names: self.sensor_names.clone(),
+            temperatures_c: temps,
+            channel_names: vec![],
+            displacements_um: vec![],
+        })
+    }
+
     /// Index of a sensor by name.
     pub fn sensor_index(&self, name: &str) -> Option<usize> {
         self.sensor_names.iter().position(|n| n == name)

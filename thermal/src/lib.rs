@@ -9,11 +9,19 @@
 //! ([`iso230_3`]).
 #![warn(unreachable_pub)]
 
+mod baseline;
 mod cv;
 mod dataset;
 mod error;
 mod filter;
+mod inputs;
+mod model;
+mod predict;
+mod select;
 
+pub use baseline::{StaticChannel, StaticFit, static_fit};
 pub use cv::{GainRule, HeldOutGain};
 pub use dataset::ThermalDataset;
 pub use error::ThermalError;
+pub use model::{ChannelModel, FitOptions, Input, Interval, Term, ThermalModel, fit};
+pub use predict::{ChannelPrediction, Prediction};

@@ -39,7 +39,10 @@ impl Default for FitOptions {
             spindle_exponents: vec![1, 2],
             asymmetric: true,
             sensors: None,
-            rule: GainRule::default(),
+            rule: GainRule {
+                min_relative_gain: 0.05,
+                min_t: 0.0,
+            },
             interval_level: 0.95,
         }
     }

@@ -15,6 +15,7 @@ mod dataset;
 mod error;
 mod filter;
 mod inputs;
+pub mod iso230_3;
 mod model;
 mod predict;
 mod select;

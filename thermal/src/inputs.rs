@@ -76,10 +76,6 @@ impl Inputs {
         }
     }
 
-    pub(crate) fn n_sensors(&self) -> usize {
-        self.rises.len()
-    }
-
     pub(crate) fn has_spindle(&self) -> bool {
         self.krpm.is_some()
     }

@@ -12,6 +12,7 @@
 mod baseline;
 mod cv;
 mod dataset;
+mod diagnose;
 mod error;
 mod filter;
 mod inputs;
@@ -19,10 +20,14 @@ pub mod iso230_3;
 mod model;
 mod predict;
 mod select;
+mod sensors;
 
 pub use baseline::{StaticChannel, StaticFit, static_fit};
 pub use cv::{GainRule, HeldOutGain};
 pub use dataset::ThermalDataset;
+pub use diagnose::{
+    ChannelDiagnosis, DiagnoseOptions, Finding, Rung, ThermalDiagnosis, describe, diagnose,
+};
 pub use error::ThermalError;
 pub use model::{ChannelModel, FitOptions, Input, Interval, Term, ThermalModel, fit};
 pub use predict::{ChannelPrediction, Prediction};

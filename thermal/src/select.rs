@@ -28,7 +28,6 @@ pub(crate) struct Search<'a> {
 pub(crate) struct Selection {
     pub(crate) specs: Vec<Spec>,
     pub(crate) score: CvScore,
-    pub(crate) steps: Vec<(Spec, HeldOutGain)>,
 }
 
 impl<'a> Search<'a> {
@@ -247,7 +246,6 @@ impl<'a> Search<'a> {
     ) -> Option<Selection> {
         let mut specs = start;
         let mut score = self.score(&specs)?;
-        let mut steps = vec![];
         while specs.len() < max_terms {
             let Some((cand, _)) = self.best_addition(&specs, pool) else {
                 break;
@@ -261,7 +259,6 @@ impl<'a> Search<'a> {
                 break;
             }
             let s = self.backfit(&mut trial).unwrap_or(s);
-            steps.push((refined, gain));
             specs = trial;
             score = s;
         }

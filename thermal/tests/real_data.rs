@@ -2,7 +2,7 @@
 //! the file, predict the last 40 % from temperatures and speed only.
 
 use std::path::PathBuf;
-use thermal::{FitOptions, ThermalDataset, fit, static_fit};
+use thermal::{DiagnoseOptions, FitOptions, ThermalDataset, diagnose, fit, static_fit};
 
 fn real_file() -> Option<String> {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -27,6 +27,15 @@ fn rms_between(a: &[f64], b: &[f64]) -> f64 {
 fn blocked_split_beats_the_static_fit() {
     let Some(text) = real_file() else { return };
     let ds = ThermalDataset::from_csv(&text).expect("the real file reads");
+    if std::env::var("THERMAL_DIAGNOSE").is_ok() {
+        let t0 = std::time::Instant::now();
+        let d = diagnose(&ds, &DiagnoseOptions::default()).unwrap();
+        eprintln!(
+            "diagnosis of the whole file in {:.1} s\n{}",
+            t0.elapsed().as_secs_f64(),
+            d.render()
+        );
+    }
     let cut = ds.len() * 6 / 10;
     let train = ds.slice(0..cut).unwrap();
     let test = ds.slice(cut..ds.len()).unwrap();

@@ -262,11 +262,7 @@ impl<'a> Search<'a> {
             specs = trial;
             score = s;
         }
-        Some(Selection {
-            specs,
-            score,
-            steps,
-        })
+        Some(Selection { specs, score })
     }
 }
 

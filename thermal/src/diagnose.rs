@@ -234,7 +234,12 @@ fn diagnose_channel(
     let m2 = s
         .forward(vec![], &no_spindle, o.fit.max_terms)
         .ok_or_else(err)?;
-    let m = s.forward(vec![], &pool, o.fit.max_terms).ok_or_else(err)?;
+    let m = s.select(&pool, o.fit.max_terms).ok_or_else(err)?;
+    let m = if m2.score.total() < m.score.total() {
+        m2.clone()
+    } else {
+        m
+    };
     findings.extend(lag_findings(ds, s, &m, o));
     findings.extend(spindle_findings(s, &m, &m2, o));
     let ladder = vec![

@@ -266,6 +266,30 @@ impl<'a> Search<'a> {
     }
 }
 
+impl Search<'_> {
+    /// The better on held-out blocks of two paths: forward selection over the whole pool, and
+    /// sensors first (with their lags) then the whole pool from there. A greedy path that takes
+    /// spindle heat first can end worse than sensors alone.
+    pub(crate) fn select(&self, pool: &Pool, max_terms: usize) -> Option<Selection> {
+        let direct = self.forward(vec![], pool, max_terms);
+        let sensors_only = Pool {
+            spindle_exponents: vec![],
+            asymmetric: false,
+            ..pool.clone()
+        };
+        let first = self.forward(vec![], &sensors_only, max_terms)?;
+        let staged = self.forward(first.specs, pool, max_terms);
+        match (direct, staged) {
+            (Some(a), Some(b)) => Some(if b.score.total() < a.score.total() {
+                b
+            } else {
+                a
+            }),
+            (a, b) => a.or(b),
+        }
+    }
+}
+
 fn with_tau(s: Spec, tau: f64, heat: bool) -> Spec {
     if heat {
         Spec {

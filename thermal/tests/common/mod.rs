@@ -67,16 +67,16 @@ pub fn expected_kinds(c: &[Effect]) -> Vec<&'static str> {
 }
 
 // Nodes of the network.
-const S: usize = 0; // spindle (never read by a sensor)
+const S: usize = 0; // spindle bearings (never read), cooled by a chiller held at 20 °C
 const H: usize = 1; // spindle housing
 const C: usize = 2; // column
 const L: usize = 3; // a mass heated only through the housing (never read)
 
 struct Network {
     cap: [f64; 4],     // J/K
-    g_sh: f64,         // W/K spindle-housing
-    g_sa: f64,         // spindle-ambient at rest
-    g_sa_running: f64, // spindle-ambient while turning
+    g_sa: f64,         // W/K spindle-chiller at rest
+    g_sa_running: f64, // spindle-chiller while turning (more coolant flow)
+    motor_share: f64,  // heat into the housing per unit of the spindle's
     g_ha: f64,
     g_hc: f64,
     g_ca: f64,
@@ -92,12 +92,11 @@ impl Network {
             self.g_sa
         };
         let q = self.heat_per_krpm2 * krpm * krpm;
-        let f_sh = self.g_sh * (t[S] - t[H]);
         let f_hc = self.g_hc * (t[H] - t[C]);
         let f_lh = self.g_lh * (t[H] - t[L]);
         [
-            (q - f_sh - g_sa * (t[S] - ambient)) / self.cap[S],
-            (f_sh - f_hc - f_lh - self.g_ha * (t[H] - ambient)) / self.cap[H],
+            (q - g_sa * (t[S] - 20.0)) / self.cap[S],
+            (self.motor_share * q - f_hc - f_lh - self.g_ha * (t[H] - ambient)) / self.cap[H],
             (f_hc - self.g_ca * (t[C] - ambient)) / self.cap[C],
             f_lh / self.cap[L],
         ]
@@ -137,16 +136,15 @@ pub fn generate(class: &[Effect], seed: u64, hours: f64, dt_s: f64) -> Run {
     let has = |e: Effect| class.contains(&e);
     let asym = has(Effect::Asymmetry);
     let unseen = has(Effect::Unseen) || asym;
-    // Time constants: spindle 15-30 min, housing ~1-2 h, column several hours, L 40-90 min.
+    // Time constants: spindle 15-30 min at rest (3-5x shorter while turning with asymmetry), housing ~1-2 h, column several hours, L 40-90 min.
     let tau_s = rng.random_range(15.0..30.0) * 60.0;
-    let g_sh = 10.0;
-    let g_sa = if asym { 4.0 } else { 3.0 };
+    let g_sa = 10.0;
     let g_sa_running = if asym {
-        g_sa * rng.random_range(5.0..7.0)
+        g_sa * rng.random_range(3.0..5.0)
     } else {
         g_sa
     };
-    let cap_s = tau_s * (g_sh + g_sa);
+    let cap_s = tau_s * g_sa;
     let tau_l = rng.random_range(40.0..90.0) * 60.0;
     let g_lh = 1.0;
     let net = Network {
@@ -156,9 +154,9 @@ pub fn generate(class: &[Effect], seed: u64, hours: f64, dt_s: f64) -> Run {
             rng.random_range(6.0..10.0) * 3600.0 * 6.0,
             tau_l * g_lh,
         ],
-        g_sh,
         g_sa,
         g_sa_running,
+        motor_share: 2.0,
         g_ha: 6.0,
         g_hc: 2.0,
         g_ca: 4.0,
@@ -192,7 +190,7 @@ pub fn generate(class: &[Effect], seed: u64, hours: f64, dt_s: f64) -> Run {
     // Displacement, µm per K of each mass.
     let a_h = rng.random_range(2.0..4.0) * if rng.random_bool(0.5) { 1.0 } else { -1.0 };
     let a_c = rng.random_range(2.0..4.0);
-    let a_s = rng.random_range(3.0..5.0) * if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+    let a_s = rng.random_range(1.5..3.0) * if rng.random_bool(0.5) { 1.0 } else { -1.0 };
     let noise_d = Normal::new(0.0, 0.1).unwrap_or_else(|_| unreachable!());
     let noise_t = Normal::new(0.0, 0.01).unwrap_or_else(|_| unreachable!());
     let noise_copy = Normal::new(0.0, 0.03).unwrap_or_else(|_| unreachable!());

@@ -36,7 +36,7 @@ impl Spec {
         self.tau_heat_s != self.tau_cool_s
     }
 
-    fn key(&self) -> (Src, u64, u64) {
+    fn key(&self) -> Key {
         (
             self.src,
             self.tau_heat_s.to_bits(),
@@ -45,6 +45,9 @@ impl Spec {
     }
 }
 
+/// A column's cache key: its input and its two time constants' bits.
+type Key = (Src, u64, u64);
+
 /// The raw inputs of one dataset and the lagged columns computed from them (cached).
 pub(crate) struct Inputs {
     pub(crate) time_s: Vec<f64>,
@@ -52,7 +55,7 @@ pub(crate) struct Inputs {
     rises: Vec<Vec<f64>>,
     /// Spindle speed in 1000 rpm.
     krpm: Option<Vec<f64>>,
-    cache: RefCell<HashMap<(Src, u64, u64), Rc<Vec<f64>>>>,
+    cache: RefCell<HashMap<Key, Rc<Vec<f64>>>>,
 }
 
 impl Inputs {

@@ -127,6 +127,31 @@ impl BlockStats {
         solve(g, b)
     }
 
+    /// Sums of squares of each block from `first` on predicted by a fit on the blocks
+    /// before it only: the model's use, forward in time and beyond the fitted range.
+    pub(crate) fn forward_score(&self, first: usize) -> Option<CvScore> {
+        let k_all = self.g.len();
+        let first = first.clamp(1, k_all - 1);
+        let mut g = DMatrix::zeros(self.p, self.p);
+        let mut b = DVector::zeros(self.p);
+        for k in 0..first {
+            g += &self.g[k];
+            b += &self.b[k];
+        }
+        let mut sse = vec![];
+        for k in first..k_all {
+            let beta = solve(g.clone(), b.clone())?;
+            let s = self.yy[k] - 2.0 * beta.dot(&self.b[k]) + (&self.g[k] * &beta).dot(&beta);
+            sse.push(s.max(0.0));
+            g += &self.g[k];
+            b += &self.b[k];
+        }
+        sse.iter().all(|v| v.is_finite()).then(|| CvScore {
+            sse,
+            n: self.n[first..].to_vec(),
+        })
+    }
+
     /// Held-out sums of squares, each block predicted from the others.
     pub(crate) fn score(&self) -> Option<CvScore> {
         let mut sse = Vec::with_capacity(self.g.len());

@@ -36,7 +36,7 @@ impl Default for FitOptions {
             blocks: 8,
             max_terms: 6,
             sensor_lags: true,
-            spindle_exponents: vec![1, 2],
+            spindle_exponents: vec![2],
             asymmetric: true,
             sensors: None,
             rule: GainRule {

@@ -212,6 +212,30 @@ pub(crate) fn heldout_residuals(cols: &[&[f64]], y: &[f64], blocks: &Blocks) -> 
     Some(res)
 }
 
+/// Residuals of the blocks from `first` on, each predicted by a fit on the blocks before it
+/// (forward in time); the block ranges are those of `blocks` from `first` on.
+pub(crate) fn forward_residuals(
+    cols: &[&[f64]],
+    y: &[f64],
+    blocks: &Blocks,
+    first: usize,
+) -> Option<(Vec<f64>, Blocks)> {
+    let k_all = blocks.0.len();
+    let first = first.clamp(1, k_all - 1);
+    let mut res = vec![];
+    let mut ranges = vec![];
+    for k in first..k_all {
+        let train = Blocks(vec![0..blocks.0[k].start]);
+        let beta = BlockStats::new(cols, y, &train).coefficients(None)?;
+        let start = res.len();
+        for i in blocks.0[k].clone() {
+            res.push(y[i] - predict_row(&beta, cols, i));
+        }
+        ranges.push(start..res.len());
+    }
+    Some((res, Blocks(ranges)))
+}
+
 pub(crate) fn predict_row(beta: &DVector<f64>, cols: &[&[f64]], i: usize) -> f64 {
     beta[0]
         + cols

@@ -29,6 +29,10 @@ pub struct DiagnoseOptions {
     /// Held-out RMS left, relative to the channel's short-term noise, above which the
     /// channel is called unexplained (3).
     pub unexplained_ratio: f64,
+    /// Least size of a named lag, spindle heat or asymmetry: the RMS it explains on held-out
+    /// blocks, √(before² − after²), relative to the displacement's short-term noise (0.5;
+    /// calibrated on the generator's runs without effects, see docs/methods.md).
+    pub min_effect_noise_ratio: f64,
 }
 
 impl Default for DiagnoseOptions {
@@ -40,6 +44,7 @@ impl Default for DiagnoseOptions {
             noise_ratio_limit: 5.0,
             jump_scales: 10.0,
             unexplained_ratio: 3.0,
+            min_effect_noise_ratio: 0.5,
         }
     }
 }
@@ -240,8 +245,22 @@ fn diagnose_channel(
     } else {
         m
     };
-    findings.extend(lag_findings(ds, s, &m, o));
-    findings.extend(spindle_findings(s, &m, &m2, o));
+    let noise = short_term_noise(s.y);
+    let big_enough = |g: &HeldOutGain| {
+        let explained = (g.rms_before_um.powi(2) - g.rms_after_um.powi(2)).max(0.0).sqrt();
+        explained >= o.min_effect_noise_ratio * noise
+    };
+    findings.extend(
+        lag_findings(ds, s, &m, o)
+            .into_iter()
+            .chain(spindle_findings(s, &m, &m2, o))
+            .filter(|f| match f {
+                Finding::Lag { gain, .. }
+                | Finding::UnseenHeatSource { gain, .. }
+                | Finding::HeatingCoolingAsymmetry { gain, .. } => big_enough(gain),
+                _ => true,
+            }),
+    );
     let ladder = vec![
         Rung {
             model: "static, all sensors".into(),
@@ -260,7 +279,6 @@ fn diagnose_channel(
             heldout_rms_um: m.score.rms(),
         },
     ];
-    let noise = short_term_noise(s.y);
     let left = m.score.rms();
     let unexplained = (left > o.unexplained_ratio * noise).then(|| {
         format!(

@@ -4,7 +4,7 @@
 ///
 /// `tau_heat_s` applies while the input is above the lagged value (it is heating the
 /// lagged value), `tau_cool_s` while it is below. A time constant of 0 passes the input
-/// through. Each step is exact for an input held at its new value over the step.
+/// through. Each step is exact for an input held at the mean of its two readings.
 pub(crate) fn lag(time_s: &[f64], x: &[f64], tau_heat_s: f64, tau_cool_s: f64) -> Vec<f64> {
     let mut out = Vec::with_capacity(x.len());
     let Some(&first) = x.first() else { return out };
@@ -13,10 +13,14 @@ pub(crate) fn lag(time_s: &[f64], x: &[f64], tau_heat_s: f64, tau_cool_s: f64) -
     for k in 1..x.len() {
         let dt = time_s[k] - time_s[k - 1];
         let tau = if x[k] >= y { tau_heat_s } else { tau_cool_s };
+        // A change between two readings happened, on average, halfway between them: the
+        // input over the step is taken as the mean of its two ends (a speed logged at the
+        // new value has run at it for about half the step).
+        let u = 0.5 * (x[k - 1] + x[k]);
         y = if tau <= 0.0 {
             x[k]
         } else {
-            y + (1.0 - (-dt / tau).exp()) * (x[k] - y)
+            y + (1.0 - (-dt / tau).exp()) * (u - y)
         };
         out.push(y);
     }
@@ -33,7 +37,9 @@ mod tests {
         let x: Vec<f64> = t.iter().map(|&t| if t > 0.0 { 1.0 } else { 0.0 }).collect();
         let y = lag(&t, &x, 300.0, 300.0);
         for (k, v) in y.iter().enumerate().skip(1) {
-            let expect = 1.0 - (-(t[k]) / 300.0).exp();
+            // Half the step over the first interval, then the whole: exact.
+            let y1 = 0.5 * (1.0 - (-10.0f64 / 300.0).exp());
+            let expect = 1.0 - (1.0 - y1) * (-(t[k] - 10.0) / 300.0).exp();
             assert!((v - expect).abs() < 1e-12, "{k}: {v} vs {expect}");
         }
     }
@@ -46,9 +52,10 @@ mod tests {
             .map(|&t| if (1.0..1000.0).contains(&t) { 1.0 } else { 0.0 })
             .collect();
         let y = lag(&t, &x, 100.0, 400.0);
-        assert!((y[100] - (1.0 - (-1.0f64).exp())).abs() < 1e-9);
+        // The step is seen half a sample late (a change halfway between readings).
+        assert!((y[100] - (1.0 - (-0.995f64).exp())).abs() < 1e-4);
         let top = y[999];
-        assert!((y[1399] - top * (-1.0f64).exp()).abs() < 1e-9);
+        assert!((y[1399] - top * (-0.99875f64).exp()).abs() < 1e-4);
     }
 
     #[test]

@@ -97,3 +97,18 @@ fn hidden_effects_are_named_sweep() {
     let rows = sweep(100, 100_000);
     check(&rows, 0.95, 0.02);
 }
+
+/// Prints what the ladder saw on one run: THERMAL_RUN="class-index seed".
+#[test]
+#[ignore = "a debugging aid: THERMAL_RUN='2 2002' cargo test ... show_one_run -- --ignored --nocapture"]
+fn show_one_run() {
+    let Ok(spec) = std::env::var("THERMAL_RUN") else {
+        return;
+    };
+    let mut it = spec.split_whitespace().map(|v| v.parse::<u64>().unwrap());
+    let (ci, seed) = (it.next().unwrap() as usize, it.next().unwrap());
+    let run = generate(CLASSES[ci], seed, 20.0, 60.0);
+    let ds = ThermalDataset::from_csv(&run.csv).unwrap();
+    let d = diagnose(&ds, &DiagnoseOptions::default()).unwrap();
+    eprintln!("{}", d.render());
+}

@@ -225,7 +225,7 @@ pub(crate) fn forward_residuals(
     let mut res = vec![];
     let mut ranges = vec![];
     for k in first..k_all {
-        let train = Blocks(vec![0..blocks.0[k].start]);
+        let train = Blocks(std::iter::once(0..blocks.0[k].start).collect());
         let beta = BlockStats::new(cols, y, &train).coefficients(None)?;
         let start = res.len();
         for i in blocks.0[k].clone() {

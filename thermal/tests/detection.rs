@@ -85,14 +85,35 @@ fn check(rows: &[Row], min_detect: f64, max_false: f64) {
 }
 
 #[test]
-#[ignore = "fails: detection and false findings far from target on the current code (docs/methods.md); ~4 min in debug"]
+#[ignore = "below target: 6 runs per class, classes from 16.7 % (lag+unseen, asymmetry+noisy) to 100 % named, 16.7 % of none runs and up to 83 % of asymmetry+noisy runs name an effect not there (docs/methods.md)"]
 fn hidden_effects_are_named_fast() {
     let rows = sweep(6, 1);
     check(&rows, 5.0 / 6.0, 0.05);
 }
 
+/// The default (CI) guard, ~15 s: the same 6 runs per class, held to what the code reaches
+/// now (not the targets): the unseen heat source and the noisy sensor named in 5 of 6 runs,
+/// and at most 1 of the 6 runs without effects naming one.
 #[test]
-#[ignore = "large sweep: cargo test --release -p metrolog-thermal --test detection -- --ignored --nocapture"]
+fn fast_sweep_holds_its_current_level() {
+    let rows = sweep(6, 1);
+    print_table(&rows);
+    for r in &rows {
+        if r.class == "unseen" || r.class == "noisy" {
+            assert!(r.detected >= 5, "{}: {} of 6 named", r.class, r.detected);
+        }
+        if r.class == "none" {
+            assert!(
+                r.false_runs <= 1,
+                "none: {} of 6 runs name an effect",
+                r.false_runs
+            );
+        }
+    }
+}
+
+#[test]
+#[ignore = "100 runs per class (~4 min): below target (≥ 95 % named, ≤ 2 % false); table in docs/methods.md"]
 fn hidden_effects_are_named_sweep() {
     let rows = sweep(100, 100_000);
     check(&rows, 0.95, 0.02);

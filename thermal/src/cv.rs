@@ -1,0 +1,372 @@
+//! Least squares with an intercept, checked on contiguous time blocks held out in turn.
+
+use nalgebra::{DMatrix, DVector};
+use std::ops::Range;
+
+/// Contiguous blocks of samples, held out one at a time.
+#[derive(Debug, Clone)]
+pub(crate) struct Blocks(pub(crate) Vec<Range<usize>>);
+
+impl Blocks {
+    /// `k` blocks of (nearly) equal length over `n` samples.
+    pub(crate) fn contiguous(n: usize, k: usize) -> Self {
+        let k = k.clamp(2, n.max(2));
+        Self((0..k).map(|i| i * n / k..(i + 1) * n / k).collect())
+    }
+}
+
+/// Products of the design (intercept first) with itself and the data, per block.
+#[derive(Debug, Clone)]
+pub(crate) struct BlockStats {
+    p: usize,
+    g: Vec<DMatrix<f64>>,
+    b: Vec<DVector<f64>>,
+    yy: Vec<f64>,
+    n: Vec<usize>,
+}
+
+/// Held-out sums of squares per block.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct CvScore {
+    pub(crate) sse: Vec<f64>,
+    pub(crate) n: Vec<usize>,
+}
+
+impl CvScore {
+    /// RMS of all held-out residuals.
+    pub(crate) fn rms(&self) -> f64 {
+        let n: usize = self.n.iter().sum();
+        (self.sse.iter().sum::<f64>() / n.max(1) as f64).sqrt()
+    }
+
+    pub(crate) fn total(&self) -> f64 {
+        self.sse.iter().sum()
+    }
+}
+
+impl BlockStats {
+    /// Products for the intercept and `cols`.
+    pub(crate) fn new(cols: &[&[f64]], y: &[f64], blocks: &Blocks) -> Self {
+        let mut s = Self::intercept(y, blocks);
+        for c in 0..cols.len() {
+            s = s.with_column(&cols[..c], cols[c], y, blocks);
+        }
+        s
+    }
+
+    fn intercept(y: &[f64], blocks: &Blocks) -> Self {
+        let mut st = Self {
+            p: 1,
+            g: vec![],
+            b: vec![],
+            yy: vec![],
+            n: vec![],
+        };
+        for r in &blocks.0 {
+            let ys = &y[r.clone()];
+            st.g.push(DMatrix::from_element(1, 1, ys.len() as f64));
+            st.b.push(DVector::from_element(1, ys.iter().sum()));
+            st.yy.push(ys.iter().map(|v| v * v).sum());
+            st.n.push(ys.len());
+        }
+        st
+    }
+
+    /// The products once column `c` is added after `cols` (the columns these stats hold).
+    pub(crate) fn with_column(
+        &self,
+        cols: &[&[f64]],
+        c: &[f64],
+        y: &[f64],
+        blocks: &Blocks,
+    ) -> Self {
+        let p = self.p + 1;
+        let mut out = Self {
+            p,
+            g: vec![],
+            b: vec![],
+            yy: self.yy.clone(),
+            n: self.n.clone(),
+        };
+        for (k, r) in blocks.0.iter().enumerate() {
+            let mut g = self.g[k].clone().resize(p, p, 0.0);
+            let cs = &c[r.clone()];
+            g[(0, p - 1)] = cs.iter().sum();
+            for (j, col) in cols.iter().enumerate() {
+                g[(j + 1, p - 1)] = dot(&col[r.clone()], cs);
+            }
+            g[(p - 1, p - 1)] = dot(cs, cs);
+            for j in 0..p - 1 {
+                g[(p - 1, j)] = g[(j, p - 1)];
+            }
+            let mut b = self.b[k].clone().resize_vertically(p, 0.0);
+            b[p - 1] = dot(cs, &y[r.clone()]);
+            out.g.push(g);
+            out.b.push(b);
+        }
+        out
+    }
+
+    fn totals(&self) -> (DMatrix<f64>, DVector<f64>) {
+        let mut g = DMatrix::zeros(self.p, self.p);
+        let mut b = DVector::zeros(self.p);
+        for k in 0..self.g.len() {
+            g += &self.g[k];
+            b += &self.b[k];
+        }
+        (g, b)
+    }
+
+    /// Coefficients (intercept first) fitted on every block but `k`, or on all with `None`.
+    pub(crate) fn coefficients(&self, held_out: Option<usize>) -> Option<DVector<f64>> {
+        let (mut g, mut b) = self.totals();
+        if let Some(k) = held_out {
+            g -= &self.g[k];
+            b -= &self.b[k];
+        }
+        solve(g, b)
+    }
+
+    /// Sums of squares of each block from `first` on predicted by a fit on the blocks
+    /// before it only: the model's use, forward in time and beyond the fitted range.
+    pub(crate) fn forward_score(&self, first: usize) -> Option<CvScore> {
+        let k_all = self.g.len();
+        let first = first.clamp(1, k_all - 1);
+        let mut g = DMatrix::zeros(self.p, self.p);
+        let mut b = DVector::zeros(self.p);
+        for k in 0..first {
+            g += &self.g[k];
+            b += &self.b[k];
+        }
+        let mut sse = vec![];
+        for k in first..k_all {
+            let beta = solve(g.clone(), b.clone())?;
+            let s = self.yy[k] - 2.0 * beta.dot(&self.b[k]) + (&self.g[k] * &beta).dot(&beta);
+            sse.push(s.max(0.0));
+            g += &self.g[k];
+            b += &self.b[k];
+        }
+        sse.iter().all(|v| v.is_finite()).then(|| CvScore {
+            sse,
+            n: self.n[first..].to_vec(),
+        })
+    }
+
+    /// Held-out sums of squares, each block predicted from the others.
+    pub(crate) fn score(&self) -> Option<CvScore> {
+        let mut sse = Vec::with_capacity(self.g.len());
+        for k in 0..self.g.len() {
+            let beta = self.coefficients(Some(k))?;
+            let s = self.yy[k] - 2.0 * beta.dot(&self.b[k]) + (&self.g[k] * &beta).dot(&beta);
+            sse.push(s.max(0.0));
+        }
+        sse.iter().all(|v| v.is_finite()).then(|| CvScore {
+            sse,
+            n: self.n.clone(),
+        })
+    }
+}
+
+/// Solves the normal equations by Cholesky, with a tiny ridge on a near-singular matrix.
+fn solve(g: DMatrix<f64>, b: DVector<f64>) -> Option<DVector<f64>> {
+    let scale: Vec<f64> = (0..g.nrows())
+        .map(|i| g[(i, i)].max(1e-300).sqrt())
+        .collect();
+    let mut a = g;
+    for i in 0..a.nrows() {
+        for j in 0..a.ncols() {
+            a[(i, j)] /= scale[i] * scale[j];
+        }
+    }
+    let bs = DVector::from_iterator(b.len(), b.iter().zip(&scale).map(|(v, s)| v / s));
+    for ridge in [0.0, 1e-12, 1e-9, 1e-6] {
+        let mut m = a.clone();
+        for i in 0..m.nrows() {
+            m[(i, i)] += ridge;
+        }
+        if let Some(ch) = m.cholesky() {
+            let x = ch.solve(&bs);
+            let x = DVector::from_iterator(x.len(), x.iter().zip(&scale).map(|(v, s)| v / s));
+            if x.iter().all(|v| v.is_finite()) {
+                return Some(x);
+            }
+        }
+    }
+    None
+}
+
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Residuals of `y` held out block by block (each block predicted by a fit on the others).
+pub(crate) fn heldout_residuals(cols: &[&[f64]], y: &[f64], blocks: &Blocks) -> Option<Vec<f64>> {
+    let stats = BlockStats::new(cols, y, blocks);
+    let mut res = vec![0.0; y.len()];
+    for (k, r) in blocks.0.iter().enumerate() {
+        let beta = stats.coefficients(Some(k))?;
+        for i in r.clone() {
+            res[i] = y[i] - predict_row(&beta, cols, i);
+        }
+    }
+    Some(res)
+}
+
+/// Residuals of the blocks from `first` on, each predicted by a fit on the blocks before it
+/// (forward in time); the block ranges are those of `blocks` from `first` on.
+pub(crate) fn forward_residuals(
+    cols: &[&[f64]],
+    y: &[f64],
+    blocks: &Blocks,
+    first: usize,
+) -> Option<(Vec<f64>, Blocks)> {
+    let k_all = blocks.0.len();
+    let first = first.clamp(1, k_all - 1);
+    let mut res = vec![];
+    let mut ranges = vec![];
+    for k in first..k_all {
+        let train = Blocks(std::iter::once(0..blocks.0[k].start).collect());
+        let beta = BlockStats::new(cols, y, &train).coefficients(None)?;
+        let start = res.len();
+        for i in blocks.0[k].clone() {
+            res.push(y[i] - predict_row(&beta, cols, i));
+        }
+        ranges.push(start..res.len());
+    }
+    Some((res, Blocks(ranges)))
+}
+
+pub(crate) fn predict_row(beta: &DVector<f64>, cols: &[&[f64]], i: usize) -> f64 {
+    beta[0]
+        + cols
+            .iter()
+            .enumerate()
+            .map(|(j, c)| beta[j + 1] * c[i])
+            .sum::<f64>()
+}
+
+/// The rule that decides whether a change of model gains on held-out blocks.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GainRule {
+    /// Least relative fall of the held-out RMS (0.05: 5 %).
+    pub min_relative_gain: f64,
+    /// Least t value of the per-block log ratio of held-out mean squares.
+    pub min_t: f64,
+}
+
+impl Default for GainRule {
+    fn default() -> Self {
+        Self {
+            min_relative_gain: 0.05,
+            min_t: 3.0,
+        }
+    }
+}
+
+/// A change of model measured on held-out blocks.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct HeldOutGain {
+    /// Held-out RMS before, µm.
+    pub rms_before_um: f64,
+    /// Held-out RMS after, µm.
+    pub rms_after_um: f64,
+    /// t value of the per-block log ratio of held-out mean squares (positive: after is better).
+    pub t: f64,
+    /// Whether the gain passes the rule.
+    pub significant: bool,
+}
+
+impl HeldOutGain {
+    pub(crate) fn between(before: &CvScore, after: &CvScore, rule: &GainRule) -> Self {
+        let floor =
+            1e-12 * (before.total() + after.total()) / before.sse.len().max(1) as f64 + 1e-300;
+        let r: Vec<f64> = before
+            .sse
+            .iter()
+            .zip(&after.sse)
+            .map(|(b, a)| ((b + floor) / (a + floor)).ln())
+            .collect();
+        let k = r.len() as f64;
+        let mean = r.iter().sum::<f64>() / k;
+        let var = r.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (k - 1.0).max(1.0);
+        let se = (var / k).sqrt();
+        let t = if se > 0.0 {
+            mean / se
+        } else if mean > 0.0 {
+            f64::MAX
+        } else {
+            0.0
+        };
+        let (rb, ra) = (before.rms(), after.rms());
+        let significant = t >= rule.min_t && ra <= (1.0 - rule.min_relative_gain) * rb;
+        Self {
+            rms_before_um: rb,
+            rms_after_um: ra,
+            t: t.min(1e6),
+            significant,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn naive_heldout(cols: &[Vec<f64>], y: &[f64], blocks: &Blocks) -> Vec<f64> {
+        let n = y.len();
+        let p = cols.len() + 1;
+        let x = DMatrix::from_fn(n, p, |i, j| if j == 0 { 1.0 } else { cols[j - 1][i] });
+        let mut out = vec![];
+        for r in &blocks.0 {
+            let keep: Vec<usize> = (0..n).filter(|i| !r.contains(i)).collect();
+            let xt = x.select_rows(&keep);
+            let yt = DVector::from_iterator(keep.len(), keep.iter().map(|&i| y[i]));
+            let beta = xt.clone().svd(true, true).solve(&yt, 1e-14).unwrap();
+            out.push(
+                r.clone()
+                    .map(|i| (y[i] - (x.row(i) * &beta)[0]).powi(2))
+                    .sum(),
+            );
+        }
+        out
+    }
+
+    #[test]
+    fn block_cv_matches_refitting_each_fold() {
+        let n = 97;
+        let a: Vec<f64> = (0..n).map(|i| (i as f64 * 0.1).sin()).collect();
+        let b: Vec<f64> = (0..n)
+            .map(|i| (i as f64 * 0.037).cos() + 0.01 * i as f64)
+            .collect();
+        let y: Vec<f64> = (0..n)
+            .map(|i| 1.0 + 2.0 * a[i] - b[i] + 0.1 * ((i * 7919) % 13) as f64)
+            .collect();
+        let blocks = Blocks::contiguous(n, 5);
+        let s = BlockStats::new(&[&a, &b], &y, &blocks).score().unwrap();
+        let naive = naive_heldout(&[a.clone(), b.clone()], &y, &blocks);
+        for (x, z) in s.sse.iter().zip(&naive) {
+            assert!((x - z).abs() < 1e-8 * z.max(1.0), "{x} vs {z}");
+        }
+        let res = heldout_residuals(&[&a, &b], &y, &blocks).unwrap();
+        let sse: f64 = res.iter().map(|r| r * r).sum();
+        assert!((sse - naive.iter().sum::<f64>()).abs() < 1e-8);
+    }
+
+    #[test]
+    fn gain_rule_needs_consistent_gain() {
+        let before = CvScore {
+            sse: vec![4.0; 8],
+            n: vec![10; 8],
+        };
+        let after = CvScore {
+            sse: vec![1.0, 1.1, 0.9, 1.0, 1.2, 0.8, 1.0, 1.0],
+            n: vec![10; 8],
+        };
+        assert!(HeldOutGain::between(&before, &after, &GainRule::default()).significant);
+        let mixed = CvScore {
+            sse: vec![1.0, 8.0, 1.0, 8.0, 1.0, 8.0, 1.0, 4.0],
+            n: vec![10; 8],
+        };
+        assert!(!HeldOutGain::between(&before, &mixed, &GainRule::default()).significant);
+    }
+}

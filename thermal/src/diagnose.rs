@@ -1,0 +1,597 @@
+//! What the static all-temperature regression gets wrong, named with held-out evidence.
+//!
+//! The diagnosis starts from the static fit, extends the model (chosen sensors, their lags,
+//! spindle heat, its heating/cooling asymmetry) and names an effect only when taking it out
+//! again of the extended model loses significantly on held-out time blocks.
+
+use crate::cv::{BlockStats, GainRule, HeldOutGain};
+use crate::dataset::ThermalDataset;
+use crate::error::ThermalError;
+use crate::inputs::{Inputs, Spec, Src};
+use crate::model::{FitOptions, pool, reference_temperatures, searcher};
+use crate::select::{Pool, Search, Selection};
+use crate::sensors::{jumps, short_term_noise, vifs};
+use serde::{Deserialize, Serialize};
+
+/// Thresholds of the diagnosis.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnoseOptions {
+    /// How the extended model is selected.
+    pub fit: FitOptions,
+    /// What a named effect must gain on held-out blocks.
+    pub finding_rule: GainRule,
+    /// Variance inflation above which sensors are collinear (100).
+    pub vif_limit: f64,
+    /// Short-term noise, relative to the median sensor's, above which a sensor is noisy (5).
+    pub noise_ratio_limit: f64,
+    /// A jump: a difference beyond this many robust scales of the sensor's differences (10).
+    pub jump_scales: f64,
+    /// Held-out RMS left, relative to the channel's short-term noise, above which the
+    /// channel is called unexplained (3).
+    pub unexplained_ratio: f64,
+    /// Least size of a named lag, spindle heat or asymmetry: the RMS it explains on held-out
+    /// blocks, √(before² − after²), relative to the displacement's short-term noise (0.5;
+    /// calibrated on the generator's runs without effects, see docs/methods.md).
+    pub min_effect_noise_ratio: f64,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        Self {
+            fit: FitOptions::default(),
+            finding_rule: GainRule::default(),
+            vif_limit: 100.0,
+            noise_ratio_limit: 5.0,
+            jump_scales: 10.0,
+            unexplained_ratio: 3.0,
+            min_effect_noise_ratio: 0.5,
+        }
+    }
+}
+
+/// An effect the static regression misses, with its held-out evidence.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "effect", rename_all = "snake_case")]
+pub enum Finding {
+    /// Sensors so collinear that their static coefficients change from block to block;
+    /// `gain`: the static fit on all sensors → on the chosen ones (must not lose).
+    CollinearSensors {
+        sensors: Vec<String>,
+        max_vif: f64,
+        gain: HeldOutGain,
+    },
+    /// A sensor whose readings carry noise or jumps the others do not and which the static
+    /// fit does not need; `gain`: static fit with it → without it (must not lose).
+    NoisySensor {
+        sensor: String,
+        noise_ratio: f64,
+        jumps: usize,
+        gain: HeldOutGain,
+    },
+    /// The displacement lags this sensor; `gain`: the model with τ = 0 → with τ.
+    Lag {
+        sensor: String,
+        tau_s: f64,
+        gain: HeldOutGain,
+    },
+    /// Spindle heat no sensor sees; `gain`: the best model without spindle input → with it.
+    UnseenHeatSource {
+        exponent: u32,
+        tau_heat_s: f64,
+        tau_cool_s: f64,
+        coefficient: f64,
+        gain: HeldOutGain,
+    },
+    /// The spindle heat's heating and cooling time constants differ; `gain`: one τ → two.
+    HeatingCoolingAsymmetry {
+        tau_heat_s: f64,
+        tau_cool_s: f64,
+        gain: HeldOutGain,
+    },
+}
+
+impl Finding {
+    /// Short name of the effect.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Finding::CollinearSensors { .. } => "collinear sensors",
+            Finding::NoisySensor { .. } => "noisy sensor",
+            Finding::Lag { .. } => "lag",
+            Finding::UnseenHeatSource { .. } => "unseen heat source",
+            Finding::HeatingCoolingAsymmetry { .. } => "heating/cooling asymmetry",
+        }
+    }
+}
+
+/// One rung of the ladder from the static fit to the extended model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Rung {
+    pub model: String,
+    pub heldout_rms_um: f64,
+}
+
+/// The diagnosis of one displacement channel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelDiagnosis {
+    pub channel: String,
+    pub ladder: Vec<Rung>,
+    pub findings: Vec<Finding>,
+    /// Short-term noise of the displacement, µm.
+    pub noise_um: f64,
+    /// What is left unexplained, if the extended model leaves well above the noise.
+    pub unexplained: Option<String>,
+    pub notes: Vec<String>,
+}
+
+/// The diagnosis of every channel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ThermalDiagnosis {
+    pub sensor_notes: Vec<String>,
+    pub channels: Vec<ChannelDiagnosis>,
+}
+
+struct SensorScreen {
+    flagged: Vec<(usize, f64, usize)>,
+    notes: Vec<String>,
+}
+
+fn screen_sensors(ds: &ThermalDataset, o: &DiagnoseOptions) -> SensorScreen {
+    let noise: Vec<f64> = ds
+        .temperatures_c
+        .iter()
+        .map(|t| short_term_noise(t))
+        .collect();
+    let mut flagged = vec![];
+    let mut notes = vec![];
+    for (i, t) in ds.temperatures_c.iter().enumerate() {
+        let mut others: Vec<f64> = noise
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, v)| *v)
+            .collect();
+        others.sort_by(f64::total_cmp);
+        let typical = others
+            .get(others.len() / 2)
+            .copied()
+            .unwrap_or(noise[i])
+            .max(1e-12);
+        let ratio = noise[i] / typical;
+        let nj = jumps(t, o.jump_scales);
+        if ratio > o.noise_ratio_limit || nj > 0 {
+            notes.push(format!(
+                "sensor {}: short-term noise {:.4} K ({ratio:.1}× the median sensor's), {nj} jump(s)",
+                ds.sensor_names[i], noise[i]
+            ));
+            flagged.push((i, ratio, nj));
+        }
+    }
+    SensorScreen { flagged, notes }
+}
+
+/// Diagnoses every displacement channel of `ds`.
+pub fn diagnose(
+    ds: &ThermalDataset,
+    o: &DiagnoseOptions,
+) -> Result<ThermalDiagnosis, ThermalError> {
+    crate::baseline::static_fit(ds, o.fit.blocks)?;
+    let screen = screen_sensors(ds, o);
+    let refs = reference_temperatures(ds);
+    let inputs = Inputs::new(ds, &refs);
+    let base_pool = pool(ds, &o.fit)?;
+    let mut channels = vec![];
+    for (c, y) in ds.displacements_um.iter().enumerate() {
+        let search = searcher(&inputs, y, &o.fit);
+        channels.push(diagnose_channel(ds, &search, &base_pool, &screen, o, c)?);
+    }
+    Ok(ThermalDiagnosis {
+        sensor_notes: screen.notes,
+        channels,
+    })
+}
+
+fn nonfinite(ds: &ThermalDataset, c: usize) -> ThermalError {
+    ThermalError::NonFinite {
+        what: format!("diagnosis of `{}`", ds.channel_names[c]),
+    }
+}
+
+fn diagnose_channel(
+    ds: &ThermalDataset,
+    s: &Search,
+    base_pool: &Pool,
+    screen: &SensorScreen,
+    o: &DiagnoseOptions,
+    c: usize,
+) -> Result<ChannelDiagnosis, ThermalError> {
+    let err = || nonfinite(ds, c);
+    let all: Vec<Spec> = base_pool
+        .sensors
+        .iter()
+        .map(|&i| Spec::symmetric(Src::Sensor(i), 0.0))
+        .collect();
+    let s0 = s.score(&all).ok_or_else(err)?;
+    let mut findings = vec![];
+    let mut notes = vec![];
+    let dropped = noisy_findings(ds, s, &all, &s0, screen, o, &mut findings, &mut notes);
+    let mut pool = base_pool.clone();
+    pool.sensors.retain(|i| !dropped.contains(i));
+    let static_pool = Pool {
+        spindle_exponents: vec![],
+        asymmetric: false,
+        ..pool.clone()
+    };
+    let static_search = Search {
+        sensor_lags: false,
+        ..clone_search(s)
+    };
+    let s1 = static_search
+        .forward(vec![], &static_pool, o.fit.max_terms)
+        .ok_or_else(err)?;
+    if let Some(f) = collinear_finding(ds, s, &pool.sensors, &s0, &s1, o) {
+        findings.push(f);
+    }
+    let no_spindle = Pool {
+        spindle_exponents: vec![],
+        asymmetric: false,
+        ..pool.clone()
+    };
+    let m2 = s
+        .forward(vec![], &no_spindle, o.fit.max_terms)
+        .ok_or_else(err)?;
+    let m = s.select(&pool, o.fit.max_terms).ok_or_else(err)?;
+    let m = if m2.score.total() < m.score.total() {
+        m2.clone()
+    } else {
+        m
+    };
+    let noise = short_term_noise(s.y);
+    let big_enough = |g: &HeldOutGain| {
+        let explained = (g.rms_before_um.powi(2) - g.rms_after_um.powi(2))
+            .max(0.0)
+            .sqrt();
+        explained >= o.min_effect_noise_ratio * noise
+    };
+    findings.extend(
+        lag_findings(ds, s, &m, o)
+            .into_iter()
+            .chain(spindle_findings(s, &m, &m2, o))
+            .filter(|f| match f {
+                Finding::Lag { gain, .. }
+                | Finding::UnseenHeatSource { gain, .. }
+                | Finding::HeatingCoolingAsymmetry { gain, .. } => big_enough(gain),
+                _ => true,
+            }),
+    );
+    let ladder = vec![
+        Rung {
+            model: "static, all sensors".into(),
+            heldout_rms_um: s0.rms(),
+        },
+        Rung {
+            model: "static, chosen sensors".into(),
+            heldout_rms_um: s1.score.rms(),
+        },
+        Rung {
+            model: "chosen sensors with lags".into(),
+            heldout_rms_um: m2.score.rms(),
+        },
+        Rung {
+            model: "with spindle heat".into(),
+            heldout_rms_um: m.score.rms(),
+        },
+    ];
+    let left = m.score.rms();
+    let unexplained = (left > o.unexplained_ratio * noise).then(|| {
+        format!(
+            "the extended model leaves {left:.3} µm RMS on held-out blocks, {:.1}× the displacement's short-term noise {noise:.3} µm: an effect no input here explains (another heat source, ambient not measured, the measuring set-up)",
+            left / noise.max(1e-12)
+        )
+    });
+    if ladder.iter().any(|r| !r.heldout_rms_um.is_finite()) {
+        return Err(err());
+    }
+    Ok(ChannelDiagnosis {
+        channel: ds.channel_names[c].clone(),
+        ladder,
+        findings,
+        noise_um: noise,
+        unexplained,
+        notes,
+    })
+}
+
+fn clone_search<'a>(s: &Search<'a>) -> Search<'a> {
+    Search {
+        inputs: s.inputs,
+        y: s.y,
+        blocks: s.blocks.clone(),
+        grid: s.grid.clone(),
+        rule: s.rule,
+        sensor_lags: s.sensor_lags,
+    }
+}
+
+/// A flagged sensor is named when the static fit does not lose without it.
+#[allow(clippy::too_many_arguments)]
+fn noisy_findings(
+    ds: &ThermalDataset,
+    s: &Search,
+    all: &[Spec],
+    s0: &crate::cv::CvScore,
+    screen: &SensorScreen,
+    o: &DiagnoseOptions,
+    findings: &mut Vec<Finding>,
+    notes: &mut Vec<String>,
+) -> Vec<usize> {
+    let mut dropped = vec![];
+    for &(i, ratio, nj) in &screen.flagged {
+        let without: Vec<Spec> = all
+            .iter()
+            .filter(|sp| sp.src != Src::Sensor(i))
+            .copied()
+            .collect();
+        let Some(sw) = s.score(&without) else {
+            continue;
+        };
+        let gain = HeldOutGain::between(s0, &sw, &o.finding_rule);
+        let name = ds.sensor_names[i].clone();
+        if gain.rms_after_um <= (1.0 + o.finding_rule.min_relative_gain) * gain.rms_before_um {
+            findings.push(Finding::NoisySensor {
+                sensor: name,
+                noise_ratio: ratio,
+                jumps: nj,
+                gain,
+            });
+            dropped.push(i);
+        } else {
+            notes.push(format!(
+                "sensor {name} is noisy or jumps but carries information: the static fit's held-out RMS rises {:.3} → {:.3} µm without it",
+                gain.rms_before_um, gain.rms_after_um
+            ));
+        }
+    }
+    dropped
+}
+
+/// Collinear sensors: variance inflation above the limit in the static design (all sensors
+/// with an intercept), a property of the data whatever the outcome.
+fn collinear_finding(
+    ds: &ThermalDataset,
+    s: &Search,
+    sensors: &[usize],
+    s0: &crate::cv::CvScore,
+    s1: &Selection,
+    o: &DiagnoseOptions,
+) -> Option<Finding> {
+    let cols: Vec<Vec<f64>> = sensors
+        .iter()
+        .map(|&i| s.inputs.raw(Src::Sensor(i)))
+        .collect::<Option<_>>()?;
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let v = vifs(&refs);
+    let group: Vec<usize> = (0..sensors.len()).filter(|&k| v[k] > o.vif_limit).collect();
+    if group.len() < 2 {
+        return None;
+    }
+    // Collinearity is a property of the data (the static design's variance inflation), not
+    // of the outcome: the gain of the chosen sensors over all is reported, not required.
+    let gain = HeldOutGain::between(s0, &s1.score, &o.finding_rule);
+    let max_vif = group.iter().map(|&k| v[k]).fold(0.0, f64::max);
+    Some(Finding::CollinearSensors {
+        sensors: group
+            .iter()
+            .map(|&k| ds.sensor_names[sensors[k]].clone())
+            .collect(),
+        max_vif,
+        gain,
+    })
+}
+
+/// Each lagged sensor of the model whose lag, set to 0 with the others searched again,
+/// loses significantly.
+fn lag_findings(
+    ds: &ThermalDataset,
+    s: &Search,
+    m: &Selection,
+    o: &DiagnoseOptions,
+) -> Vec<Finding> {
+    let mut out = vec![];
+    for (idx, spec) in m.specs.iter().enumerate() {
+        let Src::Sensor(i) = spec.src else { continue };
+        if spec.tau_heat_s == 0.0 {
+            continue;
+        }
+        let mut without = m.specs.clone();
+        without[idx] = Spec::symmetric(spec.src, 0.0);
+        let others = Search {
+            sensor_lags: true,
+            ..clone_search(s)
+        };
+        let Some(sw) = backfit_except(&others, &mut without, idx) else {
+            continue;
+        };
+        let gain = HeldOutGain::between(&sw, &m.score, &o.finding_rule);
+        if gain.significant {
+            out.push(Finding::Lag {
+                sensor: ds.sensor_names[i].clone(),
+                tau_s: spec.tau_heat_s,
+                gain,
+            });
+        }
+    }
+    out
+}
+
+fn backfit_except(s: &Search, specs: &mut [Spec], keep: usize) -> Option<crate::cv::CvScore> {
+    let mut score = s.score(specs)?;
+    for idx in (0..specs.len()).filter(|&i| i != keep) {
+        let (spec, sc) = s.refine(specs, idx);
+        if sc.total() < score.total() {
+            specs[idx] = spec;
+            score = sc;
+        }
+    }
+    Some(score)
+}
+
+/// Spindle heat named when the best model without it loses significantly; its asymmetry
+/// when one time constant for both loses significantly.
+fn spindle_findings(
+    s: &Search,
+    m: &Selection,
+    m2: &Selection,
+    o: &DiagnoseOptions,
+) -> Vec<Finding> {
+    let mut out = vec![];
+    let Some((idx, spec)) = m
+        .specs
+        .iter()
+        .enumerate()
+        .find(|(_, sp)| matches!(sp.src, Src::Spindle(_)))
+    else {
+        return out;
+    };
+    let gain = HeldOutGain::between(&m2.score, &m.score, &o.finding_rule);
+    if !gain.significant {
+        return out;
+    }
+    let Src::Spindle(exponent) = spec.src else {
+        return out;
+    };
+    let coefficient = coefficient_of(s, &m.specs, idx).unwrap_or(0.0);
+    out.push(Finding::UnseenHeatSource {
+        exponent,
+        tau_heat_s: spec.tau_heat_s,
+        tau_cool_s: spec.tau_cool_s,
+        coefficient,
+        gain,
+    });
+    if spec.is_asymmetric() {
+        let mut sym = m.specs.clone();
+        sym[idx] = Spec::symmetric(spec.src, (spec.tau_heat_s * spec.tau_cool_s).sqrt());
+        let (r, _) = s.refine(&sym, idx);
+        sym[idx] = r;
+        if let Some(ss) = s.backfit(&mut sym) {
+            let g = HeldOutGain::between(&ss, &m.score, &o.finding_rule);
+            if g.significant {
+                out.push(Finding::HeatingCoolingAsymmetry {
+                    tau_heat_s: spec.tau_heat_s,
+                    tau_cool_s: spec.tau_cool_s,
+                    gain: g,
+                });
+            }
+        }
+    }
+    out
+}
+
+fn coefficient_of(s: &Search, specs: &[Spec], idx: usize) -> Option<f64> {
+    let cols = s.columns(specs)?;
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    Some(BlockStats::new(&refs, s.y, &s.blocks).coefficients(None)?[idx + 1])
+}
+
+impl ThermalDiagnosis {
+    /// Plain-text report.
+    pub fn render(&self) -> String {
+        let mut out = String::from("Thermal diagnosis (held-out contiguous time blocks)\n");
+        for n in &self.sensor_notes {
+            out += &format!("  note: {n}\n");
+        }
+        for ch in &self.channels {
+            out += &ch.render();
+        }
+        out
+    }
+}
+
+impl ChannelDiagnosis {
+    fn render(&self) -> String {
+        let mut out = format!(
+            "\n{} (short-term noise {:.3} µm)\n",
+            self.channel, self.noise_um
+        );
+        for r in &self.ladder {
+            out += &format!(
+                "  {:<28} held-out RMS {:>8.3} µm\n",
+                r.model, r.heldout_rms_um
+            );
+        }
+        if self.findings.is_empty() {
+            out += "  findings: none (no extension gains significantly on held-out blocks)\n";
+        }
+        for f in &self.findings {
+            out += &format!("  finding: {}\n", describe(f));
+        }
+        if let Some(u) = &self.unexplained {
+            out += &format!("  unexplained: {u}\n");
+        }
+        for n in &self.notes {
+            out += &format!("  note: {n}\n");
+        }
+        out
+    }
+}
+
+fn gain_text(g: &HeldOutGain) -> String {
+    format!(
+        "held-out RMS {:.3} → {:.3} µm, t = {:.1}",
+        g.rms_before_um, g.rms_after_um, g.t
+    )
+}
+
+/// One line for a finding.
+pub fn describe(f: &Finding) -> String {
+    match f {
+        Finding::CollinearSensors {
+            sensors,
+            max_vif,
+            gain,
+        } => format!(
+            "collinear sensors {} (variance inflation up to {max_vif:.0}): their static coefficients change from block to block and mean nothing one by one; chosen sensors predict as well ({})",
+            sensors.join(", "),
+            gain_text(gain)
+        ),
+        Finding::NoisySensor {
+            sensor,
+            noise_ratio,
+            jumps,
+            gain,
+        } => format!(
+            "sensor {sensor} only adds noise ({noise_ratio:.1}× the median sensor's short-term noise, {jumps} jump(s)); the static fit without it: {}",
+            gain_text(gain)
+        ),
+        Finding::Lag {
+            sensor,
+            tau_s,
+            gain,
+        } => format!(
+            "the displacement lags sensor {sensor} by τ = {:.1} min ({})",
+            tau_s / 60.0,
+            gain_text(gain)
+        ),
+        Finding::UnseenHeatSource {
+            exponent,
+            tau_heat_s,
+            tau_cool_s,
+            coefficient,
+            gain,
+        } => format!(
+            "a heat source no sensor sees, following spindle speed^{exponent} (heating τ = {:.1} min, cooling τ = {:.1} min, {coefficient:+.3} µm per (1000 rpm)^{exponent}; {})",
+            tau_heat_s / 60.0,
+            tau_cool_s / 60.0,
+            gain_text(gain)
+        ),
+        Finding::HeatingCoolingAsymmetry {
+            tau_heat_s,
+            tau_cool_s,
+            gain,
+        } => format!(
+            "spindle heating and cooling differ: τ = {:.1} min heating, {:.1} min cooling ({})",
+            tau_heat_s / 60.0,
+            tau_cool_s / 60.0,
+            gain_text(gain)
+        ),
+    }
+}

@@ -1,0 +1,125 @@
+//! The model's input columns: sensor temperature rises and spindle speed, through lags.
+
+use crate::dataset::ThermalDataset;
+use crate::filter::lag;
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::rc::Rc;
+
+/// Where a term's input comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) enum Src {
+    /// Sensor index in the dataset.
+    Sensor(usize),
+    /// Spindle speed as (rpm / 1000)^exponent.
+    Spindle(u32),
+}
+
+/// A term before its coefficient is known: an input and its lag.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Spec {
+    pub(crate) src: Src,
+    pub(crate) tau_heat_s: f64,
+    pub(crate) tau_cool_s: f64,
+}
+
+impl Spec {
+    pub(crate) fn symmetric(src: Src, tau_s: f64) -> Self {
+        Self {
+            src,
+            tau_heat_s: tau_s,
+            tau_cool_s: tau_s,
+        }
+    }
+
+    pub(crate) fn is_asymmetric(&self) -> bool {
+        self.tau_heat_s != self.tau_cool_s
+    }
+
+    fn key(&self) -> Key {
+        (
+            self.src,
+            self.tau_heat_s.to_bits(),
+            self.tau_cool_s.to_bits(),
+        )
+    }
+}
+
+/// A column's cache key: its input and its two time constants' bits.
+type Key = (Src, u64, u64);
+
+/// The raw inputs of one dataset and the lagged columns computed from them (cached).
+pub(crate) struct Inputs {
+    pub(crate) time_s: Vec<f64>,
+    /// Temperature rise above the reference, K, per sensor.
+    rises: Vec<Vec<f64>>,
+    /// Spindle speed in 1000 rpm.
+    krpm: Option<Vec<f64>>,
+    cache: RefCell<HashMap<Key, Rc<Vec<f64>>>>,
+}
+
+impl Inputs {
+    /// Inputs of `ds` with temperature rises above `reference_c` (one per sensor).
+    pub(crate) fn new(ds: &ThermalDataset, reference_c: &[f64]) -> Self {
+        let rises = ds
+            .temperatures_c
+            .iter()
+            .zip(reference_c)
+            .map(|(t, r)| t.iter().map(|v| v - r).collect())
+            .collect();
+        let krpm = ds
+            .spindle_rpm
+            .as_ref()
+            .map(|v| v.iter().map(|r| r / 1000.0).collect());
+        Self {
+            time_s: ds.time_s.clone(),
+            rises,
+            krpm,
+            cache: RefCell::new(HashMap::new()),
+        }
+    }
+
+    pub(crate) fn has_spindle(&self) -> bool {
+        self.krpm.is_some()
+    }
+
+    /// The raw (unlagged) input of `src`, or `None` when the dataset lacks it.
+    pub(crate) fn raw(&self, src: Src) -> Option<Vec<f64>> {
+        match src {
+            Src::Sensor(i) => self.rises.get(i).cloned(),
+            Src::Spindle(p) => self
+                .krpm
+                .as_ref()
+                .map(|v| v.iter().map(|x| x.abs().powi(p as i32)).collect()),
+        }
+    }
+
+    /// The lagged column of `spec` (computed once per dataset).
+    pub(crate) fn column(&self, spec: &Spec) -> Option<Rc<Vec<f64>>> {
+        if let Some(c) = self.cache.borrow().get(&spec.key()) {
+            return Some(Rc::clone(c));
+        }
+        let raw = self.raw(spec.src)?;
+        let col = Rc::new(lag(&self.time_s, &raw, spec.tau_heat_s, spec.tau_cool_s));
+        self.cache.borrow_mut().insert(spec.key(), Rc::clone(&col));
+        Some(col)
+    }
+}
+
+/// Time constants tried, s: 1 min to 12 h, those between two samples and half the run.
+pub(crate) fn tau_grid(time_s: &[f64]) -> Vec<f64> {
+    const MINUTES: [f64; 18] = [
+        1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0, 240.0,
+        360.0, 480.0, 720.0,
+    ];
+    let n = time_s.len();
+    let span = time_s[n - 1] - time_s[0];
+    let mut dts: Vec<f64> = time_s.windows(2).map(|w| w[1] - w[0]).collect();
+    dts.sort_by(f64::total_cmp);
+    let dt = dts.get(dts.len() / 2).copied().unwrap_or(1.0);
+    MINUTES
+        .iter()
+        .map(|m| m * 60.0)
+        .filter(|&t| t >= 2.0 * dt && t <= span / 2.0)
+        .collect()
+}

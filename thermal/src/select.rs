@@ -1,0 +1,327 @@
+//! Forward selection of lagged inputs judged on held-out time blocks.
+
+use crate::cv::{BlockStats, Blocks, CvScore, GainRule, HeldOutGain};
+use crate::inputs::{Inputs, Spec, Src};
+use std::rc::Rc;
+
+/// Which terms a selection may use.
+#[derive(Debug, Clone)]
+pub(crate) struct Pool {
+    pub(crate) sensors: Vec<usize>,
+    pub(crate) spindle_exponents: Vec<u32>,
+    pub(crate) asymmetric: bool,
+}
+
+/// The search for one displacement channel.
+pub(crate) struct Search<'a> {
+    pub(crate) inputs: &'a Inputs,
+    pub(crate) y: &'a [f64],
+    pub(crate) blocks: Blocks,
+    pub(crate) grid: Vec<f64>,
+    pub(crate) rule: GainRule,
+    /// Whether sensor terms may have a lag (their τ is searched).
+    pub(crate) sensor_lags: bool,
+}
+
+/// A selected model: its terms, held-out score and the gain of each step.
+#[derive(Debug, Clone)]
+pub(crate) struct Selection {
+    pub(crate) specs: Vec<Spec>,
+    pub(crate) score: CvScore,
+}
+
+impl<'a> Search<'a> {
+    pub(crate) fn columns(&self, specs: &[Spec]) -> Option<Vec<Rc<Vec<f64>>>> {
+        specs.iter().map(|s| self.inputs.column(s)).collect()
+    }
+
+    fn stats(&self, specs: &[Spec]) -> Option<BlockStats> {
+        let cols = self.columns(specs)?;
+        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+        Some(BlockStats::new(&refs, self.y, &self.blocks))
+    }
+
+    /// Forward-in-time score of a model: each block of the second half predicted by a fit
+    /// on the blocks before it.
+    pub(crate) fn forward_score(&self, specs: &[Spec]) -> Option<CvScore> {
+        self.stats(specs)?.forward_score(self.blocks.0.len() / 2)
+    }
+
+    /// Held-out score of a model.
+    pub(crate) fn score(&self, specs: &[Spec]) -> Option<CvScore> {
+        self.stats(specs)?.score()
+    }
+
+    /// Scores of `base` plus each of `cands` in turn.
+    fn scores_with(&self, base: &[Spec], cands: &[Spec]) -> Vec<(Spec, CvScore)> {
+        let (Some(stats), Some(cols)) = (self.stats(base), self.columns(base)) else {
+            return vec![];
+        };
+        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+        cands
+            .iter()
+            .filter_map(|c| {
+                let col = self.inputs.column(c)?;
+                let s = stats
+                    .with_column(&refs, &col, self.y, &self.blocks)
+                    .score()?;
+                Some((*c, s))
+            })
+            .collect()
+    }
+
+    fn symmetric_candidates(&self, pool: &Pool) -> Vec<Spec> {
+        let mut out = vec![];
+        for &i in &pool.sensors {
+            out.push(Spec::symmetric(Src::Sensor(i), 0.0));
+            if self.sensor_lags {
+                out.extend(
+                    self.grid
+                        .iter()
+                        .map(|&t| Spec::symmetric(Src::Sensor(i), t)),
+                );
+            }
+        }
+        if self.inputs.has_spindle() {
+            for &p in &pool.spindle_exponents {
+                out.push(Spec::symmetric(Src::Spindle(p), 0.0));
+                out.extend(
+                    self.grid
+                        .iter()
+                        .map(|&t| Spec::symmetric(Src::Spindle(p), t)),
+                );
+            }
+        }
+        out
+    }
+
+    fn asymmetric_candidates(&self, p: u32) -> Vec<Spec> {
+        let coarse: Vec<f64> = self.grid.iter().copied().step_by(2).collect();
+        let mut out = vec![];
+        for &h in &coarse {
+            for &c in coarse.iter().filter(|&&c| c != h) {
+                out.push(Spec {
+                    src: Src::Spindle(p),
+                    tau_heat_s: h,
+                    tau_cool_s: c,
+                });
+            }
+        }
+        out
+    }
+
+    /// The best term to add to `sel`: an asymmetric spindle term only when it gains on
+    /// the best symmetric one of the same input.
+    fn best_addition(&self, sel: &[Spec], pool: &Pool) -> Option<(Spec, CvScore)> {
+        let cands: Vec<Spec> = self
+            .symmetric_candidates(pool)
+            .into_iter()
+            .filter(|c| !sel.contains(c))
+            .collect();
+        let scored = self.scores_with(sel, &cands);
+        let mut best = best_of(scored.iter().cloned())?;
+        if let (Src::Spindle(p), true) = (best.0.src, pool.asymmetric) {
+            let asym = self.scores_with(sel, &self.asymmetric_candidates(p));
+            if let Some(a) = best_of(asym.into_iter()) {
+                let mut trial = sel.to_vec();
+                trial.push(a.0);
+                let refined = self.refine(&trial, trial.len() - 1);
+                if HeldOutGain::between(&best.1, &refined.1, &self.rule).significant {
+                    best = refined;
+                }
+            }
+        }
+        Some(best)
+    }
+
+    /// Term `idx` of `specs` with its time constant(s) searched, the others fixed.
+    pub(crate) fn refine(&self, specs: &[Spec], idx: usize) -> (Spec, CvScore) {
+        let others: Vec<Spec> = specs
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != idx)
+            .map(|(_, s)| *s)
+            .collect();
+        let mut cur = specs[idx];
+        let mut best = self.scores_with(&others, &[cur]).pop();
+        if cur.is_asymmetric() {
+            for heat in [true, false] {
+                let cands: Vec<Spec> = self.grid.iter().map(|&t| with_tau(cur, t, heat)).collect();
+                if let Some(b) = best_of(
+                    self.scores_with(&others, &cands)
+                        .into_iter()
+                        .chain(best.clone()),
+                ) {
+                    cur = b.0;
+                    best = Some(self.golden(&others, b, heat));
+                    cur = best.as_ref().map_or(cur, |b| b.0);
+                }
+            }
+        } else {
+            if matches!(cur.src, Src::Sensor(_)) && !self.sensor_lags {
+                return best.unwrap_or_else(|| (cur, self.worst()));
+            }
+            let taus = std::iter::once(0.0).chain(self.grid.iter().copied());
+            let cands: Vec<Spec> = taus.map(|t| Spec::symmetric(cur.src, t)).collect();
+            if let Some(b) = best_of(
+                self.scores_with(&others, &cands)
+                    .into_iter()
+                    .chain(best.clone()),
+            ) {
+                best = Some(self.golden(&others, b, true));
+            }
+        }
+        best.unwrap_or_else(|| (cur, self.worst()))
+    }
+
+    fn worst(&self) -> CvScore {
+        let k = self.blocks.0.len();
+        CvScore {
+            sse: vec![f64::MAX / (k as f64 + 1.0); k],
+            n: vec![1; k],
+        }
+    }
+
+    /// Golden-section search of log τ between the grid neighbours of the best value.
+    fn golden(&self, others: &[Spec], best: (Spec, CvScore), heat: bool) -> (Spec, CvScore) {
+        let tau = if heat {
+            best.0.tau_heat_s
+        } else {
+            best.0.tau_cool_s
+        };
+        let Some(pos) = self.grid.iter().position(|&g| g == tau) else {
+            return best;
+        };
+        let lo = if pos == 0 {
+            tau / 1.5
+        } else {
+            self.grid[pos - 1]
+        };
+        let hi = self.grid.get(pos + 1).copied().unwrap_or(tau * 1.5);
+        let symmetric = !best.0.is_asymmetric();
+        let start = best.0;
+        let make = |t: f64| {
+            if symmetric {
+                Spec::symmetric(start.src, t)
+            } else {
+                with_tau(start, t, heat)
+            }
+        };
+        let eval = |x: f64| self.scores_with(others, &[make(x.exp())]).pop();
+        let (mut a, mut b) = (lo.ln(), hi.ln());
+        let r = 0.618_033_988_749_895;
+        let mut out = best;
+        for _ in 0..10 {
+            let (x1, x2) = (b - r * (b - a), a + r * (b - a));
+            let (Some(f1), Some(f2)) = (eval(x1), eval(x2)) else {
+                break;
+            };
+            let better = if f1.1.total() < f2.1.total() {
+                b = x2;
+                f1
+            } else {
+                a = x1;
+                f2
+            };
+            if better.1.total() < out.1.total() {
+                out = better;
+            }
+        }
+        out
+    }
+
+    /// Each term's time constant searched again with the others in (one pass).
+    pub(crate) fn backfit(&self, specs: &mut [Spec]) -> Option<CvScore> {
+        let mut score = self.score(specs)?;
+        for idx in 0..specs.len() {
+            let (spec, s) = self.refine(specs, idx);
+            if s.total() < score.total() {
+                specs[idx] = spec;
+                score = s;
+            }
+        }
+        Some(score)
+    }
+
+    /// Forward selection from `start`, each step kept when it gains on held-out blocks.
+    pub(crate) fn forward(
+        &self,
+        start: Vec<Spec>,
+        pool: &Pool,
+        max_terms: usize,
+    ) -> Option<Selection> {
+        let mut specs = start;
+        let mut score = self.score(&specs)?;
+        while specs.len() < max_terms {
+            let Some((cand, _)) = self.best_addition(&specs, pool) else {
+                break;
+            };
+            let mut trial = specs.clone();
+            trial.push(cand);
+            let (refined, s) = self.refine(&trial, trial.len() - 1);
+            *trial.last_mut()? = refined;
+            let gain = HeldOutGain::between(&score, &s, &self.rule);
+            if !gain.significant {
+                break;
+            }
+            let s = self.backfit(&mut trial).unwrap_or(s);
+            specs = trial;
+            score = s;
+        }
+        Some(Selection { specs, score })
+    }
+}
+
+impl Search<'_> {
+    /// The better on held-out blocks of two paths: forward selection over the whole pool, and
+    /// sensors first (with their lags) then the whole pool from there. A greedy path that takes
+    /// spindle heat first can end worse than sensors alone.
+    pub(crate) fn select(&self, pool: &Pool, max_terms: usize) -> Option<Selection> {
+        let direct = self.forward(vec![], pool, max_terms);
+        let sensors_only = Pool {
+            spindle_exponents: vec![],
+            asymmetric: false,
+            ..pool.clone()
+        };
+        let first = self.forward(vec![], &sensors_only, max_terms)?;
+        let staged = self.forward(first.specs, pool, max_terms);
+        // A greedy path that keeps few sensors can end worse than the static fit on every
+        // sensor it should improve on: a path starts from that static fit too, and the static
+        // fit itself is a candidate. Held-out blocks between fitted ones favour many collinear
+        // sensors that extrapolate badly, so the candidate is chosen by predicting forward in
+        // time (each later block from the blocks before it), the model's use.
+        let all: Vec<Spec> = pool
+            .sensors
+            .iter()
+            .map(|&i| Spec::symmetric(Src::Sensor(i), 0.0))
+            .collect();
+        let stat = self.score(&all).map(|score| Selection {
+            specs: all.clone(),
+            score,
+        });
+        [direct, staged, stat]
+            .into_iter()
+            .flatten()
+            .filter_map(|c| Some((self.forward_score(&c.specs)?.total(), c)))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, c)| c)
+    }
+}
+
+fn with_tau(s: Spec, tau: f64, heat: bool) -> Spec {
+    if heat {
+        Spec {
+            tau_heat_s: tau,
+            ..s
+        }
+    } else {
+        Spec {
+            tau_cool_s: tau,
+            ..s
+        }
+    }
+}
+
+fn best_of(it: impl Iterator<Item = (Spec, CvScore)>) -> Option<(Spec, CvScore)> {
+    it.min_by(|a, b| a.1.total().total_cmp(&b.1.total()))
+}

@@ -1,0 +1,135 @@
+//! Detection of hidden thermal effects on the generator's runs (tests/common): the share of
+//! runs of each class whose effects are all named, and of runs naming an effect not there.
+
+mod common;
+
+use common::{CLASSES, class_name, expected_kinds, generate};
+use thermal::{DiagnoseOptions, ThermalDataset, diagnose};
+
+struct Row {
+    class: String,
+    runs: usize,
+    detected: usize,
+    false_runs: usize,
+}
+
+fn sweep(runs: usize, seed0: u64) -> Vec<Row> {
+    let opts = DiagnoseOptions::default();
+    let mut rows = vec![];
+    for (ci, class) in CLASSES.iter().enumerate() {
+        let expect = expected_kinds(class);
+        let mut row = Row {
+            class: class_name(class),
+            runs,
+            detected: 0,
+            false_runs: 0,
+        };
+        for r in 0..runs {
+            let seed = seed0 + 1000 * ci as u64 + r as u64;
+            let run = generate(class, seed, 20.0, 60.0);
+            let ds = ThermalDataset::from_csv(&run.csv).expect("generated CSV reads");
+            let d = diagnose(&ds, &opts).expect("diagnosis runs");
+            let kinds: Vec<&str> = d.channels[0].findings.iter().map(|f| f.kind()).collect();
+            if expect.iter().all(|k| kinds.contains(k)) {
+                row.detected += 1;
+            }
+            if kinds.iter().any(|k| !expect.contains(k)) {
+                row.false_runs += 1;
+                eprintln!("{} seed {seed}: {kinds:?}", row.class);
+            }
+        }
+        rows.push(row);
+    }
+    rows
+}
+
+fn print_table(rows: &[Row]) {
+    eprintln!("| class | runs | all effects named | runs naming an effect not there |");
+    eprintln!("|---|---|---|---|");
+    for r in rows {
+        let det = if r.class == "none" {
+            "–".to_string()
+        } else {
+            format!("{:.1} %", 100.0 * r.detected as f64 / r.runs as f64)
+        };
+        eprintln!(
+            "| {} | {} | {det} | {:.1} % |",
+            r.class,
+            r.runs,
+            100.0 * r.false_runs as f64 / r.runs as f64
+        );
+    }
+}
+
+fn check(rows: &[Row], min_detect: f64, max_false: f64) {
+    print_table(rows);
+    let total: usize = rows.iter().map(|r| r.runs).sum();
+    let false_runs: usize = rows.iter().map(|r| r.false_runs).sum();
+    let low: Vec<&str> = rows
+        .iter()
+        .filter(|r| r.class != "none" && (r.detected as f64) < min_detect * r.runs as f64)
+        .map(|r| r.class.as_str())
+        .collect();
+    assert!(
+        low.is_empty(),
+        "classes detected in under {:.0} % of runs: {low:?}",
+        100.0 * min_detect
+    );
+    let f = false_runs as f64 / total as f64;
+    assert!(
+        f <= max_false,
+        "runs with false findings {:.1} % > {:.1} %",
+        100.0 * f,
+        100.0 * max_false
+    );
+}
+
+#[test]
+#[ignore = "below target: 6 runs per class, classes from 16.7 % (lag+unseen, asymmetry+noisy) to 100 % named, 16.7 % of none runs and up to 83 % of asymmetry+noisy runs name an effect not there (docs/methods.md)"]
+fn hidden_effects_are_named_fast() {
+    let rows = sweep(6, 1);
+    check(&rows, 5.0 / 6.0, 0.05);
+}
+
+/// The default (CI) guard, ~15 s: the same 6 runs per class, held to what the code reaches
+/// now (not the targets): the unseen heat source and the noisy sensor named in 5 of 6 runs,
+/// and at most 1 of the 6 runs without effects naming one.
+#[test]
+fn fast_sweep_holds_its_current_level() {
+    let rows = sweep(6, 1);
+    print_table(&rows);
+    for r in &rows {
+        if r.class == "unseen" || r.class == "noisy" {
+            assert!(r.detected >= 5, "{}: {} of 6 named", r.class, r.detected);
+        }
+        if r.class == "none" {
+            assert!(
+                r.false_runs <= 1,
+                "none: {} of 6 runs name an effect",
+                r.false_runs
+            );
+        }
+    }
+}
+
+#[test]
+#[ignore = "100 runs per class (~6 min): below target (≥ 95 % named, ≤ 2 % false): named 12-100 % by class, 13 % of none runs and up to 42 % of a class name an effect not there; table in docs/methods.md"]
+fn hidden_effects_are_named_sweep() {
+    let rows = sweep(100, 100_000);
+    check(&rows, 0.95, 0.02);
+}
+
+/// Prints what the ladder saw on one run: THERMAL_RUN="class-index seed".
+#[test]
+#[ignore = "a debugging aid: THERMAL_RUN='2 2002' cargo test ... show_one_run -- --ignored --nocapture"]
+fn show_one_run() {
+    let Ok(spec) = std::env::var("THERMAL_RUN") else {
+        return;
+    };
+    let mut it = spec.split_whitespace().map(|v| v.parse::<u64>().unwrap());
+    let (ci, seed) = (it.next().unwrap() as usize, it.next().unwrap());
+    let run = generate(CLASSES[ci], seed, 20.0, 60.0);
+    let ds = ThermalDataset::from_csv(&run.csv).unwrap();
+    let d = diagnose(&ds, &DiagnoseOptions::default()).unwrap();
+    eprintln!("{}", d.render());
+}

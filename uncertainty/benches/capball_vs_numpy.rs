@@ -5,6 +5,12 @@
 //!
 //!     cargo bench -p metrolog-uncertainty --bench capball_vs_numpy
 //!
+//! First, end to end: the whole work of `metrolog identify capball --uncertainty mc`
+//! (`capball::source_widths`: model set-up and four adaptive Monte Carlo runs with their
+//! per-sequence statistics, stabilisation checks, intervals and correlations) on both cores,
+//! against `capball_mc.py --end-to-end` doing the same sequences of the same trials with NumPy,
+//! wall-clock and CPU seconds of each, three rounds interleaved. Then the kernels alone:
+//!
 //! Two Rust figures: the per-point path (every trial draws the 2421 per-point normals and
 //! projects them with the precomputed pseudo-inverse, batched into matrix products: the same
 //! work as the NumPy script) and the reduced path (the per-point noise drawn directly in
@@ -109,7 +115,97 @@ fn parts() -> Option<()> {
     Some(())
 }
 
+/// CPU seconds of the whole process, all threads (Linux /proc/self/stat, clock ticks of 10 ms).
+fn process_cpu_s() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let rest = s.rsplit_once(')')?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+/// The whole `source_widths` run as the CLI makes it: (wall s, CPU s, sequences per run).
+fn rust_end_to_end() -> Option<(f64, f64, Vec<usize>)> {
+    use uncertainty::capball::{CapballSources, Source, source_widths};
+    let case = Paper001Case::paper001();
+    let sources = case.cyclic_sources();
+    let opts = uncertainty::McOptions::default();
+    let c0 = process_cpu_s()?;
+    let t0 = std::time::Instant::now();
+    let build = |s: &CapballSources| {
+        case.monte_carlo_model(&case.p_true, s)
+            .map(|m| m.with_reduced_noise())
+    };
+    let (total, widths) = source_widths(&build, &sources, &opts, None).ok()?;
+    let wall = t0.elapsed().as_secs_f64();
+    let cpu = process_cpu_s()? - c0;
+    // The sequences of each run, for NumPy to do the same trials: the total's from the result,
+    // the single sources' by running them again (outside the timing).
+    let mut seqs = vec![total.sequences];
+    for src in [Source::Drift, Source::Sensor, Source::Frame] {
+        let m = build(&sources.only(src)).ok()?;
+        seqs.push(uncertainty::mc::run(&m, &opts, None).ok()?.sequences);
+    }
+    std::hint::black_box(widths);
+    Some((wall, cpu, seqs))
+}
+
+fn numpy_end_to_end(seqs: &[usize]) -> Result<(f64, f64), String> {
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/py/capball_mc.py");
+    let list: Vec<String> = seqs.iter().map(|s| s.to_string()).collect();
+    let out = std::process::Command::new("python3")
+        .arg(script)
+        .args([
+            "--end-to-end",
+            "--threads",
+            "2",
+            "--sequences",
+            &list.join(","),
+        ])
+        .output()
+        .map_err(|e| format!("python3: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() {
+        return Err(format!(
+            "{text}{}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    let field = |k: &str| {
+        text.lines()
+            .find_map(|l| l.strip_prefix(k))
+            .and_then(|v| v.trim().parse::<f64>().ok())
+            .ok_or_else(|| format!("unexpected output: {text}"))
+    };
+    Ok((
+        field("end-to-end seconds (wall): ")?,
+        field("end-to-end seconds (CPU): ")?,
+    ))
+}
+
+fn end_to_end() {
+    for round in 1..=3 {
+        let Some((wall, cpu, seqs)) = rust_end_to_end() else {
+            println!("end to end: no /proc/self/stat or the run failed: nothing measured");
+            return;
+        };
+        let trials: usize = seqs.iter().sum::<usize>() * 10_000;
+        match numpy_end_to_end(&seqs) {
+            Ok((nw, nc)) => println!(
+                "end to end round {round} ({trials} trials, sequences {seqs:?}): Rust {wall:.3} s \
+                 wall {cpu:.2} s CPU, NumPy {nw:.3} s wall {nc:.2} s CPU: {:.1}x wall, {:.1}x CPU",
+                nw / wall,
+                nc / cpu.max(0.01)
+            ),
+            Err(e) => println!(
+                "end to end round {round}: Rust {wall:.3} s wall {cpu:.2} s CPU; NumPy not run ({e})"
+            ),
+        }
+    }
+}
+
 fn main() {
+    end_to_end();
     if parts().is_none() {
         println!("no per-thread CPU clock (/proc/thread-self/schedstat): nothing measured");
         return;

@@ -14,7 +14,10 @@
 //! [[input]]
 //! name = "X1"
 //! unit = "mm"             # optional, for display
-//! dof = 8                 # optional degrees of freedom (default infinite)
+//! dof = 8                 # optional degrees of freedom (default infinite); Monte Carlo
+//!                         # draws a normal input with ν as the scaled and shifted t_ν
+//!                         # (JCGM 101 §6.4.9: Type A, u = s/√n, ν = n − 1) and a rectangular
+//!                         # one as a curvilinear trapezoid with d = a/√(2ν) (§6.4.3)
 //! group = "fit"           # optional: inputs of one evaluation (one fit) share a group and a
 //!                         # dof; they are one Welch–Satterthwaite component (JCGM 100 H.3)
 //! distribution = "normal" # + the distribution's fields: see `Distribution`
@@ -37,10 +40,10 @@
 
 use nalgebra::DMatrix;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution as _, StandardNormal};
+use rand_distr::{ChiSquared, Distribution as _, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use super::dist::{Distribution, std_normal_cdf};
+use super::dist::{Distribution, open_unit, std_normal_cdf};
 use super::expr::Expr;
 use super::gum::{self, Coverage, GumInput, GumResult};
 use super::mc::{self, IntervalKind, McOptions, McProgress, McResult, TrialSource, Validation};
@@ -70,6 +73,9 @@ pub struct Input {
     #[serde(default)]
     pub description: Option<String>,
     /// Degrees of freedom of the standard uncertainty (JCGM 100 G.3); infinite when absent.
+    /// The Monte Carlo honours it too: a normal input is drawn as t_ν (JCGM 101 §6.4.9), a
+    /// rectangular one as a curvilinear trapezoid (§6.4.3), see `Draw`; other shapes with a
+    /// `dof` are drawn as given (only the GUM uses their ν).
     #[serde(default)]
     pub dof: Option<f64>,
     /// Inputs from one evaluation (e.g. intercept and slope of one fit) share a group name and
@@ -136,6 +142,76 @@ pub struct Budget {
     output_exprs: Vec<Expr>,
     correlation_matrix: Option<DMatrix<f64>>,
     cholesky_l: Option<DMatrix<f64>>,
+    /// How the Monte Carlo draws each input (from its distribution and `dof`).
+    draws: Vec<Draw>,
+    /// ν and the χ²_ν distribution of each shared scale of the t-distributed inputs.
+    t_scales: Vec<TScale>,
+}
+
+/// How the Monte Carlo draws an input whose standard uncertainty has finite degrees of freedom
+/// ν (JCGM 101 §6.4; without `dof` an input is drawn as its distribution says).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Draw {
+    /// As its distribution says.
+    Plain,
+    /// A normal input with ν: the scaled and shifted t_ν of JCGM 101 §6.4.9 (mean + u·t_ν,
+    /// u = s/√n, ν = n − 1). `scale` indexes the χ²_ν draw that divides the normal deviate:
+    /// inputs of one `group` (the parameters of one fit) share it, which makes them the
+    /// multivariate t of JCGM 102 §6.5.3 (and their combination a t_ν with the GUM's u, so
+    /// the GUM's t-based interval is reproduced exactly).
+    T { scale: usize },
+    /// A rectangular input with ν: its half-width a is itself uncertain, the curvilinear
+    /// trapezoid of JCGM 101 §6.4.3 with the limits inexact by ±d, d = a/√(2ν) (JCGM 100
+    /// G.4.2: ν ≈ ½·(Δu/u)⁻², so Δu/u = 1/√(2ν); H.1's "10 % reliable", ν = 50, is d = 0.1·a).
+    CurvilinearTrapezoid { d: f64 },
+}
+
+/// Each input's [`Draw`] and the degrees of freedom of the shared χ² scales.
+/// ν and the χ²_ν distribution of one shared t scale.
+type TScale = (f64, ChiSquared<f64>);
+type Draws = (Vec<Draw>, Vec<TScale>);
+
+fn draws_of(inputs: &[Input]) -> Result<Draws, UncertaintyError> {
+    let mut draws = Vec::with_capacity(inputs.len());
+    let mut scales: Vec<(Option<&str>, TScale)> = Vec::new();
+    for i in inputs {
+        let nu = i.dof.filter(|v| v.is_finite());
+        let d = match (&i.distribution, nu) {
+            (Distribution::Normal { .. }, Some(nu)) => {
+                let g = i.group.as_deref();
+                let at = scales.iter().position(|(n, _)| g.is_some() && *n == g);
+                let scale = match at {
+                    Some(k) => k,
+                    None => {
+                        let chi =
+                            ChiSquared::new(nu).map_err(|e| UncertaintyError::BadDistribution {
+                                input: i.name.clone(),
+                                reason: format!("`dof` {nu}: {e}"),
+                            })?;
+                        scales.push((g, (nu, chi)));
+                        scales.len() - 1
+                    }
+                };
+                Draw::T { scale }
+            }
+            (Distribution::Rectangular { half_width, .. }, Some(nu)) => {
+                let d = half_width / (2.0 * nu).sqrt();
+                if d > *half_width {
+                    return Err(UncertaintyError::BadDistribution {
+                        input: i.name.clone(),
+                        reason: format!(
+                            "rectangular with `dof` {nu}: the half-width would be uncertain by more \
+                             than itself (Monte Carlo needs ν ≥ 0.5, JCGM 101 §6.4.3)"
+                        ),
+                    });
+                }
+                Draw::CurvilinearTrapezoid { d }
+            }
+            _ => Draw::Plain,
+        };
+        draws.push(d);
+    }
+    Ok((draws, scales.into_iter().map(|s| s.1).collect()))
 }
 
 /// Which method(s) to run.
@@ -265,6 +341,7 @@ impl Budget {
                 .l();
             (Some(r), Some(l))
         };
+        let (draws, t_scales) = draws_of(&f.inputs)?;
         Ok(Budget {
             title: f.title,
             description: f.description,
@@ -277,6 +354,8 @@ impl Budget {
             output_exprs,
             correlation_matrix,
             cholesky_l,
+            draws,
+            t_scales,
         })
     }
 
@@ -351,7 +430,30 @@ impl Budget {
         opts: &McOptions,
         progress: Option<&(dyn Fn(&McProgress) + Sync)>,
     ) -> Result<McResult, UncertaintyError> {
+        self.check_monte_carlo()?;
         mc::run(self, opts, progress)
+    }
+
+    /// A normal input with ν ≤ 2 is drawn as a t whose variance is infinite (JCGM 101
+    /// §6.4.9.4): the Monte Carlo's u(y) would not settle. The GUM evaluation is unaffected.
+    fn check_monte_carlo(&self) -> Result<(), UncertaintyError> {
+        for (i, d) in self.inputs.iter().zip(&self.draws) {
+            if let Draw::T { scale } = d
+                && self.t_scales[*scale].0 <= 2.0
+            {
+                return Err(UncertaintyError::BadDistribution {
+                    input: i.name.clone(),
+                    reason: format!(
+                        "a normal input with `dof` = {} is drawn by Monte Carlo as a Student t \
+                         (JCGM 101 §6.4.9), whose variance is infinite for ν ≤ 2; give the \
+                         distribution as rectangular (its ν then makes the half-width uncertain) \
+                         or state ν > 2",
+                        self.t_scales[*scale].0
+                    ),
+                });
+            }
+        }
+        Ok(())
     }
 
     /// Runs the chosen method(s) and, for both, the JCGM 101 §8 validation: the Monte Carlo run
@@ -367,6 +469,7 @@ impl Budget {
             Method::Gum => (Some(self.gum()?), None, Vec::new()),
             Method::Mc => (None, Some(self.monte_carlo(opts, progress)?), Vec::new()),
             Method::Both => {
+                self.check_monte_carlo()?;
                 let g = self.gum()?;
                 let (m, v) = mc::run_for_validation(self, &g.outputs, opts, progress)?;
                 (Some(g), Some(m), v)
@@ -381,11 +484,23 @@ impl Budget {
         })
     }
 
-    fn sample_inputs(&self, rng: &mut ChaCha8Rng, z: &mut [f64], x: &mut [f64]) {
+    /// Draws one trial's inputs into `x`. `z` and `w` are scratch: the (correlated) normal
+    /// deviates and the t scales 1/√(χ²_ν/ν).
+    fn sample_inputs(&self, rng: &mut ChaCha8Rng, s: &mut BudgetScratch, x: &mut [f64]) {
+        for (w, (nu, chi)) in s.w.iter_mut().zip(&self.t_scales) {
+            *w = (nu / chi.sample(rng)).sqrt();
+        }
         match &self.cholesky_l {
             None => {
-                for (xi, inp) in x.iter_mut().zip(&self.inputs) {
-                    *xi = inp.distribution.sample(rng);
+                for ((xi, inp), d) in x.iter_mut().zip(&self.inputs).zip(&self.draws) {
+                    *xi = match *d {
+                        Draw::Plain => inp.distribution.sample(rng),
+                        _ => {
+                            let z: f64 = StandardNormal.sample(rng);
+                            let q = open_unit(rng);
+                            self.draw(inp, *d, z, q, &s.w)
+                        }
+                    };
                 }
             }
             Some(l) => {
@@ -393,25 +508,47 @@ impl Budget {
                 // directly (exact), any other its quantile at Φ(z), which keeps its marginal
                 // distribution and imposes the rank correlation of the normal pair (the
                 // NIST Uncertainty Machine's default copula does the same).
+                let z = &mut s.z;
                 let n = z.len();
                 for zi in z.iter_mut() {
                     *zi = StandardNormal.sample(rng);
                 }
                 for i in (0..n).rev() {
-                    let mut s = 0.0;
+                    let mut acc = 0.0;
                     for k in 0..=i {
-                        s += l[(i, k)] * z[k];
+                        acc += l[(i, k)] * z[k];
                     }
-                    z[i] = s;
+                    z[i] = acc;
                 }
                 for (i, (xi, inp)) in x.iter_mut().zip(&self.inputs).enumerate() {
-                    *xi = match inp.distribution {
-                        Distribution::Normal { mean, u } => mean + u * z[i],
-                        Distribution::Constant { value } => value,
-                        ref d => d.quantile(std_normal_cdf(z[i]).clamp(1e-300, 1.0 - 1e-16)),
+                    *xi = match (self.draws[i], &inp.distribution) {
+                        (Draw::Plain, Distribution::Normal { mean, u }) => mean + u * z[i],
+                        (Draw::Plain, Distribution::Constant { value }) => *value,
+                        (Draw::Plain, d) => {
+                            d.quantile(std_normal_cdf(z[i]).clamp(1e-300, 1.0 - 1e-16))
+                        }
+                        (d, _) => {
+                            let q = open_unit(rng);
+                            self.draw(inp, d, z[i], q, &s.w)
+                        }
                     };
                 }
             }
+        }
+    }
+
+    /// An input with finite ν from its standard normal deviate `z` (correlated or not) and a
+    /// uniform `q` in (0, 1) (see [`Draw`]). For the curvilinear trapezoid the deviate places
+    /// the value within the drawn half-width (Φ(z) uniform) and `q` draws the half-width, so a
+    /// correlation acts on the position, not on the width.
+    fn draw(&self, inp: &Input, d: Draw, z: f64, q: f64, w: &[f64]) -> f64 {
+        match (d, &inp.distribution) {
+            (Draw::T { scale }, Distribution::Normal { mean, u }) => mean + u * z * w[scale],
+            (Draw::CurvilinearTrapezoid { d }, Distribution::Rectangular { mean, half_width }) => {
+                let a_s = half_width - d + 2.0 * d * q;
+                mean + a_s * (2.0 * std_normal_cdf(z) - 1.0)
+            }
+            _ => inp.distribution.mean(),
         }
     }
 }
@@ -431,6 +568,7 @@ impl Model for Budget {
 pub struct BudgetScratch {
     vars: Vec<f64>,
     z: Vec<f64>,
+    w: Vec<f64>,
 }
 
 impl TrialSource for Budget {
@@ -445,14 +583,89 @@ impl TrialSource for Budget {
         BudgetScratch {
             vars: vec![0.0; self.inputs.len() + self.intermediates.len()],
             z: vec![0.0; self.inputs.len()],
+            w: vec![1.0; self.t_scales.len()],
         }
     }
     fn fill(&self, rng: &mut ChaCha8Rng, s: &mut BudgetScratch, out: &mut [f64]) {
         let n_in = self.inputs.len();
         let n_out = self.outputs.len();
         for y in out.chunks_exact_mut(n_out) {
-            self.sample_inputs(rng, &mut s.z, &mut s.vars[..n_in]);
-            self.eval_into(&mut s.vars, y);
+            let mut vars = std::mem::take(&mut s.vars);
+            self.sample_inputs(rng, s, &mut vars[..n_in]);
+            self.eval_into(&mut vars, y);
+            s.vars = vars;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn one_input(dist: &str, dof: &str) -> Budget {
+        Budget::from_toml(&format!(
+            "title = \"t\"\n[[input]]\nname = \"x\"\n{dof}\n{dist}\n\
+             [[output]]\nname = \"y\"\nexpr = \"x\"\n"
+        ))
+        .unwrap()
+    }
+
+    fn draws(b: &Budget, n: usize) -> Vec<f64> {
+        let mc = b
+            .monte_carlo(
+                &McOptions {
+                    fixed_trials: Some(n),
+                    seed: 4,
+                    ..McOptions::default()
+                },
+                None,
+            )
+            .unwrap();
+        let mut v = mc.values[0].clone();
+        v.sort_unstable_by(f64::total_cmp);
+        v
+    }
+
+    /// JCGM 101 §6.4.9: a normal input with ν = 5 is drawn as t₅: its 97.5 % point is
+    /// t₀.₉₇₅(5) = 2.5706 (tables), not 1.96, and its variance ν/(ν − 2) = 5/3.
+    #[test]
+    fn normal_with_dof_is_drawn_as_student_t() {
+        let b = one_input("distribution = \"normal\"\nmean = 0\nu = 1", "dof = 5");
+        let v = draws(&b, 400_000);
+        let q = v[(0.975 * v.len() as f64) as usize];
+        assert!((q - 2.5706).abs() < 0.03, "{q}");
+        let var = v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64;
+        assert!((var - 5.0 / 3.0).abs() < 0.05, "{var}");
+        // The GUM keeps u = 1 with ν = 5.
+        assert_eq!(b.gum_inputs()[0].standard_uncertainty, 1.0);
+    }
+
+    /// JCGM 101 §6.4.3: a rectangular input of half-width a = 1 with ν = 2 (50 % reliable) is
+    /// a curvilinear trapezoid with d = 0.5: variance a²/3 + d²/9 = 0.36111, support ±1.5.
+    #[test]
+    fn rectangular_with_dof_is_a_curvilinear_trapezoid() {
+        let b = one_input(
+            "distribution = \"rectangular\"\nmean = 0\nhalf_width = 1",
+            "dof = 2",
+        );
+        let v = draws(&b, 400_000);
+        let var = v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64;
+        assert!((var - (1.0 / 3.0 + 0.25 / 9.0)).abs() < 0.004, "{var}");
+        assert!(v[0] >= -1.5 && v[v.len() - 1] <= 1.5);
+        assert!(
+            v[v.len() - 1] > 1.4,
+            "the support reaches past the nominal half-width"
+        );
+    }
+
+    #[test]
+    fn normal_with_two_or_fewer_dof_is_refused_by_monte_carlo_only() {
+        let b = one_input("distribution = \"normal\"\nmean = 0\nu = 1", "dof = 2");
+        assert!(b.gum().is_ok());
+        let e = b
+            .monte_carlo(&McOptions::default(), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("infinite for ν ≤ 2"), "{e}");
     }
 }

@@ -112,9 +112,10 @@ pub struct McResult {
     pub outputs: Vec<McOutput>,
     /// Correlation coefficients between the outputs.
     pub output_correlation: Vec<Vec<f64>>,
-    /// All model values of each output, sorted ascending (for histograms and densities).
+    /// All model values of each output in trial order (for histograms and densities; not
+    /// sorted: the intervals are found by selection).
     #[serde(skip)]
-    pub sorted_values: Vec<Vec<f64>>,
+    pub values: Vec<Vec<f64>>,
 }
 
 /// The outcome of a validation (JCGM 101 §8.1) once the Monte Carlo endpoints' own numerical
@@ -228,19 +229,126 @@ pub fn coverage_interval(sorted: &[f64], p: f64, kind: IntervalKind) -> [f64; 2]
     }
 }
 
-fn mean_std(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let ss = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>();
-    (m, (ss / (n - 1.0).max(1.0)).sqrt())
+/// Count, mean and sum of squared deviations of a set of values; two sets merge exactly
+/// (Chan, Golub and LeVeque), so the statistics of all h·M values are kept without passing
+/// over them again after each sequence.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Moments {
+    n: f64,
+    mean: f64,
+    m2: f64,
 }
 
-/// Average and standard deviation *of the average* of per-sequence values (JCGM 101 eq. 19).
-fn mean_and_sd_of_mean(v: &[f64]) -> (f64, f64) {
+impl Moments {
+    fn of(v: &[f64]) -> Moments {
+        let n = v.len() as f64;
+        if v.is_empty() {
+            return Moments::default();
+        }
+        let mean = v.iter().sum::<f64>() / n;
+        let m2 = v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>();
+        Moments { n, mean, m2 }
+    }
+
+    fn merge(self, o: Moments) -> Moments {
+        if self.n == 0.0 {
+            return o;
+        }
+        if o.n == 0.0 {
+            return self;
+        }
+        let n = self.n + o.n;
+        let d = o.mean - self.mean;
+        Moments {
+            n,
+            mean: self.mean + d * o.n / n,
+            m2: self.m2 + o.m2 + d * d * self.n * o.n / n,
+        }
+    }
+
+    /// Standard deviation with n − 1 (JCGM 101 eq. 16).
+    fn sd(&self) -> f64 {
+        (self.m2 / (self.n - 1.0).max(1.0)).sqrt()
+    }
+}
+
+/// Standard deviation *of the average* of per-sequence values (JCGM 101 eq. 19).
+fn sd_of_mean(v: &[f64]) -> f64 {
     let h = v.len() as f64;
     let m = v.iter().sum::<f64>() / h;
     let ss = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>();
-    (m, (ss / (h * (h - 1.0))).sqrt())
+    (ss / (h * (h - 1.0))).sqrt()
+}
+
+/// The order statistics of the 0-based `ranks` (ascending, distinct) of `v`, by nested
+/// selections (`v` is reordered): each step selects the rank that splits the remaining part
+/// most evenly and goes on in the two sides, so ranks in the two tails cost about two passes,
+/// not one each.
+fn order_stats(v: &mut [f64], ranks: &[usize], out: &mut Vec<f64>) {
+    let Some(mid) = (0..ranks.len()).min_by_key(|&i| ranks[i].abs_diff(v.len() / 2)) else {
+        return;
+    };
+    if v.is_empty() {
+        return;
+    }
+    let r = ranks[mid].min(v.len() - 1);
+    let (left, x, right) = v.select_nth_unstable_by(r, f64::total_cmp);
+    let x = *x;
+    order_stats(left, &ranks[..mid], out);
+    out.push(x);
+    let shifted: Vec<usize> = ranks[mid + 1..].iter().map(|k| k - r - 1).collect();
+    order_stats(right, &shifted, out);
+}
+
+/// The order statistics of 0-based ranks `a ≤ b` of `v` (reordered in place).
+fn two_order_stats(v: &mut [f64], a: usize, b: usize) -> (f64, f64) {
+    if a >= b {
+        let x = *v.select_nth_unstable_by(a, f64::total_cmp).1;
+        return (x, x);
+    }
+    let mut out = Vec::with_capacity(2);
+    order_stats(v, &[a, b], &mut out);
+    (out[0], out[1])
+}
+
+/// q = pM if an integer, else the integer part of pM + 1/2 (JCGM 101 §7.7.1).
+fn coverage_count(m: usize, p: f64) -> usize {
+    (((p * m as f64) + 0.5).floor() as usize).clamp(1, m.saturating_sub(1).max(1))
+}
+
+/// The coverage interval of unsorted `v` (reordered in place), the same values as
+/// [`coverage_interval`] of the sorted values. The symmetric interval needs two selections;
+/// the shortest one only the lowest and highest M − q values in order (its start lies among
+/// the lowest M − q, its end among the highest), which are selected, then sorted: for p = 0.95
+/// a tenth of the values is sorted instead of all.
+pub fn coverage_interval_unsorted(v: &mut [f64], p: f64, kind: IntervalKind) -> [f64; 2] {
+    let m = v.len();
+    if m < 2 {
+        return v.first().map_or([f64::NAN; 2], |x| [*x, *x]);
+    }
+    let q = coverage_count(m, p);
+    match kind {
+        IntervalKind::Symmetric => {
+            let ([a, b], _) = symmetric_indices(m, p);
+            let (lo, hi) = two_order_stats(v, a, b);
+            [lo, hi]
+        }
+        IntervalKind::Shortest => {
+            let tail = m - q;
+            if q < tail + 1 {
+                v.sort_unstable_by(f64::total_cmp);
+                return coverage_interval(v, p, kind);
+            }
+            v.select_nth_unstable_by(tail, f64::total_cmp);
+            v[..tail].sort_unstable_by(f64::total_cmp);
+            v[tail..].select_nth_unstable_by(q - tail, f64::total_cmp);
+            v[q..].sort_unstable_by(f64::total_cmp);
+            let best = (0..tail)
+                .min_by(|&r, &s| (v[r + q] - v[r]).total_cmp(&(v[s + q] - v[s])))
+                .unwrap_or(0);
+            [v[best], v[best + q]]
+        }
+    }
 }
 
 /// Runs `n_blocks` blocks starting at global block `first_block`, returning values column-wise.
@@ -264,6 +372,7 @@ fn run_blocks<S: TrialSource>(
         );
     let n = n_blocks * BLOCK_TRIALS;
     (0..n_out)
+        .into_par_iter()
         .map(|j| (0..n).map(|t| buf[t * n_out + j]).collect())
         .collect()
 }
@@ -293,22 +402,13 @@ pub fn run<S: TrialSource>(
     run_until(src, opts, progress, &|_| true)
 }
 
-/// [`run`], where the adaptive procedure also waits for `also_done(values so far, per output)`
-/// before it stops (a validation that must be decided, JCGM 101 §8.2).
-pub fn run_until<S: TrialSource>(
-    src: &S,
-    opts: &McOptions,
-    progress: Option<&(dyn Fn(&McProgress) + Sync)>,
-    also_done: &dyn Fn(&[Vec<f64>]) -> bool,
-) -> Result<McResult, UncertaintyError> {
+fn check_options(opts: &McOptions, n_out: usize) -> Result<(), UncertaintyError> {
     let p = opts.coverage_probability;
     if !(p > 0.0 && p < 1.0) {
         return Err(UncertaintyError::Invalid(format!(
             "coverage probability {p} must lie strictly between 0 and 1"
         )));
     }
-    let names = src.output_names();
-    let n_out = src.n_outputs();
     if let Some(t) = &opts.tolerance
         && (t.len() != n_out || t.iter().any(|v| v.is_nan() || *v <= 0.0))
     {
@@ -316,115 +416,224 @@ pub fn run_until<S: TrialSource>(
             "give one positive numerical tolerance per output ({n_out})"
         )));
     }
-    let mut all: Vec<Vec<f64>> = vec![Vec::new(); n_out];
-    let mut sequences = 0;
-    let mut converged = true;
-    let mut stability: Vec<Option<[f64; 4]>> = vec![None; n_out];
+    Ok(())
+}
 
-    if let Some(m) = opts.fixed_trials {
-        let n_blocks = m.max(1).div_ceil(BLOCK_TRIALS);
-        // Report progress in slices of about a hundred blocks.
-        let step = 100.max(n_blocks / 50);
-        let mut done = 0;
-        while done < n_blocks {
-            let nb = step.min(n_blocks - done);
-            let cols = run_blocks(src, opts.seed, done as u64, nb);
-            check_finite(&names, &cols, done * BLOCK_TRIALS)?;
-            for (a, c) in all.iter_mut().zip(cols) {
-                a.extend(c);
-            }
-            done += nb;
-            if let Some(cb) = progress {
-                cb(&McProgress {
-                    sequences: 1,
-                    trials: done * BLOCK_TRIALS,
-                    worst_ratio: None,
-                    max_trials: n_blocks * BLOCK_TRIALS,
-                });
-            }
-        }
-        sequences = 1;
-    } else {
-        let m = sequence_trials(p);
-        let blocks_per_seq = m / BLOCK_TRIALS;
-        // Per output, per sequence: y, u, y_low, y_high.
-        let mut seq_stats: Vec<Vec<[f64; 4]>> = vec![Vec::new(); n_out];
-        loop {
-            let cols = run_blocks(
-                src,
-                opts.seed,
-                (sequences * blocks_per_seq) as u64,
-                blocks_per_seq,
-            );
-            check_finite(&names, &cols, sequences * m)?;
-            for (j, c) in cols.into_iter().enumerate() {
-                let (mu, sd) = mean_std(&c);
-                let mut s = c.clone();
-                s.sort_unstable_by(f64::total_cmp);
-                let [lo, hi] = coverage_interval(&s, p, opts.interval);
-                seq_stats[j].push([mu, sd, lo, hi]);
-                all[j].extend(c);
-            }
-            sequences += 1;
-            let trials = sequences * m;
-            let mut worst: Option<f64> = None;
-            if sequences >= 2 {
-                let mut ok = true;
-                for j in 0..n_out {
-                    let (_, u_all) = mean_std(&all[j]);
-                    let delta = match &opts.tolerance {
-                        Some(t) => t[j],
-                        None => numerical_tolerance(u_all, opts.ndig),
-                    };
-                    let mut two_s = [0.0; 4];
-                    for (k, ts) in two_s.iter_mut().enumerate() {
-                        let v: Vec<f64> = seq_stats[j].iter().map(|s| s[k]).collect();
-                        *ts = 2.0 * mean_and_sd_of_mean(&v).1;
-                    }
-                    stability[j] = Some(two_s);
-                    if u_all == 0.0 {
-                        continue; // a constant output is as stable as it gets
-                    }
-                    let r = two_s.iter().fold(0.0f64, |a, b| a.max(*b)) / delta;
-                    worst = Some(worst.map_or(r, |w| w.max(r)));
-                    if r > 1.0 {
-                        ok = false;
-                    }
-                }
-                if let Some(cb) = progress {
-                    cb(&McProgress {
-                        sequences,
-                        trials,
-                        worst_ratio: worst,
-                        max_trials: opts.max_trials,
-                    });
-                }
-                if ok && also_done(&all) {
-                    break;
-                }
-            } else if let Some(cb) = progress {
-                cb(&McProgress {
-                    sequences,
-                    trials,
-                    worst_ratio: None,
-                    max_trials: opts.max_trials,
-                });
-            }
-            if trials + m > opts.max_trials {
-                converged = false;
-                break;
-            }
+/// The values of a run so far, per output, and what the adaptive procedure keeps of them.
+struct Accumulator {
+    values: Vec<Vec<f64>>,
+    moments: Vec<Moments>,
+    /// Per output, per sequence: y, u(y), y_low, y_high (JCGM 101 §7.9.4 c).
+    sequences: Vec<Vec<[f64; 4]>>,
+}
+
+impl Accumulator {
+    fn new(n_out: usize) -> Accumulator {
+        Accumulator {
+            values: vec![Vec::new(); n_out],
+            moments: vec![Moments::default(); n_out],
+            sequences: vec![Vec::new(); n_out],
         }
     }
 
+    fn trials(&self) -> usize {
+        self.values.first().map_or(0, Vec::len)
+    }
+
+    /// Adds one sequence's values (column-wise); with `stats`, its y, u(y) and interval too.
+    fn push(&mut self, cols: Vec<Vec<f64>>, stats: Option<(f64, IntervalKind)>) {
+        let per: Vec<(Moments, Option<[f64; 2]>)> = cols
+            .par_iter()
+            .map(|c| {
+                let iv = stats.map(|(p, kind)| coverage_interval_unsorted(&mut c.clone(), p, kind));
+                (Moments::of(c), iv)
+            })
+            .collect();
+        for (j, (c, (mo, iv))) in cols.into_iter().zip(per).enumerate() {
+            if let Some([lo, hi]) = iv {
+                self.sequences[j].push([mo.mean, mo.sd(), lo, hi]);
+            }
+            self.moments[j] = self.moments[j].merge(mo);
+            self.values[j].extend(c);
+        }
+    }
+
+    /// 2·s of the sequence averages of y, u(y), y_low, y_high for output `j` (§7.9.4 f–g).
+    fn two_s(&self, j: usize) -> [f64; 4] {
+        let mut two_s = [0.0; 4];
+        for (k, ts) in two_s.iter_mut().enumerate() {
+            let v: Vec<f64> = self.sequences[j].iter().map(|s| s[k]).collect();
+            *ts = 2.0 * sd_of_mean(&v);
+        }
+        two_s
+    }
+}
+
+/// The stabilisation check of JCGM 101 §7.9.4 after h ≥ 2 sequences: δ from u(y) of all h·M
+/// values (or the given tolerance), stabilised when every 2s ≤ δ for every output. Returns
+/// the largest 2s/δ and the 2s per output.
+fn stabilisation(acc: &Accumulator, opts: &McOptions) -> (Option<f64>, Vec<[f64; 4]>) {
+    let mut worst: Option<f64> = None;
+    let mut all_two_s = Vec::with_capacity(acc.values.len());
+    for j in 0..acc.values.len() {
+        let u_all = acc.moments[j].sd();
+        let delta = match &opts.tolerance {
+            Some(t) => t[j],
+            None => numerical_tolerance(u_all, opts.ndig),
+        };
+        let two_s = acc.two_s(j);
+        all_two_s.push(two_s);
+        if u_all == 0.0 {
+            continue; // a constant output is as stable as it gets
+        }
+        let r = two_s.iter().fold(0.0f64, |a, b| a.max(*b)) / delta;
+        worst = Some(worst.map_or(r, |w| w.max(r)));
+    }
+    (worst, all_two_s)
+}
+
+/// [`run`], where the adaptive procedure also waits for `also_done(values so far, per output)`
+/// before it stops (a validation that must be decided, JCGM 101 §8.2). `also_done` costs a
+/// pass over all values, so it is asked when the run is stabilised and then only each time the
+/// number of trials has grown by a quarter (at most a quarter more trials than needed, and the
+/// checks cost a fixed multiple of one pass instead of one pass per sequence).
+///
+/// `converged` in the result says whether the §7.9 criterion was met when the run stopped; a
+/// run that reached `max_trials` while stabilised but waiting for `also_done` is converged.
+pub fn run_until<S: TrialSource>(
+    src: &S,
+    opts: &McOptions,
+    progress: Option<&(dyn Fn(&McProgress) + Sync)>,
+    also_done: &dyn Fn(&[Vec<f64>]) -> bool,
+) -> Result<McResult, UncertaintyError> {
+    let names = src.output_names();
+    check_options(opts, names.len())?;
+    let mut acc = Accumulator::new(src.n_outputs());
+    let (sequences, converged, stability) = match opts.fixed_trials {
+        Some(m) => {
+            run_fixed(src, opts, &names, m, &mut acc, progress)?;
+            (1, true, vec![None; names.len()])
+        }
+        None => run_adaptive(src, opts, &names, &mut acc, progress, also_done)?,
+    };
     Ok(summarise(
-        all, &names, opts, &stability, sequences, converged,
+        acc.values, &names, opts, &stability, sequences, converged,
     ))
 }
 
-/// The statistics of a finished run from its model values per output (JCGM 101 §7.5–7.7).
+fn run_fixed<S: TrialSource>(
+    src: &S,
+    opts: &McOptions,
+    names: &[String],
+    m: usize,
+    acc: &mut Accumulator,
+    progress: Option<&(dyn Fn(&McProgress) + Sync)>,
+) -> Result<(), UncertaintyError> {
+    let n_blocks = m.max(1).div_ceil(BLOCK_TRIALS);
+    // Report progress in slices of about a hundred blocks.
+    let step = 100.max(n_blocks / 50);
+    let mut done = 0;
+    while done < n_blocks {
+        let nb = step.min(n_blocks - done);
+        let cols = run_blocks(src, opts.seed, done as u64, nb);
+        check_finite(names, &cols, done * BLOCK_TRIALS)?;
+        acc.push(cols, None);
+        done += nb;
+        if let Some(cb) = progress {
+            cb(&McProgress {
+                sequences: 1,
+                trials: done * BLOCK_TRIALS,
+                worst_ratio: None,
+                max_trials: n_blocks * BLOCK_TRIALS,
+            });
+        }
+    }
+    Ok(())
+}
+
+type AdaptiveOutcome = (usize, bool, Vec<Option<[f64; 4]>>);
+
+fn run_adaptive<S: TrialSource>(
+    src: &S,
+    opts: &McOptions,
+    names: &[String],
+    acc: &mut Accumulator,
+    progress: Option<&(dyn Fn(&McProgress) + Sync)>,
+    also_done: &dyn Fn(&[Vec<f64>]) -> bool,
+) -> Result<AdaptiveOutcome, UncertaintyError> {
+    let p = opts.coverage_probability;
+    let m = sequence_trials(p);
+    let blocks_per_seq = m / BLOCK_TRIALS;
+    let mut sequences = 0;
+    let mut stable = false;
+    let mut stability = vec![None; names.len()];
+    let mut next_check = 0;
+    loop {
+        let first = (sequences * blocks_per_seq) as u64;
+        let cols = run_blocks(src, opts.seed, first, blocks_per_seq);
+        check_finite(names, &cols, sequences * m)?;
+        acc.push(cols, Some((p, opts.interval)));
+        sequences += 1;
+        let trials = acc.trials();
+        let mut worst = None;
+        if sequences >= 2 {
+            let (w, two_s) = stabilisation(acc, opts);
+            worst = w;
+            stability = two_s.into_iter().map(Some).collect();
+            stable = w.is_none_or(|r| r <= 1.0);
+        }
+        if let Some(cb) = progress {
+            cb(&McProgress {
+                sequences,
+                trials,
+                worst_ratio: worst,
+                max_trials: opts.max_trials,
+            });
+        }
+        if stable && trials >= next_check {
+            if also_done(&acc.values) {
+                break;
+            }
+            next_check = trials + trials / 4;
+        }
+        if trials + m > opts.max_trials {
+            break;
+        }
+    }
+    Ok((sequences, stable, stability))
+}
+
+/// Correlation coefficients of the columns (pairs computed in parallel).
+fn correlations(all: &[Vec<f64>], moments: &[Moments]) -> Vec<Vec<f64>> {
+    let n_out = all.len();
+    let pairs: Vec<(usize, usize)> = (0..n_out)
+        .flat_map(|a| (a + 1..n_out).map(move |b| (a, b)))
+        .collect();
+    let r: Vec<f64> = pairs
+        .par_iter()
+        .map(|&(a, b)| {
+            let (ma, mb) = (moments[a].mean, moments[b].mean);
+            let cov: f64 = all[a]
+                .iter()
+                .zip(&all[b])
+                .map(|(x, y)| (x - ma) * (y - mb))
+                .sum();
+            let d = moments[a].m2.sqrt() * moments[b].m2.sqrt();
+            if d > 0.0 { cov / d } else { 0.0 }
+        })
+        .collect();
+    let mut c = vec![vec![1.0; n_out]; n_out];
+    for (&(a, b), v) in pairs.iter().zip(r) {
+        c[a][b] = v;
+        c[b][a] = v;
+    }
+    c
+}
+
+/// The statistics of a finished run from its model values per output (JCGM 101 §7.5–7.7):
+/// one pass for the moments, selections for the intervals, no full sort.
 fn summarise(
-    mut all: Vec<Vec<f64>>,
+    all: Vec<Vec<f64>>,
     names: &[String],
     opts: &McOptions,
     stability: &[Option<[f64; 4]>],
@@ -432,46 +641,34 @@ fn summarise(
     converged: bool,
 ) -> McResult {
     let p = opts.coverage_probability;
-    let n_out = all.len();
     let trials = all.first().map_or(0, Vec::len);
-    let means: Vec<f64> = all.iter().map(|c| mean_std(c).0).collect();
-    let sds: Vec<f64> = all.iter().map(|c| mean_std(c).1).collect();
-    let output_correlation = (0..n_out)
-        .map(|a| {
-            (0..n_out)
-                .map(|b| {
-                    if a == b {
-                        return 1.0;
-                    }
-                    let cov = all[a]
-                        .iter()
-                        .zip(&all[b])
-                        .map(|(x, y)| (x - means[a]) * (y - means[b]))
-                        .sum::<f64>()
-                        / (trials as f64 - 1.0);
-                    let d = sds[a] * sds[b];
-                    if d > 0.0 { cov / d } else { 0.0 }
-                })
-                .collect()
+    let per: Vec<(Moments, [f64; 2], [f64; 2])> = all
+        .par_iter()
+        .map(|c| {
+            let mut s = c.clone();
+            let sym = coverage_interval_unsorted(&mut s, p, IntervalKind::Symmetric);
+            let short = coverage_interval_unsorted(&mut s, p, IntervalKind::Shortest);
+            (Moments::of(c), sym, short)
         })
         .collect();
-    let mut outputs = Vec::with_capacity(n_out);
-    for (j, col) in all.iter_mut().enumerate() {
-        col.par_sort_unstable_by(f64::total_cmp);
-        let tolerance = match &opts.tolerance {
-            Some(t) => t[j],
-            None => numerical_tolerance(sds[j], opts.ndig),
-        };
-        outputs.push(McOutput {
+    let moments: Vec<Moments> = per.iter().map(|x| x.0).collect();
+    let output_correlation = correlations(&all, &moments);
+    let outputs = per
+        .iter()
+        .enumerate()
+        .map(|(j, &(mo, sym, short))| McOutput {
             name: names[j].clone(),
-            estimate: means[j],
-            standard_uncertainty: sds[j],
-            symmetric_interval: coverage_interval(col, p, IntervalKind::Symmetric),
-            shortest_interval: coverage_interval(col, p, IntervalKind::Shortest),
-            tolerance,
+            estimate: mo.mean,
+            standard_uncertainty: mo.sd(),
+            symmetric_interval: sym,
+            shortest_interval: short,
+            tolerance: match &opts.tolerance {
+                Some(t) => t[j],
+                None => numerical_tolerance(mo.sd(), opts.ndig),
+            },
             stability: stability[j],
-        });
-    }
+        })
+        .collect();
     McResult {
         coverage_probability: p,
         trials,
@@ -479,7 +676,7 @@ fn summarise(
         converged,
         outputs,
         output_correlation,
-        sorted_values: all,
+        values: all,
     }
 }
 
@@ -488,7 +685,7 @@ fn summarise(
 /// the number of values below an endpoint is binomial(m, α), so its standard deviation in
 /// index is √(m·α·(1−α)).
 fn symmetric_indices(m: usize, p: f64) -> ([usize; 2], usize) {
-    let q = (((p * m as f64) + 0.5).floor() as usize).clamp(1, m.saturating_sub(1).max(1));
+    let q = coverage_count(m, p);
     let r = (m - q).div_ceil(2).max(1);
     let alpha = 0.5 * (1.0 - p);
     let k = (m as f64 * alpha * (1.0 - alpha)).sqrt().ceil().max(1.0) as usize;
@@ -503,12 +700,25 @@ fn interval_with_errors(values: &[f64], p: f64) -> ([f64; 2], [f64; 2]) {
         return ([f64::NAN; 2], [f64::INFINITY; 2]);
     }
     let ([a, b], k) = symmetric_indices(m, p);
-    let mut v = values.to_vec();
-    let mut at = |i: usize| *v.select_nth_unstable_by(i.min(m - 1), f64::total_cmp).1;
-    let lo = at(a);
-    let hi = at(b);
-    let se_lo = 0.5 * (at(a + k) - at(a.saturating_sub(k)));
-    let se_hi = 0.5 * (at(b + k) - at(b.saturating_sub(k)));
+    let top = m - 1;
+    let ranks = [
+        a.saturating_sub(k),
+        a,
+        (a + k).min(top),
+        b.saturating_sub(k),
+        b,
+        (b + k).min(top),
+    ];
+    // Distinct ascending ranks for the selection, then each looked up.
+    let mut distinct = ranks.to_vec();
+    distinct.sort_unstable();
+    distinct.dedup();
+    let mut found = Vec::with_capacity(distinct.len());
+    order_stats(&mut values.to_vec(), &distinct, &mut found);
+    let at = |r: usize| found[distinct.binary_search(&r).unwrap_or(0)];
+    let (lo, hi) = (at(ranks[1]), at(ranks[4]));
+    let se_lo = 0.5 * (at(ranks[2]) - at(ranks[0]));
+    let se_hi = 0.5 * (at(ranks[5]) - at(ranks[3]));
     ([lo, hi], [se_lo, se_hi])
 }
 
@@ -601,7 +811,7 @@ pub fn run_for_validation<S: TrialSource>(
     let r = run_until(src, &o, progress, &decided)?;
     let v = gum
         .iter()
-        .zip(&r.sorted_values)
+        .zip(&r.values)
         .map(|(g, c)| validate(g, c, p, ndig))
         .collect();
     Ok((r, v))
@@ -619,6 +829,56 @@ mod tests {
         assert!((numerical_tolerance(0.0754, 2) - 0.0005).abs() < 1e-15);
         assert!((numerical_tolerance(0.0754, 1) - 0.005).abs() < 1e-15);
         assert!((numerical_tolerance(32.0, 2) - 0.5).abs() < 1e-15);
+    }
+
+    /// Values with ties and a skew, in a scrambled order.
+    fn scrambled(m: usize) -> Vec<f64> {
+        (0..m)
+            .map(|i| {
+                let k = (i * 7919 + 13) % m;
+                ((k / 3) as f64 / m as f64).powi(3)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn intervals_by_selection_equal_the_sorted_ones() {
+        for m in [2, 3, 10, 101, 1000, 10_007] {
+            let v = scrambled(m);
+            let mut sorted = v.clone();
+            sorted.sort_unstable_by(f64::total_cmp);
+            for p in [0.5, 0.9, 0.95, 0.99] {
+                for kind in [IntervalKind::Symmetric, IntervalKind::Shortest] {
+                    let want = coverage_interval(&sorted, p, kind);
+                    let got = coverage_interval_unsorted(&mut v.clone(), p, kind);
+                    assert_eq!(got, want, "m {m} p {p} {kind:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn nested_selection_finds_every_rank() {
+        let v = scrambled(5000);
+        let mut sorted = v.clone();
+        sorted.sort_unstable_by(f64::total_cmp);
+        let ranks = [0, 3, 124, 125, 126, 2500, 4874, 4875, 4999];
+        let mut out = Vec::new();
+        order_stats(&mut v.clone(), &ranks, &mut out);
+        let want: Vec<f64> = ranks.iter().map(|&r| sorted[r]).collect();
+        assert_eq!(out, want);
+    }
+
+    #[test]
+    fn merged_moments_equal_those_of_the_whole() {
+        let v = scrambled(3001);
+        let whole = Moments::of(&v);
+        let merged = Moments::of(&v[..1000])
+            .merge(Moments::of(&v[1000..2999]))
+            .merge(Moments::of(&v[2999..]));
+        assert!((whole.mean - merged.mean).abs() < 1e-15);
+        assert!((whole.sd() - merged.sd()).abs() < 1e-14);
+        assert_eq!(whole.n, merged.n);
     }
 
     #[test]

@@ -83,9 +83,12 @@ fn draw_panel<DB: DrawingBackend>(
     mc: &McResult,
     gum: Option<&GumResult>,
 ) -> anyhow::Result<()> {
-    let (Some(o), Some(values)) = (mc.outputs.get(j), mc.sorted_values.get(j)) else {
+    let (Some(o), Some(values)) = (mc.outputs.get(j), mc.values.get(j)) else {
         return Ok(());
     };
+    let mut values = values.clone();
+    values.sort_unstable_by(f64::total_cmp);
+    let values = &values;
     if values.is_empty() {
         return Ok(());
     }

@@ -775,6 +775,21 @@ pub struct CapballRecord {
 
 /// Parse a CapBall dataset (CSV text). Lines starting with `#` are comments; columns in any
 /// order; unknown columns are ignored.
+/// The physical range of a CapBall dataset column: past it a number is a damaged file or a
+/// unit mistake (an angle of 10¹⁶⁰° made the identification's SVD loop forever).
+fn dataset_range(name: &str) -> (f64, f64, &'static str) {
+    match name {
+        "a_deg" | "c_deg" => (
+            -1e5,
+            1e5,
+            "an axis angle in degrees (±10⁵°, some 280 turns)",
+        ),
+        "ex_um" | "ey_um" | "ez_um" => (-1e5, 1e5, "a volumetric error in µm (±100 mm)"),
+        "time_s" => (-1e9, 1e9, "a time since the start (±30 years)"),
+        _ => (-1e6, 1e6, "a machine position in mm (±1 km)"),
+    }
+}
+
 pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
     let err = |m: String| CapballError::Dataset(m);
     let mut rdr = csv::ReaderBuilder::new()
@@ -814,14 +829,22 @@ pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
         let row = line + 2;
         let num = |i: usize, name: &str| -> Result<f64, CapballError> {
             let s = rec.get(i).unwrap_or("");
-            s.parse::<f64>()
+            let v = s
+                .parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
                 .ok_or_else(|| {
                     err(format!(
                         "row {row}: column `{name}`: `{s}` is not a finite number"
                     ))
-                })
+                })?;
+            let (lo, hi, what) = dataset_range(name);
+            if !(lo..=hi).contains(&v) {
+                return Err(err(format!(
+                    "row {row}: column `{name}`: `{s}` is outside the range of {what}: {lo} to {hi}"
+                )));
+            }
+            Ok(v)
         };
         let int = |i: usize, name: &str| -> Result<u32, CapballError> {
             let s = rec.get(i).unwrap_or("");

@@ -235,6 +235,19 @@ fn dataset_round_trip_and_unit_checks() {
     assert!(parse_dataset(&bad).unwrap_err().to_string().contains("µm"));
     let bad = text.replacen("1,2,", "1,x,", 1);
     assert!(parse_dataset(&bad).is_err());
+    // A finite but absurd angle (10¹⁶⁰°) is refused where it is read: it used to reach the
+    // identification and loop forever in the SVD.
+    let mut rows: Vec<String> = text.lines().map(str::to_string).collect();
+    let header: Vec<&str> = rows[0].split(',').collect();
+    let c = header.iter().position(|h| *h == "c_deg").unwrap();
+    let mut fields: Vec<String> = rows[1].split(',').map(str::to_string).collect();
+    fields[c] = "1e160".into();
+    rows[1] = fields.join(",");
+    let e = parse_dataset(&rows.join("\n")).unwrap_err().to_string();
+    assert!(
+        e.contains("c_deg") && e.contains("outside the range"),
+        "{e}"
+    );
 }
 
 #[test]

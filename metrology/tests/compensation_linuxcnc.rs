@@ -322,16 +322,16 @@ fn linuxcnc_motion_applies_the_comp_file_as_read_here() {
     assert!(res <= 0.15 * err, "{res} of {err}");
 }
 
-/// One canonical command: name and numeric arguments.
-fn canon(line: &str) -> Option<(String, Vec<f64>)> {
+/// One canonical command: name, numeric arguments and the raw arguments.
+fn canon(line: &str) -> Option<(String, Vec<f64>, String)> {
     let body = line.split("N..... ").nth(1)?;
     let (name, args) = body.split_once('(')?;
-    let args = args
-        .trim_end_matches(')')
+    let raw = args.trim_end_matches(')').to_string();
+    let nums = raw
         .split(',')
         .filter_map(|a| a.trim().parse().ok())
         .collect();
-    Some((name.to_string(), args))
+    Some((name.to_string(), nums, raw))
 }
 
 #[test]
@@ -364,17 +364,10 @@ fn rs274_runs_the_program_through_every_target_in_machine_coordinates() {
     let mut mode = String::new();
     let mut pending: Option<(usize, f64)> = None; // pose index set, move
     let mut cmds = text.lines().filter_map(canon).peekable();
-    while let Some((name, a)) = cmds.next() {
+    while let Some((name, a, raw)) = cmds.next() {
         match name.as_str() {
             "SET_G5X_OFFSET" => offset = a[1],
-            "SET_MOTION_CONTROL_MODE" => {
-                mode = text
-                    .lines()
-                    .filter(|l| l.contains("SET_MOTION_CONTROL_MODE"))
-                    .last()
-                    .unwrap_or("")
-                    .to_string()
-            }
+            "SET_MOTION_CONTROL_MODE" => mode = raw,
             "SET_AUX_OUTPUT_VALUE" => pending = Some((a[1] as usize, f64::NAN)),
             "STRAIGHT_FEED" => {
                 moves.push(a[0] + offset);

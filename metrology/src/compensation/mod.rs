@@ -254,12 +254,22 @@ pub fn build(data: &PositioningData, o: &Options) -> Result<CompensationTable, C
         o.spacing_mm = Some(fanuc::spacing_mm(c.spacing_mm));
     }
     let c = curve(data, &o)?;
-    match o.dialect {
+    let mut t = match o.dialect {
         Dialect::Sinumerik => sinumerik::write(&c),
         Dialect::Fanuc => fanuc::write(&c, o.point_limit.unwrap_or(FANUC_POINT_LIMIT)),
         Dialect::Heidenhain => heidenhain::write(&c),
         Dialect::LinuxCnc => linuxcnc::write(&c),
+    }?;
+    let [(xu, _), _] = means(data);
+    if let (Some(lo), Some(hi)) = (xu.first(), xu.last())
+        && !(*lo..=*hi).contains(&c.reference_mm)
+    {
+        t.notes.push(format!(
+            "the reference point {:.4} mm lies outside the measured targets ({lo:.4} … {hi:.4} mm): the table holds the nearest measured error up to it; measure from the home position, or set --reference-point",
+            c.reference_mm
+        ));
     }
+    Ok(t)
 }
 
 /// The run as it would read with the table loaded: each reading plus the correction the

@@ -105,10 +105,20 @@ pub fn write_csv_dir(
     results: &[StandardResult],
 ) -> std::io::Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir)?;
+    // A rotary run's units (deg, mdeg…) head every file: the column names keep `_mm`/`_um`.
+    let u = data.units();
+    let head = if u != positioning::units::Units::default() {
+        format!(
+            "# target_unit: {}\n# deviation_unit: {}\n",
+            u.target, u.deviation
+        )
+    } else {
+        String::new()
+    };
     let files = [
         ("readings.csv", data.to_csv_string()),
-        ("targets.csv", targets_csv(targets)),
-        ("results.csv", results_csv(results)),
+        ("targets.csv", head.clone() + &targets_csv(targets)),
+        ("results.csv", head + &results_csv(results)),
     ];
     let mut out = Vec::new();
     for (name, text) in files {

@@ -537,6 +537,15 @@ impl PositioningData {
         if !self.material_compensation {
             let _ = writeln!(s, "# material_compensation: off");
         }
+        // The unit lines of a rotary run (deg, mdeg…): the column names keep `_mm`/`_um`.
+        let (u, d) = (self.units(), crate::units::Units::default());
+        if u != d {
+            let _ = writeln!(
+                s,
+                "# target_unit: {}\n# deviation_unit: {}",
+                u.target, u.deviation
+            );
+        }
         let temps = self
             .readings
             .iter()

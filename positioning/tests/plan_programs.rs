@@ -20,11 +20,17 @@ fn num(s: &str) -> f64 {
         .unwrap_or_else(|_| panic!("not a number: {s}"))
 }
 
-/// `G1 X12.345 F1000` (SINUMERIK, LinuxCNC) / `G01 X12.345 F1000.` (FANUC).
-fn gmove(l: &str, g: &str, axis: char) -> Option<f64> {
+/// `G1 SUPA X12.345 F1000` (SINUMERIK), `G53 G1 X12.345 F1000` (LinuxCNC): the words
+/// before the axis word given, then the axis and the feed; `G90 G53 X12.345` (FANUC: G53
+/// moves at rapid traverse, no feed).
+fn gmove(l: &str, words: &[&str], axis: char, feed: bool) -> Option<f64> {
     let f: Vec<&str> = l.split_whitespace().collect();
-    (f.len() == 3 && f[0] == g && f[1].starts_with(axis) && f[2].starts_with('F'))
-        .then(|| num(&f[1][1..]))
+    let n = words.len();
+    (f.len() == n + 1 + feed as usize
+        && f[..n] == *words
+        && f[n].starts_with(axis)
+        && (!feed || f[n + 1].starts_with('F')))
+    .then(|| num(&f[n][1..]))
 }
 
 fn read_sinumerik(text: &str) -> Vec<Ev> {
@@ -33,7 +39,7 @@ fn read_sinumerik(text: &str) -> Vec<Ev> {
         let code = l.split(';').next().unwrap().trim();
         if code.is_empty() || code == "G90 G71 G60 G601" {
             continue;
-        } else if let Some(p) = gmove(code, "G1", 'X') {
+        } else if let Some(p) = gmove(code, &["G1", "SUPA"], 'X', true) {
             ev.push(Ev::Move(p));
         } else if let Some(n) = code.strip_prefix("R100=") {
             ev.push(Ev::Pose(n.parse().unwrap()));
@@ -69,7 +75,7 @@ fn read_fanuc(text: &str) -> Vec<Ev> {
             continue;
         }
         if *l == "G21 G90 G61" {
-        } else if let Some(p) = gmove(l, "G01", 'X') {
+        } else if let Some(p) = gmove(l, &["G90", "G53"], 'X', false) {
             ev.push(Ev::Move(p));
         } else if let Some(n) = l.strip_prefix("#100=") {
             ev.push(Ev::Pose(n.parse().unwrap()));
@@ -101,9 +107,12 @@ fn read_heidenhain(text: &str) -> Vec<Ev> {
         if let Some(rest) = code.strip_prefix("L X") {
             let f: Vec<&str> = rest.split_whitespace().collect();
             assert!(f[0].starts_with(['+', '-']), "sign required: `{l}`");
-            assert!(f[1] == "R0" && f[2].starts_with('F'), "`{l}`");
+            assert!(
+                f[1] == "R0" && f[2].starts_with('F') && f[3] == "M91",
+                "`{l}`"
+            );
             ev.push(Ev::Move(num(f[0])));
-            match f.get(3) {
+            match f.get(4) {
                 Some(&"M101") => ev.push(Ev::Trigger),
                 None => {}
                 Some(m) => panic!("unexpected {m}"),
@@ -132,8 +141,8 @@ fn read_linuxcnc(text: &str) -> Vec<Ev> {
             assert!(l.ends_with(')'), "`{l}`");
             continue;
         }
-        if l == "G21 G90 G61" {
-        } else if let Some(p) = gmove(l, "G1", 'X') {
+        if l == "G21 G90 G61.1" {
+        } else if let Some(p) = gmove(l, &["G53", "G1"], 'X', true) {
             ev.push(Ev::Move(p));
         } else if let Some(q) = l.strip_prefix("M68 E0 Q") {
             ev.push(Ev::Pose(q.parse().unwrap()));
@@ -220,10 +229,11 @@ fn targets_follow_iso_230_2_with_random_offsets() {
     let o = options();
     let p = plan(&o).unwrap();
     assert_eq!(p.targets_mm.len(), 11);
-    let step = 50.0;
+    // The targets lie inside the travel by the overrun: 5…495 mm.
+    let step = 49.0;
     let mut offsets = vec![];
     for (i, t) in p.targets_mm.iter().enumerate() {
-        let r = t - i as f64 * step;
+        let r = t - 5.0 - i as f64 * step;
         assert!(r.abs() <= 0.1 * step + 1e-9, "r_{i} = {r}");
         offsets.push(r);
     }
@@ -296,6 +306,71 @@ fn every_dialect_program_reads_back_as_the_trajectory() {
 }
 
 #[test]
+fn every_move_stays_inside_the_given_travel() {
+    for overrun in [0.0, 5.0, 20.0] {
+        let p = plan(&PlanOptions {
+            overrun_mm: overrun,
+            ..options()
+        })
+        .unwrap();
+        for x in trajectory(&p) {
+            assert!((0.0..=500.0).contains(&x), "overrun {overrun}: X {x}");
+        }
+    }
+}
+
+#[test]
+fn iso_minimums_are_enforced_unless_a_reason_is_given() {
+    for (o, want) in [
+        (
+            PlanOptions {
+                targets: 3,
+                ..options()
+            },
+            "3 targets",
+        ),
+        (
+            PlanOptions {
+                cycles: 2,
+                ..options()
+            },
+            "2 cycles",
+        ),
+        (
+            PlanOptions {
+                targets: 5,
+                to_mm: 2000.0,
+                ..options()
+            },
+            "at least 5 per metre",
+        ),
+    ] {
+        let e = plan(&o).unwrap_err().to_string();
+        assert!(e.contains(want) && e.contains("--below-iso-minimum"), "{e}");
+        let reason = "quick check after a crash".to_string();
+        let p = plan(&PlanOptions {
+            below_iso_minimum: Some(reason.clone()),
+            ..o
+        })
+        .unwrap();
+        for d in [
+            Dialect::Sinumerik,
+            Dialect::Fanuc,
+            Dialect::Heidenhain,
+            Dialect::LinuxCnc,
+        ] {
+            let prog = p.part_program(d).to_ascii_lowercase();
+            assert!(
+                prog.contains("below iso 230-2 minimums") && prog.contains(&reason),
+                "{d:?}"
+            );
+        }
+    }
+    assert_eq!(positioning::plan::iso_minimums(2000.0), (10, 5));
+    assert_eq!(positioning::plan::iso_minimums(300.0), (5, 5));
+}
+
+#[test]
 fn bad_plans_say_what_to_fix() {
     for (o, want) in [
         (
@@ -332,6 +407,13 @@ fn bad_plans_say_what_to_fix() {
                 ..options()
             },
             "half",
+        ),
+        (
+            PlanOptions {
+                overrun_mm: 250.0,
+                ..options()
+            },
+            "--overrun",
         ),
     ] {
         let e = plan(&o).unwrap_err().to_string();

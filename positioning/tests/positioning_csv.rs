@@ -68,3 +68,25 @@ fn comment_lines_count_in_line_numbers() {
         err("# a\n# b\ncycle,direction,index,target_mm,deviation_um\n1,+,1,0,1\n# c\n1,x,2,5,1\n");
     assert!(e.contains("line 6"), "{e}");
 }
+
+#[test]
+fn a_rotary_run_keeps_its_unit_lines_when_written() {
+    let text = "# axis: C\n# target_unit: deg\n# deviation_unit: mdeg\n\
+        cycle,direction,index,target_mm,deviation_um\n1,+,1,0,1.5\n1,-,1,0,2.5\n1,+,2,90,3\n1,-,2,90,4\n";
+    let d = PositioningData::from_csv_str(text).unwrap();
+    let out = d.to_csv_string();
+    assert!(
+        out.contains("# target_unit: deg\n# deviation_unit: mdeg\n"),
+        "{out}"
+    );
+    let back = PositioningData::from_csv_str(&out).unwrap();
+    assert_eq!(back.units(), d.units());
+    // A linear run writes no unit lines.
+    let lin = text.replace("# target_unit: deg\n# deviation_unit: mdeg\n", "");
+    assert!(
+        !PositioningData::from_csv_str(&lin)
+            .unwrap()
+            .to_csv_string()
+            .contains("_unit")
+    );
+}

@@ -26,8 +26,8 @@ pub struct PositioningArgs {
     /// Table point spacing, mm [default: the mean target spacing].
     #[arg(long, value_name = "MM")]
     pub spacing: Option<f64>,
-    /// Reference (home) position of the axis, mm; the table is 0 there [default: the lowest
-    /// target].
+    /// Reference (home) position of the axis, mm; the table is 0 there [default: the run's
+    /// `home_mm` metadata, else 0 mm, the machine's home].
     #[arg(long, value_name = "MM")]
     pub reference_point: Option<f64>,
     /// One table per direction of approach (LinuxCNC, HEIDENHAIN).
@@ -36,12 +36,17 @@ pub struct PositioningArgs {
     /// One table from the positive direction plus a backlash value.
     #[arg(long)]
     pub backlash: bool,
-    /// Axis name as the controller knows it [default: the run's axis].
+    /// Axis name as the controller knows it [default: the run's axis; SINUMERIK: its machine
+    /// axis, e.g. X1 for X, as in Siemens' K3 example].
     #[arg(long)]
     pub axis_name: Option<String>,
     /// Axis number (FANUC parameter axis, LinuxCNC joint + 1).
     #[arg(long, default_value_t = 1)]
     pub axis_number: usize,
+    /// FANUC: the largest value one pitch point may hold (the control model's limit, in
+    /// detection units × magnification) [default: 127; older controls: 7].
+    #[arg(long, value_name = "N")]
+    pub point_limit: Option<u32>,
     /// Directory for the files.
     #[arg(long, short = 'o', default_value = ".")]
     pub out: PathBuf,
@@ -65,6 +70,7 @@ pub fn run(c: Command) -> anyhow::Result<()> {
         reference_mm: a.reference_point,
         axis_name: a.axis_name.clone(),
         axis_number: a.axis_number,
+        point_limit: a.point_limit,
     };
     let t = build(&data, &o)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;

@@ -19,10 +19,10 @@ pub struct PositioningArgs {
     /// Axis: X, Y or Z.
     #[arg(long, default_value = "X")]
     pub axis: char,
-    /// Start of the travel to test, mm.
+    /// Start of the travel the test may use, machine coordinates, mm.
     #[arg(long)]
     pub from: f64,
-    /// End of the travel to test, mm.
+    /// End of the travel the test may use, machine coordinates, mm.
     #[arg(long)]
     pub to: f64,
     /// Number of targets (ISO 230-2: at least 5, and 5 per metre).
@@ -31,6 +31,10 @@ pub struct PositioningArgs {
     /// Number of bidirectional cycles (ISO 230-2: 5).
     #[arg(long, default_value_t = 5)]
     pub cycles: usize,
+    /// Plan below ISO 230-2's minimums (5 targets per metre and 5 in all, 5 cycles) for this
+    /// reason, printed in the program header.
+    #[arg(long, value_name = "REASON")]
+    pub below_iso_minimum: Option<String>,
     /// Seed of the random target offsets (the same seed gives the same targets).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -38,7 +42,8 @@ pub struct PositioningArgs {
     /// target interval; use at least half the screw pitch].
     #[arg(long, value_name = "MM")]
     pub offset: Option<f64>,
-    /// Travel past the end targets before each reversal, mm.
+    /// Travel past the end targets before each reversal, mm; the targets lie this far inside
+    /// --from/--to, so no move leaves that travel.
     #[arg(long, default_value_t = 5.0)]
     pub overrun: f64,
     /// Dwell at each target, s.
@@ -66,6 +71,7 @@ pub fn run(c: Command) -> anyhow::Result<()> {
         to_mm: a.to,
         targets: a.targets,
         cycles: a.cycles,
+        below_iso_minimum: a.below_iso_minimum.clone(),
         seed: a.seed,
         max_offset_mm: a.offset,
         overrun_mm: a.overrun,
@@ -101,6 +107,9 @@ pub fn run(c: Command) -> anyhow::Result<()> {
     std::fs::write(&prog, p.part_program(a.dialect))
         .with_context(|| format!("writing {}", prog.display()))?;
     let targets: Vec<String> = p.targets_mm.iter().map(|t| format!("{t:.3}")).collect();
+    for b in positioning::plan::below_minimums(&o) {
+        eprintln!("warning: below ISO 230-2's minimums: {b}");
+    }
     crate::cmd::input::print_out(&format!(
         "targets (mm): {}\n{} poses, {} measured stops\ntrajectory: {}\npart program ({:?}): {}\n",
         targets.join(" "),

@@ -1,94 +1,73 @@
-//! HEIDENHAIN TNC nonlinear axis error compensation (compensation value table `*.COM`,
-//! assigned to the axis in a `*.CMA` file, enabled per axis by MP730).
+//! HEIDENHAIN nonlinear axis error compensation, MANUALplus 620 generation (the controls
+//! configured with machine parameters of the `CfgAxes` / `MP_refPosition` kind; the TNC 4xx
+//! generation with MP730 and power-of-two spacing is **not** what this writes).
 //!
-//! Sources: HEIDENHAIN TNC 407/415/425 Technical Manual (01.98) §"Nonlinear axis error
-//! compensation": one `.COM` table per axis assigned in the `.CMA` file, at most 256 entries
-//! per table, point spacing a power of two (example 2^16 → 6.5536 mm, i.e. in 0.1 µm units);
-//! TNC 335/360 Technical Manual: "the error curve must always start with correction value = 0
-//! at the datum point" and continues in the positive direction; the entries are the error
-//! curve (error, mm). MANUALplus 620 Technical Manual: columns AXISPOS (compensation points
-//! from the machine datum), one column named after the compensated axis, and BACKLASH for
-//! the values measured in the negative direction of traverse.
+//! Source: HEIDENHAIN Technical Manual MANUALplus 620, "Nonlinear axis error compensation",
+//! pp. 716–718: a compensation-value table `*.COM` per axis with the column AXISPOS (the
+//! compensation points, with respect to the machine datum `MP_refPosition`), a column named
+//! after the compensated axis (its key in `CfgAxes/axisList`) holding the compensation values,
+//! and, if required, BACKLASH holding the values measured in the negative direction of
+//! traverse; the spacing is free (the manual's example: Y from −90 mm and Z from −200 mm,
+//! 5 mm spacing, 500 mm / 5 mm = 100 and 800 mm / 5 mm = 160 compensation points); the tables
+//! are assigned in a `*.CMA` table (standard name `config.cma`) with one column per axis
+//! holding the `.COM` names, and a line is activated with `*` in its ACTIVE column.
 //!
-//! The exact column layout of the `.COM` file written here (`NR AXISPOS <axis> BACKLASH`,
-//! `BEGIN`/`[END]` lines as in other TNC tables) was not checked against a control's own
-//! export: compare with one before loading.
+//! Not stated on those pages, and assumed here (confirm on the control before loading): the
+//! values are the error (actual − nominal, as measured, like the TNC 4xx "error curve"), the
+//! control interpolates linearly between points, and the file layout is the TNC table format
+//! (`BEGIN … MM`, column header, rows, `[END]`).
 
 use std::fmt::Write;
 
 use super::{CompensationError, CompensationTable, Curve, Dialect, Mode};
 
-const MAX_POINTS: usize = 256;
-
-/// The largest power of two of 0.1 µm not above the requested spacing.
-pub(crate) fn spacing_mm(requested: f64) -> f64 {
-    let units = (requested * 1e4).max(1.0);
-    2f64.powi(units.log2().floor() as i32) * 1e-4
-}
-
 fn q(v_um: f64) -> f64 {
-    (v_um * 10.0).round() / 10.0
+    let v = (v_um * 10.0).round() / 10.0;
+    if v == 0.0 { 0.0 } else { v }
 }
 
 pub(crate) fn write(c: &Curve) -> Result<CompensationTable, CompensationError> {
     let n = c.points_mm.len();
-    if n > MAX_POINTS {
-        return Err(CompensationError::Limit {
-            dialect: Dialect::Heidenhain,
-            message: format!("{n} points exceed the 256 per .COM table: choose a larger --spacing"),
-        });
-    }
-    // The curve starts at the datum (first point) with 0: shift by the first value (a constant
-    // does not change the positioning result).
-    let (u0, bidir) = (c.up_um[0], c.mode == Mode::Bidirectional);
-    let up: Vec<f64> = c.up_um.iter().map(|v| q(v - u0)).collect();
-    let down: Vec<f64> = if bidir {
-        c.down_um.iter().map(|v| q(v - u0)).collect()
-    } else {
-        up.clone()
-    };
+    let up: Vec<f64> = c.up_um.iter().map(|&v| q(v)).collect();
+    let down: Vec<f64> = c.down_um.iter().map(|&v| q(v)).collect();
+    let with_down = c.mode != Mode::Mean;
     let ax = c.axis.to_ascii_uppercase();
     let mut com = format!("BEGIN {ax}.COM MM\nNR AXISPOS {ax}");
-    com.push_str(if bidir { " BACKLASH\n" } else { "\n" });
+    com.push_str(if with_down { " BACKLASH\n" } else { "\n" });
     for (i, p) in c.points_mm.iter().enumerate() {
         let _ = write!(com, "{i} {p:+.4} {:+.4}", up[i] * 1e-3);
-        if bidir {
+        if with_down {
             let _ = write!(com, " {:+.4}", down[i] * 1e-3);
         }
         com.push('\n');
     }
     com.push_str("[END]\n");
-    let cma = format!("BEGIN AXISCOMP.CMA\nNR {ax}\n0 {ax}.COM\n[END]\n");
-    let mut notes = vec![
+    let cma = format!("BEGIN CONFIG.CMA\nNR ACTIVE {ax}\n0 * {ax}.COM\n[END]\n");
+    let notes = vec![
         format!(
-            "datum {:+.4} mm (first point), spacing {:.4} mm = 2^{} × 0.1 µm, {n} points",
-            c.points_mm[0],
-            c.spacing_mm,
-            (c.spacing_mm * 1e4).log2().round()
+            "MANUALplus 620 generation: AXISPOS from the machine datum, {n} points from {:+.4} mm, spacing {:.4} mm, 0 at the reference point {:+.4} mm",
+            c.points_mm[0], c.spacing_mm, c.reference_mm
         ),
         format!(
-            "assign {ax}.COM in the .CMA file and set the {ax} bit of MP730 (nonlinear compensation)"
+            "enter {ax}.COM in the {ax} column of config.cma and mark the line ACTIVE (*); the column names must be the axis keys of CfgAxes/axisList"
         ),
+        "assumed, not stated in the manual pages read: values = error (actual − nominal) in mm, linear interpolation; compare with a table exported by the control before loading".into(),
     ];
-    let down = match c.backlash_um {
-        Some(b) => {
-            notes.push(format!(
-                "enter the backlash {:.4} mm in the control's backlash compensation (MP710 on TNC 4xx)",
-                q(b) * 1e-3
-            ));
-            up.iter().map(|u| u + q(b)).collect()
-        }
-        None => down,
+    let corr_up: Vec<f64> = up.iter().map(|v| -v).collect();
+    let corr_down: Vec<f64> = if with_down {
+        down.iter().map(|v| -v).collect()
+    } else {
+        corr_up.clone()
     };
     Ok(CompensationTable {
         dialect: Dialect::Heidenhain,
         mode: c.mode,
-        reference_mm: c.points_mm[0],
+        reference_mm: c.reference_mm,
         points_mm: c.points_mm.clone(),
-        error_up_um: up,
-        error_down_um: down,
+        correction_up_um: corr_up,
+        correction_down_um: corr_down,
         backlash_um: c.backlash_um.map(q),
-        files: vec![(format!("{ax}.COM"), com), ("AXISCOMP.CMA".into(), cma)],
+        files: vec![(format!("{ax}.COM"), com), ("config.cma".into(), cma)],
         notes,
     })
 }

@@ -1,14 +1,18 @@
 //! Pitch-error (leadscrew) compensation tables from a positioning run, one writer per
-//! controller dialect, and the verification that predicts the ISO 230-2 result after the
-//! table is loaded (`docs/methods.md` "Pitch-error compensation"; each dialect's conventions
-//! and their sources are listed there and in the dialect's file).
+//! controller dialect, and the prediction of the ISO 230-2 result after the table is loaded
+//! (`docs/methods.md` "Pitch-error compensation"; each dialect's semantics and the manual
+//! page it comes from are listed there and in the dialect's file).
 //!
 //! Every table is built from the same *error curve*: the measured mean deviation (actual −
 //! nominal, µm) interpolated linearly at equally spaced table points aligned on the reference
-//! point, and re-referenced so that the error at the reference point is zero (a controller
-//! takes its reference point as exact; a constant cannot be compensated by a pitch table).
-//! The dialect then writes the error, or the correction (−error), absolute or incremental,
-//! in its units, and quantises it as the control stores it.
+//! point (the machine's home unless chosen), and re-referenced so that the error at the
+//! reference point is zero (a controller takes its reference point as exact; a constant
+//! cannot be compensated by a pitch table). Each dialect then encodes the error, or the
+//! correction (−error), absolute or incremental, in its units, and quantises it as the
+//! control stores it. [`CompensationTable`] keeps, beside the files, the *correction* the
+//! control adds to the commanded position at each point as decoded from the file's own
+//! numbers, and [`apply`] uses it the way the controls do (linear interpolation between
+//! points, end values held outside).
 
 mod fanuc;
 mod heidenhain;
@@ -64,14 +68,22 @@ pub struct Options {
     pub mode: Mode,
     /// Table point spacing, mm; default: the mean target spacing of the run.
     pub spacing_mm: Option<f64>,
-    /// Reference (home) position, mm; default: the lowest target.
+    /// Reference (home) position, mm; default: the run's metadata `home_mm`, else 0 mm (the
+    /// machine zero, where a machine referenced with its home at 0 sits).
     pub reference_mm: Option<f64>,
     /// The axis name as the control knows it (e.g. `X1`, `AX1`); default: the run's axis.
     pub axis_name: Option<String>,
     /// Axis number for dialects that address axes by number (Fanuc parameter axis, LinuxCNC
     /// joint), 1-based.
     pub axis_number: usize,
+    /// FANUC: the largest compensation value one point may hold, in detection units × the
+    /// magnification (the control model's limit); default [`FANUC_POINT_LIMIT`].
+    pub point_limit: Option<u32>,
 }
+
+/// FANUC's per-point limit when none is given: ±127 (parameter data range of Series 0i/16i/
+/// 18i/30i pitch data; older controls allow ±7, give `point_limit` for them).
+pub const FANUC_POINT_LIMIT: u32 = 127;
 
 /// Why no table could be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -86,21 +98,24 @@ pub enum CompensationError {
     Unsupported { dialect: Dialect, message: String },
     #[error("{dialect:?}: {message}")]
     Limit { dialect: Dialect, message: String },
+    #[error("bad metadata `home_mm: {0}`: expected a number of mm")]
+    BadHome(String),
 }
 
-/// A table as the control will apply it: errors (actual − nominal, µm) at the points after
-/// the dialect's quantisation, and the backlash value, µm.
+/// A table as the control will apply it: the correction it adds to the commanded position
+/// (µm, the negative of the error it removes) at each point, decoded from the file's own
+/// numbers after the dialect's quantisation, and the backlash value, µm.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CompensationTable {
     pub dialect: Dialect,
     pub mode: Mode,
     pub reference_mm: f64,
     pub points_mm: Vec<f64>,
-    /// Error the control compensates on positive-direction moves (all moves in `Mean`).
-    pub error_up_um: Vec<f64>,
-    /// Error the control compensates on negative-direction moves (`Bidirectional`) or the
-    /// positive-direction curve shifted by the backlash (`Backlash`).
-    pub error_down_um: Vec<f64>,
+    /// Correction the control adds on positive-direction moves (all moves in `Mean`), µm.
+    pub correction_up_um: Vec<f64>,
+    /// Correction the control adds on negative-direction moves (`Bidirectional`), or the
+    /// positive-direction correction less the backlash (`Backlash`), µm.
+    pub correction_down_um: Vec<f64>,
     /// Backlash value written to the control, µm (`Backlash` mode).
     pub backlash_um: Option<f64>,
     /// The files to load: (suggested file name, text).
@@ -151,6 +166,19 @@ fn means(data: &PositioningData) -> [(Vec<f64>, Vec<f64>); 2] {
     [curve(&|x| x.mean_up_um), curve(&|x| x.mean_down_um)]
 }
 
+/// The machine's home, mm: metadata `home_mm`, else 0 (machine zero).
+fn home_mm(data: &PositioningData) -> Result<f64, CompensationError> {
+    match data.metadata.get("home_mm") {
+        None => Ok(0.0),
+        Some(v) => v
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| CompensationError::BadHome(v.clone())),
+    }
+}
+
 pub(crate) fn curve(data: &PositioningData, o: &Options) -> Result<Curve, CompensationError> {
     let [(xu, yu), (xd, yd)] = means(data);
     if xu.len() < 2 {
@@ -166,7 +194,10 @@ pub(crate) fn curve(data: &PositioningData, o: &Options) -> Result<Curve, Compen
     if !(spacing.is_finite() && spacing > 0.0) {
         return Err(CompensationError::BadSpacing(spacing));
     }
-    let reference = o.reference_mm.unwrap_or(lo);
+    let reference = match o.reference_mm {
+        Some(r) => r,
+        None => home_mm(data)?,
+    };
     // Points aligned on the reference, covering the travel and the reference.
     let k0 = ((lo.min(reference) - reference) / spacing + 1e-9).floor() as i64;
     let k1 = ((hi.max(reference) - reference) / spacing - 1e-9).ceil() as i64;
@@ -213,35 +244,47 @@ pub(crate) fn curve(data: &PositioningData, o: &Options) -> Result<Curve, Compen
 /// Builds the table for a run in the chosen dialect.
 pub fn build(data: &PositioningData, o: &Options) -> Result<CompensationTable, CompensationError> {
     let mut o = o.clone();
-    if o.dialect == Dialect::Heidenhain {
-        // The TNC needs a power-of-two spacing starting at its datum (heidenhain.rs).
-        let c = curve(data, &o)?;
-        o.spacing_mm = Some(heidenhain::spacing_mm(c.spacing_mm));
+    if o.dialect == Dialect::Sinumerik && o.axis_name.is_none() {
+        // LEC tables address the machine axis (K3 §4.4.2.3's example: `X1`).
+        let a = data.axis.clone().unwrap_or_else(|| "X".into());
+        o.axis_name = Some(format!("{a}1"));
     }
     if o.dialect == Dialect::Fanuc {
         let c = curve(data, &o)?;
         o.spacing_mm = Some(fanuc::spacing_mm(c.spacing_mm));
     }
     let c = curve(data, &o)?;
-    match o.dialect {
+    let mut t = match o.dialect {
         Dialect::Sinumerik => sinumerik::write(&c),
-        Dialect::Fanuc => fanuc::write(&c),
+        Dialect::Fanuc => fanuc::write(&c, o.point_limit.unwrap_or(FANUC_POINT_LIMIT)),
         Dialect::Heidenhain => heidenhain::write(&c),
         Dialect::LinuxCnc => linuxcnc::write(&c),
+    }?;
+    let [(xu, _), _] = means(data);
+    if let (Some(lo), Some(hi)) = (xu.first(), xu.last())
+        && !(*lo..=*hi).contains(&c.reference_mm)
+    {
+        t.notes.push(format!(
+            "the reference point {:.4} mm lies outside the measured targets ({lo:.4} … {hi:.4} mm): the table holds the nearest measured error up to it; measure from the home position, or set --reference-point",
+            c.reference_mm
+        ));
     }
+    Ok(t)
 }
 
-/// The run as it would read with the table loaded: each reading minus the error the control
-/// compensates at its target and direction (interpolated linearly between table points, as
-/// the controls do).
+/// The run as it would read with the table loaded: each reading plus the correction the
+/// control adds at its target for its direction of approach (interpolated linearly between
+/// table points, end values held, as the controls do). The correction moves the axis, so the
+/// deviation it leaves is the measured one plus the correction (the error's own slope over
+/// a correction of a few µm is neglected).
 pub fn apply(data: &PositioningData, t: &CompensationTable) -> PositioningData {
     let mut out = data.clone();
     for r in &mut out.readings {
         let ys = match r.direction {
-            Direction::Up => &t.error_up_um,
-            Direction::Down => &t.error_down_um,
+            Direction::Up => &t.correction_up_um,
+            Direction::Down => &t.correction_down_um,
         };
-        r.deviation_um -= interpolate(&t.points_mm, ys, r.target_mm);
+        r.deviation_um += interpolate(&t.points_mm, ys, r.target_mm);
     }
     out.metadata
         .insert("compensation".into(), format!("predicted, {:?}", t.dialect));

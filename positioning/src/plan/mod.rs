@@ -25,11 +25,15 @@ pub struct PlanOptions {
     pub targets: usize,
     /// Number of bidirectional cycles n (ISO 230-2: 5).
     pub cycles: usize,
+    /// Why the plan may fall below ISO 230-2's minimums (targets, cycles); printed in the
+    /// program header. `None`: the minimums are enforced.
+    pub below_iso_minimum: Option<String>,
     /// Seed of the random offsets.
     pub seed: u64,
     /// Largest random offset |r|, mm; default a tenth of the interval.
     pub max_offset_mm: Option<f64>,
-    /// Travel past the end targets before each reversal, mm.
+    /// Travel past the end targets before each reversal, mm; the targets lie this far inside
+    /// `from_mm`…`to_mm`, so that every move stays inside the given travel.
     pub overrun_mm: f64,
     /// Dwell at each target, s.
     pub dwell_s: f64,
@@ -48,6 +52,7 @@ impl Default for PlanOptions {
             to_mm: 500.0,
             targets: 11,
             cycles: 5,
+            below_iso_minimum: None,
             seed: 1,
             max_offset_mm: None,
             overrun_mm: 5.0,
@@ -87,6 +92,36 @@ pub struct Plan {
     pub poses: Vec<Pose>,
 }
 
+/// ISO 230-2's minimums for a measured length: targets (5 per metre and at least 5) and
+/// bidirectional cycles (5).
+pub fn iso_minimums(length_mm: f64) -> (usize, usize) {
+    let per_metre = (5.0 * length_mm / 1000.0 - 1e-9).ceil().max(0.0) as usize;
+    (per_metre.max(5), 5)
+}
+
+/// The first and last nominal target: the travel less the overrun at each end.
+fn span(o: &PlanOptions) -> (f64, f64) {
+    (o.from_mm + o.overrun_mm, o.to_mm - o.overrun_mm)
+}
+
+/// What falls below ISO 230-2's minimums, in words; empty when nothing does.
+pub fn below_minimums(o: &PlanOptions) -> Vec<String> {
+    let (lo, hi) = span(o);
+    let (m, n) = iso_minimums(hi - lo);
+    let mut out = vec![];
+    if o.targets < m {
+        out.push(format!(
+            "{} targets over {:.0} mm (ISO 230-2: at least 5 per metre and 5 in all, here {m})",
+            o.targets,
+            hi - lo
+        ));
+    }
+    if o.cycles < n {
+        out.push(format!("{} cycles (ISO 230-2: {n})", o.cycles));
+    }
+    out
+}
+
 fn check(o: &PlanOptions) -> Result<(), PlanError> {
     let bad = |m: &str| Err(PlanError::Bad(m.to_string()));
     if !"XYZ".contains(o.axis) {
@@ -101,7 +136,21 @@ fn check(o: &PlanOptions) -> Result<(), PlanError> {
     if !(o.overrun_mm >= 0.0 && o.dwell_s >= 0.0 && o.feed_mm_min > 0.0) {
         return bad("--overrun and --dwell must not be negative, the feed must be positive");
     }
-    let p = (o.to_mm - o.from_mm) / (o.targets - 1) as f64;
+    let (lo, hi) = span(o);
+    if hi <= lo {
+        return bad(
+            "the overrun at both ends leaves no travel for the targets: --overrun must be below half of --to minus --from",
+        );
+    }
+    let below = below_minimums(o);
+    let reason = o.below_iso_minimum.as_deref().map(str::trim);
+    if !below.is_empty() && reason.is_none_or(str::is_empty) {
+        return Err(PlanError::Bad(format!(
+            "{}: raise them, or give the reason with --below-iso-minimum \"REASON\" (it is printed in the program header)",
+            below.join("; ")
+        )));
+    }
+    let p = (hi - lo) / (o.targets - 1) as f64;
     if o.max_offset_mm
         .is_some_and(|r| !(0.0..p / 2.0).contains(&r))
     {
@@ -110,14 +159,15 @@ fn check(o: &PlanOptions) -> Result<(), PlanError> {
     Ok(())
 }
 
-/// Plans the test: P_i = from + (i − 1)p + r_i, r_i uniform in ±r_max (the first target only
-/// upward, the last only downward, so the targets stay in the travel); each cycle runs
-/// from below P_1 − overrun up through the targets to P_m + overrun and back down through
-/// them to P_1 − overrun.
+/// Plans the test: P_i = from + overrun + (i − 1)p + r_i, r_i uniform in ±r_max (the first
+/// target only upward, the last only downward); each cycle runs from P_1 − overrun (≥ from)
+/// up through the targets to P_m + overrun (≤ to) and back down through them to
+/// P_1 − overrun, so no move leaves the given travel.
 pub fn plan(o: &PlanOptions) -> Result<Plan, PlanError> {
     check(o)?;
     let m = o.targets;
-    let p = (o.to_mm - o.from_mm) / (m - 1) as f64;
+    let (first, last) = span(o);
+    let p = (last - first) / (m - 1) as f64;
     let r_max = o.max_offset_mm.unwrap_or(0.1 * p);
     let mut rng = ChaCha8Rng::seed_from_u64(o.seed);
     let targets_mm: Vec<f64> = (0..m)
@@ -133,7 +183,7 @@ pub fn plan(o: &PlanOptions) -> Result<Plan, PlanError> {
                 0.0
             };
             // Programmed to 1 µm: what the controller can be told.
-            ((o.from_mm + i as f64 * p + r) * 1e3).round() / 1e3
+            ((first + i as f64 * p + r) * 1e3).round() / 1e3
         })
         .collect();
     let mut poses = Vec::new();
@@ -144,9 +194,10 @@ pub fn plan(o: &PlanOptions) -> Result<Plan, PlanError> {
             target,
         })
     };
+    // Inside the travel even after the targets' rounding to 1 µm.
     let (below, above) = (
-        targets_mm[0] - o.overrun_mm,
-        targets_mm[m - 1] + o.overrun_mm,
+        (targets_mm[0] - o.overrun_mm).max(o.from_mm),
+        (targets_mm[m - 1] + o.overrun_mm).min(o.to_mm),
     );
     push(below, None);
     for c in 1..=o.cycles {

@@ -51,12 +51,13 @@ fn none(_: u32) -> String {
 fn words(d: Dialect) -> Words {
     match d {
         // SINUMERIK 840D sl / 828D (Programming Manual Fundamentals): `;` comments, G90 G71
-        // absolute metric, G60 G601 modal exact stop (fine window), G4 F<s> dwell in
-        // seconds, R parameters, user M function, M30.
+        // absolute metric, G60 G601 modal exact stop (fine window), SUPA per block (machine
+        // coordinates: all frames and offsets suppressed), G4 F<s> dwell in seconds, R
+        // parameters, user M function, M30.
         Dialect::Sinumerik => Words {
             comment: |t| format!("; {t}"),
             setup: |_| vec!["G90 G71 G60 G601 ; absolute, mm, exact stop fine".into()],
-            mov: |a, p, f| format!("G1 {a}{} F{f:.0}", fmt_mm(p)),
+            mov: |a, p, f| format!("G1 SUPA {a}{} F{f:.0}", fmt_mm(p)),
             pose: |n| format!("R{POSE_PARAMETER}={n}"),
             trigger: |m| Some(format!("M{m}")),
             on_move: none,
@@ -65,11 +66,13 @@ fn words(d: Dialect) -> Words {
             numbered: false,
         },
         // FANUC Series 0i/30i (Operator's Manual): `%` and O number, `( )` comments, G21 G90
-        // metric absolute, G61 exact stop mode, #100 common variable, G04 P<ms> dwell, M30.
+        // metric absolute, G61 exact stop mode, G53 per block (machine coordinate system;
+        // one-shot, moves at rapid traverse, so no feed is given), #100 common variable,
+        // G04 P<ms> dwell, M30.
         Dialect::Fanuc => Words {
             comment: |t| format!("({})", t.to_ascii_uppercase().replace(['(', ')'], "")),
             setup: |_| vec!["G21 G90 G61".into()],
-            mov: |a, p, f| format!("G01 {a}{} F{f:.0}.", fmt_mm(p)),
+            mov: |a, p, _| format!("G90 G53 {a}{}", fmt_mm(p)),
             pose: |n| format!("#{POSE_PARAMETER}={n}"),
             trigger: |m| Some(format!("M{m}")),
             on_move: none,
@@ -78,12 +81,13 @@ fn words(d: Dialect) -> Words {
             numbered: false,
         },
         // HEIDENHAIN TNC conversational (User's Manual): numbered blocks, BEGIN/END PGM,
-        // `;` comment blocks, L X+… R0 F…, FN 0: Q assignment, cycle 9 DWELL TIME, the M
-        // function on the positioning block (executed at the block end).
+        // `;` comment blocks, L X+… R0 F… M91 (coordinates referenced to the machine datum),
+        // FN 0: Q assignment, cycle 9 DWELL TIME, the trigger M function on the positioning
+        // block (executed at the block end).
         Dialect::Heidenhain => Words {
             comment: |t| format!("; {t}"),
             setup: |p| vec![format!("BEGIN PGM ISO230{} MM", p.options.axis)],
-            mov: |a, p, f| format!("L {a}{} R0 F{f:.0}", signed_mm(p)),
+            mov: |a, p, f| format!("L {a}{} R0 F{f:.0} M91", signed_mm(p)),
             pose: |n| format!("FN 0: Q{POSE_PARAMETER} = +{n}"),
             trigger: |_| None,
             on_move: |m| format!(" M{m}"),
@@ -96,13 +100,15 @@ fn words(d: Dialect) -> Words {
             end: |p| vec![format!("END PGM ISO230{} MM", p.options.axis)],
             numbered: true,
         },
-        // LinuxCNC G-code (G-code and M-code reference): `( )` comments, G21 G90 G61 exact
-        // path, M68 E0 Q<n> analog output 0 = pose index (immediate), M64/M65 P0 digital
-        // output 0 on/off as the trigger, G4 P<s> dwell in seconds, M2.
+        // LinuxCNC G-code (G-code and M-code reference): `( )` comments, G21 G90 G61.1
+        // exact stop, G53 per block (machine coordinates, non-modal), M68 E0 Q<n> analog
+        // output 0 = pose index (immediate), M64/M65 P0 digital output 0 on/off as the
+        // trigger, G4 P<s> dwell in seconds, M2. Checked by running it through rs274
+        // (`positioning/tests/compensation_linuxcnc.rs`).
         Dialect::LinuxCnc => Words {
             comment: |t| format!("({})", t.replace(['(', ')'], "")),
-            setup: |_| vec!["G21 G90 G61".into()],
-            mov: |a, p, f| format!("G1 {a}{} F{f:.0}", fmt_mm(p)),
+            setup: |_| vec!["G21 G90 G61.1".into()],
+            mov: |a, p, f| format!("G53 G1 {a}{} F{f:.0}", fmt_mm(p)),
             pose: |n| format!("M68 E0 Q{n}"),
             trigger: |_| Some("M64 P0".into()),
             on_move: none,
@@ -125,7 +131,7 @@ fn header(p: &Plan, d: Dialect) -> Vec<String> {
             o.trigger_m
         ),
     };
-    vec![
+    let mut h = vec![
         format!(
             "ISO 230-2 positioning test of axis {}, {} targets, {} bidirectional cycles, written by metrolog plan (seed {})",
             o.axis, o.targets, o.cycles, o.seed
@@ -145,7 +151,31 @@ fn header(p: &Plan, d: Dialect) -> Vec<String> {
         format!(
             "exact-stop trigger: {trig}; the PLC sends the CAN trigger frame (docs/instruments.md 4)"
         ),
-    ]
+        format!(
+            "machine coordinates ({}); travel {} to {} mm, no move leaves it",
+            machine_word(d),
+            fmt_mm(o.from_mm),
+            fmt_mm(o.to_mm)
+        ),
+    ];
+    let below = super::below_minimums(o);
+    if !below.is_empty() {
+        h.push(format!(
+            "BELOW ISO 230-2 MINIMUMS: {}; reason given: {}",
+            below.join("; "),
+            o.below_iso_minimum.as_deref().unwrap_or("").trim()
+        ));
+    }
+    h
+}
+
+fn machine_word(d: Dialect) -> &'static str {
+    match d {
+        Dialect::Sinumerik => "SUPA on every move",
+        Dialect::Fanuc => "G53 on every move, at rapid traverse: the feed does not apply",
+        Dialect::Heidenhain => "M91 on every move",
+        Dialect::LinuxCnc => "G53 on every move",
+    }
 }
 
 pub(super) fn program(p: &Plan, d: Dialect) -> String {

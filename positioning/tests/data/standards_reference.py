@@ -1,6 +1,6 @@
 """Independent evaluation of a positioning CSV by the standards of docs/methods.md
 "Positioning standards", written from the formulas in that section with the Python standard
-library only (no code shared with metrology's Rust). Prints {designation: {symbol: value}}."""
+library only (no code shared with metrolog's Rust). Prints {designation: {symbol: value}}."""
 import csv, json, statistics, sys
 
 rows = [r for r in csv.reader(l for l in open(sys.argv[1]) if not l.startswith("#"))]

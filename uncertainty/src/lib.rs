@@ -41,75 +41,21 @@
 pub mod budget;
 pub mod capball;
 pub mod dist;
+mod error;
 pub mod expr;
 pub mod gum;
 pub mod length;
 pub mod mc;
+mod model;
 pub mod normals;
 pub mod psd;
 pub mod psd_budget;
 
 pub use budget::{Budget, Method, Report};
 pub use dist::{Distribution, DriftShape};
+pub use error::UncertaintyError;
 pub use gum::{BudgetLine, Coverage, GumInput, GumOutput, GumResult};
 pub use mc::{
     IntervalKind, McOptions, McOutput, McProgress, McResult, TrialSource, Validation, Verdict,
 };
-
-/// A measurement model Y = f(X): `evaluate` writes the outputs for the input values `x`.
-pub trait Model: Sync {
-    fn n_outputs(&self) -> usize;
-    fn evaluate(&self, x: &[f64], y: &mut [f64]);
-}
-
-/// A model given as a closure.
-pub struct FnModel<F> {
-    pub n_outputs: usize,
-    pub f: F,
-}
-
-impl<F: Fn(&[f64], &mut [f64]) + Sync> Model for FnModel<F> {
-    fn n_outputs(&self) -> usize {
-        self.n_outputs
-    }
-    fn evaluate(&self, x: &[f64], y: &mut [f64]) {
-        (self.f)(x, y)
-    }
-}
-
-/// Errors of uncertainty evaluation.
-#[derive(Debug, thiserror::Error)]
-pub enum UncertaintyError {
-    /// the budget is not valid TOML or does not follow the budget format: {0}
-    #[error("the budget is not valid TOML or does not follow the budget format: {0}")]
-    Format(String),
-    /// input `{input}`: {reason}
-    #[error("input `{input}`: {reason}")]
-    BadDistribution { input: String, reason: String },
-    /// the expression of `{quantity}` is wrong {source}
-    #[error("the expression of `{quantity}` is wrong {source}")]
-    Expr {
-        quantity: String,
-        source: expr::ExprError,
-    },
-    /// the name `{0}` is used twice (inputs, intermediates and outputs need distinct names)
-    #[error("the name `{0}` is used twice (inputs, intermediates and outputs need distinct names)")]
-    DuplicateName(String),
-    /// a correlation names `{0}`, which is not an input
-    #[error("a correlation names `{0}`, which is not an input")]
-    UnknownInput(String),
-    /// the correlation matrix is not positive definite: check the [[correlation]] coefficients
-    #[error(
-        "the correlation matrix is not positive definite: check the [[correlation]] coefficients"
-    )]
-    NotPositiveDefinite,
-    /// output `{output}` is not a finite number {context}: check the model's domain against the
-    /// input distributions (a division by zero, a square root of a negative value, ...)
-    #[error(
-        "output `{output}` is not a finite number {context}: check the model's domain against the input distributions (a division by zero, a square root of a negative value, ...)"
-    )]
-    NonFinite { output: String, context: String },
-    /// {0}
-    #[error("{0}")]
-    Invalid(String),
-}
+pub use model::{FnModel, Model};

@@ -106,6 +106,8 @@ impl LiveView {
 
 #[cfg(test)]
 mod tests {
+    use tokio::sync::broadcast;
+
     use super::*;
 
     fn topic_index(hub: &Hub, topic: &str) -> usize {

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use geometry::capball::{self, CapballSetup, Identification, PARAM_NAMES};
-use geometry::kinematics::{Machine, Pose};
+use geometry::kinematics::Pose;
 use nalgebra::Vector3;
 
 use super::capball_mc::{self, CapballMcArgs};

@@ -14,12 +14,14 @@ pub mod capball;
 pub mod diagnosis_text;
 pub mod export;
 pub mod html_report;
+pub mod identify_text;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod positioning;
 pub mod positioning_report;
 pub mod psd;
 pub mod report;
+pub mod uncertainty_text;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -1,4 +1,5 @@
-//! Command line: one subcommand per job; each lives in its own module under `cmd/`.
+//! Command line: one subcommand per job; each lives in its own module under `cmd/`. `demo` and
+//! `sim` exist with the feature `sim` (on by default; a service build leaves it out).
 
 use clap::{Parser, Subcommand};
 
@@ -17,8 +18,10 @@ pub enum Command {
     /// Run the acquisition service from a config file (what systemd starts).
     Run(cmd::run::Args),
     /// Run a complete measurement on simulated instruments and report it.
+    #[cfg(feature = "sim")]
     Demo(cmd::demo::Args),
     /// Start only the simulated instruments and print their port paths.
+    #[cfg(feature = "sim")]
     Sim(cmd::sim::Args),
     /// Re-run steady-value detection (and analysis) from the raw topics of a log.
     Replay(cmd::replay::Args),
@@ -50,16 +53,28 @@ pub enum Command {
     Report(cmd::report::Args),
 }
 
+impl Command {
+    /// Whether the command acquires (the service, the demo, the simulator): a closed socket
+    /// or pipe must be an error there, never a signal that ends it.
+    fn acquires(&self) -> bool {
+        match self {
+            Command::Run(_) => true,
+            #[cfg(feature = "sim")]
+            Command::Demo(_) | Command::Sim(_) => true,
+            _ => false,
+        }
+    }
+}
+
 pub fn run(cli: Cli) -> anyhow::Result<()> {
-    if !matches!(
-        cli.command,
-        Command::Run(_) | Command::Demo(_) | Command::Sim(_)
-    ) {
+    if !cli.command.acquires() {
         stop_quietly_on_closed_pipe();
     }
     match cli.command {
         Command::Run(a) => cmd::run::run(a),
+        #[cfg(feature = "sim")]
         Command::Demo(a) => cmd::demo::run(a),
+        #[cfg(feature = "sim")]
         Command::Sim(a) => cmd::sim::run(a),
         Command::Replay(a) => cmd::replay::run(a),
         Command::Info(a) => cmd::info::run(a),

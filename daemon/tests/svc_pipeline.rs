@@ -5,9 +5,9 @@ use std::sync::{Arc, Mutex};
 
 use detect::PoseEngine;
 use drivers::{DriverEvent, HostClock, Instrument, Sample, SampleValues, Trigger};
-use metrolog::acquire::pipeline::{
-    DetectOnly, EventSink, Pipeline, PipelineConfig, Status, StopReason,
-};
+use metrolog::acquire::counts::RunCounts;
+use metrolog::acquire::pipeline::{Pipeline, PipelineConfig, Status, StopReason};
+use metrolog::acquire::sink::{Closed, DetectOnly, EventSink};
 use metrolog_log::DetectorSettings;
 use metrolog_log::topics::PoseMsg;
 use protocol::can::TriggerEvent;
@@ -37,9 +37,12 @@ impl EventSink for Counting {
         self.1.lock().unwrap().ticks += 1;
         Ok(())
     }
-    fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
+    fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Closed> {
         self.1.lock().unwrap().finished = true;
         Box::new(self.0).finish(now_ns)
+    }
+    fn counts(&self) -> &RunCounts {
+        self.0.counts()
     }
 }
 
@@ -150,7 +153,7 @@ fn pipeline(seen: &Arc<Mutex<Seen>>, stop_at_program_end: bool) -> Pipeline {
             keep_poses: true,
         },
         HostClock::new(),
-        Box::new(Counting(DetectOnly(engine), seen.clone())),
+        Box::new(Counting(DetectOnly::new(engine), seen.clone())),
     )
 }
 

@@ -260,6 +260,49 @@ pub struct Identification {
     pub residuals_um: Vec<[f64; 3]>,
 }
 
+/// A validation residual larger than white noise at the identification's level explains: the
+/// ratio of mean squares (validation over identification) beyond 5 standard deviations of its
+/// spread under white noise, `2/n_val + 2/dof` (equations counted per channel). See
+/// [`Identification::validation_excess`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ValidationExcess {
+    /// Validation residual RMS over the three channels, µm.
+    pub validation_rms_um: f64,
+    /// The identification's residual standard deviation `s`, µm.
+    pub identification_sigma_um: f64,
+    /// Ratio of the mean squares, validation over identification.
+    pub ratio: f64,
+    /// The largest ratio white noise explains (1 + 5 standard deviations of the ratio).
+    pub bound: f64,
+}
+
+impl Identification {
+    /// Whether the residual RMS of `n_val_poses` validation poses (`val_rms_um`, per channel)
+    /// exceeds what white noise of this identification's level explains: `Some` when the
+    /// ratio of mean squares passes its 5σ bound; `None` when it does not, or when there is no
+    /// residual level or no validation pose to compare.
+    pub fn validation_excess(
+        &self,
+        val_rms_um: &[f64; 3],
+        n_val_poses: usize,
+    ) -> Option<ValidationExcess> {
+        let s2 = self.residual_sigma_um.powi(2);
+        let n_val = 3 * n_val_poses;
+        if s2 <= 0.0 || n_val == 0 {
+            return None;
+        }
+        let v2 = val_rms_um.iter().map(|v| v * v).sum::<f64>() / 3.0;
+        let ratio = v2 / s2;
+        let bound = 1.0 + 5.0 * (2.0 / n_val as f64 + 2.0 / self.dof.max(1) as f64).sqrt();
+        (ratio > bound).then(|| ValidationExcess {
+            validation_rms_um: v2.sqrt(),
+            identification_sigma_um: s2.sqrt(),
+            ratio,
+            bound,
+        })
+    }
+}
+
 /// An identification trajectory: A and C sweep together (a spiral over the sphere of the ball).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TrajectorySpec {
@@ -943,4 +986,66 @@ pub fn write_dataset(records: &[CapballRecord]) -> String {
         ));
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn identification(sigma_um: f64, dof: usize) -> Identification {
+        Identification {
+            errors: CapballErrors::default(),
+            params: vec![0.0; 14],
+            std_uncertainty: vec![0.0; 14],
+            covariance: Vec::new(),
+            condition_number: 1.0,
+            residual_rms_um: [sigma_um; 3],
+            residual_sigma_um: sigma_um,
+            n_poses: (dof + 14) / 3,
+            dof,
+            residuals_um: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn validation_excess_is_the_variance_ratio_beyond_five_sigma() {
+        // s = 1 µm, 1000 degrees of freedom, 100 validation poses (300 equations): the ratio
+        // of mean squares may reach 1 + 5·√(2/300 + 2/1000) = 1.4655 under white noise.
+        let id = identification(1.0, 1000);
+        let bound = 1.0 + 5.0 * (2.0f64 / 300.0 + 2.0 / 1000.0).sqrt();
+        assert_eq!(id.validation_excess(&[1.0; 3], 100), None);
+        // RMS 1.2 µm: ratio 1.44, inside.
+        assert_eq!(id.validation_excess(&[1.2; 3], 100), None);
+        // RMS 1.25 µm: ratio 1.5625, beyond.
+        let e = id.validation_excess(&[1.25; 3], 100).unwrap();
+        assert!((e.ratio - 1.5625).abs() < 1e-12);
+        assert!((e.bound - bound).abs() < 1e-12);
+        assert!((e.validation_rms_um - 1.25).abs() < 1e-12);
+        assert_eq!(e.identification_sigma_um, 1.0);
+        // The channels' mean squares are averaged: one channel at √3 × 1.25 µm is the same.
+        let one = id
+            .validation_excess(&[1.25 * 3f64.sqrt(), 0.0, 0.0], 100)
+            .unwrap();
+        assert!((one.ratio - e.ratio).abs() < 1e-12);
+        // Fewer validation poses widen the bound: 10 poses (30 equations) allow 2.30.
+        assert_eq!(id.validation_excess(&[1.25; 3], 10), None);
+    }
+
+    #[test]
+    fn validation_excess_needs_a_noise_level_and_validation_poses() {
+        assert_eq!(
+            identification(0.0, 1000).validation_excess(&[5.0; 3], 100),
+            None
+        );
+        assert_eq!(
+            identification(1.0, 1000).validation_excess(&[5.0; 3], 0),
+            None
+        );
+        // No degrees of freedom counts as one: the bound is wide but the test still runs.
+        assert!(
+            identification(1.0, 0)
+                .validation_excess(&[50.0; 3], 100)
+                .is_some()
+        );
+    }
 }

@@ -1,31 +1,35 @@
 //! The acquisition pipeline: driver events in, steady values out, everything recorded.
 //!
 //! ```text
-//! drivers ──(one bounded queue)──▶ Pipeline ──▶ log::Recorder: raw topics, PoseEngine (a
-//!                                     │          SteadyDetector per instrument) ─▶ /pose, /status
-//!                                     └──── status for systemd (STATUS, WATCHDOG) and progress
+//! drivers ──(one bounded queue)──▶ Pipeline ──▶ EventSink (acquire::sink): the Recorder's raw
+//!                                     │          topics, PoseEngine (a SteadyDetector per
+//!                                     │          instrument) ─▶ /pose, /status
+//!                                     └──── Status for systemd (STATUS, WATCHDOG) and progress
 //! ```
 //!
 //! The pipeline runs on its own thread (see [`spawn`]) so that writing the log never delays the
 //! drivers' tasks; the drivers never wait on the queue (a full queue is counted by them as
-//! `dropped`). The pose values come from the log's `PoseEngine`, the very code `metrolog replay`
+//! `dropped`). The pose values come from `detect::PoseEngine`, the very code `metrolog replay`
 //! runs, so a replay reproduces them.
+//!
+//! The [`Status`] is the one model of the run's state: what the pipeline sees itself
+//! (connections, events received, the program's state, the queue, pose latency, log failures)
+//! beside the counts the sink keeps ([`RunCounts`]: driver counters, pose values by status),
+//! which are read from the sink, never counted twice.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use drivers::{DriverEvent, HostClock, Instrument};
+use metrolog_log::topics::PoseMsg;
 use protocol::can::TriggerEvent;
 use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
-use metrolog_log::DetectorSettings;
-use metrolog_log::topics::PoseMsg;
-use types::PoseStatus;
-
-use crate::acquire::service::{Notifier, Watchdog};
-use detect::PoseEngine;
+use super::counts::RunCounts;
+use super::service::{Notifier, Watchdog};
+use super::sink::EventSink;
 
 /// Capacity of the queue from the drivers to the pipeline: one second of every instrument at
 /// its highest rate (10 kHz + 20 kHz + 1 kHz) plus margin, so a log flush of up to a second
@@ -34,133 +38,6 @@ pub const QUEUE_CAPACITY: usize = 1 << 16;
 
 /// How often `/status` is written and systemd hears from us.
 pub const STATUS_PERIOD: Duration = Duration::from_secs(1);
-
-/// Where the pipeline puts the driver events: the MCAP log with its pose engine in a run
-/// ([`super::recorder::Recorder`]), the pose engine alone in benchmarks and tests ([`DetectOnly`]).
-pub trait EventSink: Send {
-    /// Record one event; returns the pose values it completes.
-    fn record(&mut self, ev: &DriverEvent, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>>;
-    /// Called at least once a second (status record, flushing).
-    fn tick(&mut self, now_ns: u64) -> anyhow::Result<()>;
-    /// Close open dwells and the log; returns the last pose values.
-    fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>>;
-    /// Whether triggers are placed as they come ([`PoseEngine::placing_at_once`]): poses of
-    /// triggers that waited for the NC clock fit to settle are left out of the pose latency.
-    fn placing_at_once(&self) -> bool {
-        true
-    }
-}
-
-/// The run's log: the log's `Recorder` (raw topics, pose engine, `/status`), writing through
-/// the page cache, and a thread that makes the file durable once a second. `fdatasync` of a
-/// busy log can take hundreds of milliseconds; on the pipeline thread it would hold up every
-/// event behind it (measured: pose records up to 0.5 s late at full rates), on its own thread
-/// it holds up nothing. A power cut loses at most about two seconds instead of one.
-pub struct LiveLog {
-    recorder: super::recorder::Recorder,
-    path: std::path::PathBuf,
-    sync_stop: std::sync::mpsc::Sender<()>,
-    sync_thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl LiveLog {
-    fn new(mut recorder: super::recorder::Recorder) -> anyhow::Result<LiveLog> {
-        use anyhow::Context;
-        let path = recorder.writer().path().to_path_buf();
-        // fsync(2) works on a descriptor opened for reading: it flushes the file, not the fd.
-        let file = std::fs::File::open(&path)
-            .with_context(|| format!("cannot open {} for syncing", path.display()))?;
-        let (sync_stop, stop_rx) = std::sync::mpsc::channel::<()>();
-        let shown = path.clone();
-        let sync_thread = std::thread::Builder::new()
-            .name("log-sync".into())
-            .spawn(move || {
-                let mut reported = false;
-                loop {
-                    let last = !matches!(
-                        stop_rx.recv_timeout(Duration::from_secs(1)),
-                        Err(std::sync::mpsc::RecvTimeoutError::Timeout)
-                    );
-                    if let Err(e) = file.sync_data()
-                        && !reported
-                    {
-                        reported = true;
-                        tracing::error!("cannot sync {} to disk: {e}", shown.display());
-                    }
-                    if last {
-                        break;
-                    }
-                }
-            })
-            .context("cannot start the log-sync thread")?;
-        Ok(LiveLog {
-            recorder,
-            path,
-            sync_stop,
-            sync_thread: Some(sync_thread),
-        })
-    }
-
-    pub fn path(&self) -> &std::path::Path {
-        &self.path
-    }
-
-    /// Hands every message written from now on to `tap` too (the live view).
-    pub fn set_tap(&mut self, tap: metrolog_log::MessageTap) {
-        self.recorder.writer().set_tap(tap);
-    }
-}
-
-impl EventSink for LiveLog {
-    fn record(&mut self, ev: &DriverEvent, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
-        Ok(self.recorder.record(ev, now_ns)?)
-    }
-    fn tick(&mut self, now_ns: u64) -> anyhow::Result<()> {
-        Ok(self.recorder.tick(now_ns)?)
-    }
-    fn placing_at_once(&self) -> bool {
-        self.recorder.placing_at_once()
-    }
-    fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
-        let LiveLog {
-            recorder,
-            sync_stop,
-            sync_thread,
-            ..
-        } = *self;
-        let r = recorder.finish(now_ns);
-        // The last sync, after the footer.
-        let _ = sync_stop.send(());
-        if let Some(h) = sync_thread {
-            let _ = h.join();
-        }
-        let (path, poses) = r?;
-        tracing::info!("log closed: {}", path.display());
-        Ok(poses)
-    }
-}
-
-/// The pose engine without a log (benchmarks, tests).
-pub struct DetectOnly(pub PoseEngine);
-
-impl EventSink for DetectOnly {
-    fn record(&mut self, ev: &DriverEvent, _now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
-        Ok(match ev {
-            DriverEvent::Sample(s) => self.0.on_sample(s),
-            DriverEvent::Trigger(t) => self.0.on_trigger(t),
-            _ => Vec::new(),
-        })
-    }
-    fn tick(&mut self, _now_ns: u64) -> anyhow::Result<()> {
-        Ok(())
-    }
-    fn finish(mut self: Box<Self>, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
-        Ok(self.0.finish(now_ns))
-    }
-    fn placing_at_once(&self) -> bool {
-        self.0.placing_at_once()
-    }
-}
 
 /// Whether the NC program runs, as told by the triggers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
@@ -184,9 +61,9 @@ pub struct InstrumentStatus {
     pub identity: String,
     /// Events the pipeline received from this instrument's driver (samples or triggers).
     pub received: u64,
-    /// Pose values written, by status.
+    /// Pose values written, by status (from the sink's [`RunCounts`]).
     pub poses: BTreeMap<&'static str, u64>,
-    /// The driver's own counters (latest snapshot).
+    /// The driver's own counters (latest snapshot, from the sink's [`RunCounts`]).
     pub driver: drivers::Counters,
     pub last_error: Option<String>,
 }
@@ -204,7 +81,8 @@ impl InstrumentStatus {
     }
 }
 
-/// The `/status` record: every counter of the run.
+/// The status of a run: every counter, as systemd's STATUS, the progress display and the
+/// outcome see it.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Status {
     /// Host time of this status, ns since the Unix epoch.
@@ -308,42 +186,28 @@ pub struct PipelineConfig {
     pub keep_poses: bool,
 }
 
-/// The pipeline's state (one per run).
+/// The pipeline: the sink and the run's state beside it (one per run).
 pub struct Pipeline {
+    sink: Box<dyn EventSink>,
+    state: RunState,
+}
+
+/// What the pipeline itself keeps of a run: the [`Status`] without the sink's counts.
+struct RunState {
     cfg: PipelineConfig,
     clock: HostClock,
-    instruments: BTreeMap<Instrument, InstrumentStatus>,
+    /// The status as the pipeline keeps it; `instruments[..].driver` and `.poses`, `poses` and
+    /// `poses_ok` are filled from the sink's counts in every snapshot.
     status: Status,
-    sink: Box<dyn EventSink>,
     started: Instant,
     last_sample: Option<Instant>,
     poses: Vec<PoseMsg>,
     stop: Option<StopReason>,
-    log_error_reported: bool,
 }
 
-impl Pipeline {
-    pub fn new(cfg: PipelineConfig, clock: HostClock, sink: Box<dyn EventSink>) -> Pipeline {
-        let instruments = cfg
-            .instruments
-            .iter()
-            .map(|&i| (i, InstrumentStatus::default()))
-            .collect();
-        Pipeline {
-            cfg,
-            clock,
-            instruments,
-            status: Status {
-                queue_capacity: QUEUE_CAPACITY,
-                ..Status::default()
-            },
-            sink,
-            started: Instant::now(),
-            last_sample: None,
-            poses: Vec::new(),
-            stop: None,
-            log_error_reported: false,
-        }
+impl RunState {
+    fn slot(&mut self, i: Instrument) -> &mut InstrumentStatus {
+        self.status.instruments.entry(i).or_default()
     }
 
     /// A failed write stops the run (disk full: going on would only retry a failing write for
@@ -353,8 +217,7 @@ impl Pipeline {
             Ok(v) => v,
             Err(e) => {
                 self.status.log_errors += 1;
-                if !self.log_error_reported {
-                    self.log_error_reported = true;
+                if self.status.log_failed.is_none() {
                     tracing::error!("the log writer failed; stopping the run: {e:#}");
                     self.status.log_failed = Some(format!("{e:#}"));
                     self.stop = Some(StopReason::LogFailed);
@@ -364,52 +227,8 @@ impl Pipeline {
         }
     }
 
-    fn slot(&mut self, i: Instrument) -> &mut InstrumentStatus {
-        self.instruments.entry(i).or_default()
-    }
-
-    /// Counts pose values; `timed`: their latency counts (not when their triggers waited for
-    /// the NC clock fit to settle, docs/design.md).
-    fn count_poses(&mut self, poses: Vec<PoseMsg>, timed: bool) {
-        if poses.is_empty() {
-            return;
-        }
-        let now = self.clock.now_ns();
-        for v in poses {
-            if v.n > 0 && timed {
-                let latency_ms = now.saturating_sub(v.t_last_ns) as f64 / 1e6;
-                if latency_ms > self.status.pose_latency_max_ms {
-                    self.status.pose_latency_max_ms = latency_ms;
-                }
-            }
-            self.status.poses += 1;
-            if v.status == PoseStatus::Ok {
-                self.status.poses_ok += 1;
-            }
-            self.status.last_pose = self.status.last_pose.max(v.pose);
-            *self
-                .slot(v.instrument)
-                .poses
-                .entry(v.status.name())
-                .or_default() += 1;
-            tracing::debug!(
-                instrument = v.instrument.name(),
-                pose = v.pose,
-                status = v.status.name(),
-                "pose value"
-            );
-            if self.cfg.keep_poses {
-                self.poses.push(v);
-            }
-        }
-    }
-
-    /// Handle one driver event.
-    pub fn handle(&mut self, ev: DriverEvent) {
-        let now = self.clock.now_ns();
-        let timed = self.sink.placing_at_once();
-        let r = self.sink.record(&ev, now);
-        let poses = self.sink_result(r);
+    /// What the pipeline sees of one event (the sink has recorded it).
+    fn on_event(&mut self, ev: DriverEvent) {
         match ev {
             DriverEvent::Sample(s) => {
                 self.last_sample = Some(Instant::now());
@@ -453,32 +272,59 @@ impl Pipeline {
             } => {
                 self.slot(instrument).last_error = Some(error.to_string());
             }
-            DriverEvent::Counters {
-                instrument,
-                counters,
-            } => {
-                self.slot(instrument).driver = counters;
+            // The sink keeps the counters ([`RunCounts`]); an instrument that sends them has
+            // a place in the status.
+            DriverEvent::Counters { instrument, .. } => {
+                self.slot(instrument);
             }
         }
-        self.count_poses(poses, timed);
     }
 
-    /// Snapshot the status.
-    pub fn status(&mut self, queue_len: usize) -> Status {
+    /// What the pipeline takes from pose values (the sink counts them): the highest pose, the
+    /// latency when `timed` (not when their triggers waited for the NC clock fit to settle,
+    /// docs/design.md), and the values themselves when kept.
+    fn on_poses(&mut self, poses: Vec<PoseMsg>, timed: bool) {
+        if poses.is_empty() {
+            return;
+        }
+        let now = self.clock.now_ns();
+        for v in poses {
+            if v.n > 0 && timed {
+                let latency_ms = now.saturating_sub(v.t_last_ns) as f64 / 1e6;
+                if latency_ms > self.status.pose_latency_max_ms {
+                    self.status.pose_latency_max_ms = latency_ms;
+                }
+            }
+            self.status.last_pose = self.status.last_pose.max(v.pose);
+            self.slot(v.instrument);
+            tracing::debug!(
+                instrument = v.instrument.name(),
+                pose = v.pose,
+                status = v.status.name(),
+                "pose value"
+            );
+            if self.cfg.keep_poses {
+                self.poses.push(v);
+            }
+        }
+    }
+
+    /// The status now, with the sink's counts.
+    fn snapshot(&mut self, queue_len: usize, counts: &RunCounts) -> Status {
         self.status.t_ns = self.clock.now_ns();
         self.status.uptime_s = self.started.elapsed().as_secs_f64();
         self.status.queue_len = queue_len;
         self.status.queue_max = self.status.queue_max.max(queue_len);
-        self.status.instruments = self.instruments.clone();
-        self.status.clone()
-    }
-
-    /// The once-a-second work: the sink's status record and flush.
-    fn tick(&mut self, queue_len: usize) -> Status {
-        let now = self.clock.now_ns();
-        let r = self.sink.tick(now);
-        self.sink_result(r);
-        self.status(queue_len)
+        let mut st = self.status.clone();
+        st.poses = counts.poses_total();
+        st.poses_ok = counts.poses_ok();
+        for (i, c) in &counts.drivers {
+            st.instruments.entry(*i).or_default().driver = c.clone();
+        }
+        for (i, p) in &counts.poses {
+            st.instruments.entry(*i).or_default().poses = p.clone();
+        }
+        st
     }
 
     /// The watchdog facts now (see [`crate::acquire::service`]).
@@ -487,39 +333,101 @@ impl Pipeline {
             since_loop_s: 0.0,
             since_sample_s: self.last_sample.map(|t| t.elapsed().as_secs_f64()),
             uptime_s: self.started.elapsed().as_secs_f64(),
-            connected: self.instruments.values().filter(|s| s.connected).count(),
+            connected: self
+                .status
+                .instruments
+                .values()
+                .filter(|s| s.connected)
+                .count(),
             program_idle: self.status.program == ProgramState::Ended,
             interval_s: interval.as_secs_f64(),
         }
     }
+}
+
+impl Pipeline {
+    pub fn new(cfg: PipelineConfig, clock: HostClock, sink: Box<dyn EventSink>) -> Pipeline {
+        let instruments = cfg
+            .instruments
+            .iter()
+            .map(|&i| (i, InstrumentStatus::default()))
+            .collect();
+        Pipeline {
+            sink,
+            state: RunState {
+                cfg,
+                clock,
+                status: Status {
+                    instruments,
+                    queue_capacity: QUEUE_CAPACITY,
+                    ..Status::default()
+                },
+                started: Instant::now(),
+                last_sample: None,
+                poses: Vec::new(),
+                stop: None,
+            },
+        }
+    }
+
+    /// Handle one driver event.
+    pub fn handle(&mut self, ev: DriverEvent) {
+        let now = self.state.clock.now_ns();
+        let timed = self.sink.placing_at_once();
+        let r = self.sink.record(&ev, now);
+        let poses = self.state.sink_result(r);
+        self.state.on_event(ev);
+        self.state.on_poses(poses, timed);
+    }
+
+    /// Snapshot the status.
+    pub fn status(&mut self, queue_len: usize) -> Status {
+        self.state.snapshot(queue_len, self.sink.counts())
+    }
+
+    /// Pose values the sink has counted so far.
+    fn poses_counted(&self) -> u64 {
+        self.sink.counts().poses_total()
+    }
+
+    /// The once-a-second work: the sink's status record and flush.
+    fn tick(&mut self, queue_len: usize) -> Status {
+        let now = self.state.clock.now_ns();
+        let r = self.sink.tick(now);
+        self.state.sink_result(r);
+        self.status(queue_len)
+    }
 
     /// Close every open dwell, write the final status and close the log.
-    pub fn finish(mut self, reason: StopReason, queue_len: usize) -> anyhow::Result<Outcome> {
-        let now = self.clock.now_ns();
-        let sink = std::mem::replace(
-            &mut self.sink,
-            Box::new(DetectOnly(PoseEngine::new(&DetectorSettings::default())?)),
-        );
+    pub fn finish(self, reason: StopReason, queue_len: usize) -> anyhow::Result<Outcome> {
+        let Pipeline { sink, mut state } = self;
+        let now = state.clock.now_ns();
         let mut reason = reason;
         let timed = sink.placing_at_once();
-        match sink.finish(now) {
-            Ok(last) => self.count_poses(last, timed),
+        // The counts as they stand, should the sink fail to close.
+        let before = sink.counts().clone();
+        let counts = match sink.finish(now) {
+            Ok(closed) => {
+                state.on_poses(closed.poses, timed);
+                closed.counts
+            }
             // The file could not be closed (its footer not written): what was written before
             // stays readable, as after a kill (the reader reads the intact prefix).
             Err(e) => {
                 tracing::error!("the log could not be closed cleanly: {e:#}");
-                self.status.log_errors += 1;
-                if self.status.log_failed.is_none() {
-                    self.status.log_failed = Some(format!("{e:#}"));
+                state.status.log_errors += 1;
+                if state.status.log_failed.is_none() {
+                    state.status.log_failed = Some(format!("{e:#}"));
                 }
                 reason = StopReason::LogFailed;
+                before
             }
-        }
-        let status = self.status(queue_len);
+        };
+        let status = state.snapshot(queue_len, &counts);
         Ok(Outcome {
             reason,
             status,
-            poses: self.poses,
+            poses: state.poses,
         })
     }
 
@@ -544,7 +452,7 @@ impl Pipeline {
                     let st = self.tick(rx.len());
                     notifier.status(&st.summary());
                     if let Some(iv) = watchdog_interval {
-                        if self.watchdog(iv).healthy() {
+                        if self.state.watchdog(iv).healthy() {
                             notifier.watchdog();
                         } else {
                             tracing::warn!(
@@ -554,7 +462,7 @@ impl Pipeline {
                         }
                     }
                     progress.send_replace(st);
-                    if let Some(r) = self.stop.clone() {
+                    if let Some(r) = self.state.stop.clone() {
                         break r;
                     }
                 }
@@ -563,19 +471,19 @@ impl Pipeline {
                     self.handle(ev);
                     // Drain what is queued without going through select! for every event.
                     let mut budget = 4096;
-                    while budget > 0 && self.stop.is_none() {
+                    while budget > 0 && self.state.stop.is_none() {
                         match rx.try_recv() {
                             Ok(ev) => self.handle(ev),
                             Err(_) => break,
                         }
                         budget -= 1;
                     }
-                    self.status.queue_max = self.status.queue_max.max(rx.len());
-                    if self.status.poses != poses_published {
-                        poses_published = self.status.poses;
+                    self.state.status.queue_max = self.state.status.queue_max.max(rx.len());
+                    if self.poses_counted() != poses_published {
+                        poses_published = self.poses_counted();
                         progress.send_replace(self.status(rx.len()));
                     }
-                    if let Some(r) = self.stop.clone() {
+                    if let Some(r) = self.state.stop.clone() {
                         break r;
                     }
                 }
@@ -613,89 +521,407 @@ pub fn spawn(
         })
 }
 
-/// The detector settings of a config: the same window length for every instrument; poses
-/// delimited by the CNC's triggers when a `[trigger]` is configured, found as standstill
-/// plateaus in the signal otherwise.
-pub fn detector_settings(cfg: &crate::acquire::config::Config) -> DetectorSettings {
-    let mut s = DetectorSettings::default().with_samples(cfg.detector.samples);
-    // Only the configured instruments get pose values: one left out of the run is not "away".
-    s.instruments.retain(|i| match i {
-        drivers::Instrument::Interferometer => cfg.interferometer.is_some(),
-        drivers::Instrument::Capball => cfg.capball.is_some(),
-        drivers::Instrument::Psd => cfg.psd.is_some(),
-        drivers::Instrument::Trigger => false,
-    });
-    if cfg.trigger.is_none() {
-        for c in [&mut s.interferometer, &mut s.capball, &mut s.psd] {
-            c.mode = types::DetectorMode::Plateaus;
+#[cfg(test)]
+mod tests {
+    //! The Status bookkeeping on plain driver events, through a scripted sink (no pose engine,
+    //! no log, no clock waits): what each event changes, where the counts come from, how a
+    //! failing log stops the run.
+
+    use std::collections::VecDeque;
+
+    use drivers::{Counters, DriverError, Sample, SampleValues, Trigger};
+    use types::PoseStatus;
+
+    use super::*;
+    use crate::acquire::sink::Closed;
+
+    /// Returns the pose values it was given, one batch per recorded event, and counts them and
+    /// the counters as every sink does; fails writes when told to.
+    #[derive(Default)]
+    struct Scripted {
+        batches: VecDeque<Vec<PoseMsg>>,
+        at_finish: Vec<PoseMsg>,
+        counts: RunCounts,
+        fail_writes: bool,
+        fail_finish: bool,
+        placing_at_once: bool,
+    }
+
+    impl EventSink for Scripted {
+        fn record(&mut self, ev: &DriverEvent, _now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
+            if self.fail_writes {
+                anyhow::bail!("no space left on device");
+            }
+            self.counts.on_event(ev);
+            let poses = self.batches.pop_front().unwrap_or_default();
+            poses.iter().for_each(|p| self.counts.on_pose(p));
+            Ok(poses)
+        }
+        fn tick(&mut self, _now_ns: u64) -> anyhow::Result<()> {
+            Ok(())
+        }
+        fn finish(mut self: Box<Self>, _now_ns: u64) -> anyhow::Result<Closed> {
+            if self.fail_finish {
+                anyhow::bail!("cannot write the footer");
+            }
+            let poses = std::mem::take(&mut self.at_finish);
+            poses.iter().for_each(|p| self.counts.on_pose(p));
+            Ok(Closed {
+                poses,
+                counts: self.counts,
+            })
+        }
+        fn counts(&self) -> &RunCounts {
+            &self.counts
+        }
+        fn placing_at_once(&self) -> bool {
+            self.placing_at_once
         }
     }
-    s
-}
 
-/// Open the run's MCAP log in `[run] output_dir` (created if missing) with the run metadata and
-/// the config, trajectory and CapBall transform attached, so the log replays on its own.
-pub fn open_log(
-    cfg: &crate::acquire::config::Config,
-    clock: &HostClock,
-) -> anyhow::Result<LiveLog> {
-    use anyhow::Context;
-    let dir = &cfg.run.output_dir;
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
-    let settings = detector_settings(cfg);
-    let now = clock.now_ns();
-    let mut extra = BTreeMap::new();
-    extra.insert("config_path".to_string(), cfg.path.display().to_string());
-    extra.insert(
-        "stop_at_program_end".to_string(),
-        cfg.run.stop_at_program_end.to_string(),
-    );
-    if cfg.run.time_scale != 1.0 {
-        extra.insert("time_scale".to_string(), cfg.run.time_scale.to_string());
+    fn pipeline(sink: Scripted, stop_at_program_end: bool) -> Pipeline {
+        Pipeline::new(
+            PipelineConfig {
+                instruments: vec![Instrument::Interferometer, Instrument::Trigger],
+                stop_at_program_end,
+                keep_poses: true,
+            },
+            HostClock::new(),
+            Box::new(sink),
+        )
     }
-    extra.insert(
-        "instruments_configured".to_string(),
-        cfg.instruments()
-            .iter()
-            .map(|i| i.name())
-            .collect::<Vec<_>>()
-            .join(","),
-    );
-    let meta = metrolog_log::RunMetadata {
-        machine: cfg.run.machine.clone(),
-        started_ns: now,
-        detector: settings.clone(),
-        instruments: BTreeMap::new(),
-        // The log stores CB-3 samples as ADC codes with this calibration (docs/log-format.md).
-        capball: cfg.capball.as_ref().map(|c| c.driver.calibration()),
-        extra,
-    };
-    let mut writer = metrolog_log::LogWriter::create_in_dir(
-        dir,
-        &meta,
-        metrolog_log::LogOptions {
-            // Durability comes from the log-sync thread of [`LiveLog`].
-            fsync: false,
-            ..metrolog_log::LogOptions::default()
-        },
-    )?;
-    writer.attach(
-        metrolog_log::CONFIG_ATTACHMENT,
-        "application/toml",
-        cfg.text.as_bytes(),
-        now,
-    )?;
-    if let Some(t) = &cfg.run.trajectory {
-        writer.attach(
-            metrolog_log::TRAJECTORY_ATTACHMENT,
-            "text/csv",
-            t.text.as_bytes(),
-            now,
-        )?;
+
+    fn sample(instrument: Instrument, seq: u64) -> DriverEvent {
+        DriverEvent::Sample(Sample {
+            instrument,
+            seq,
+            device_t_us: seq,
+            host_ns: seq * 1000,
+            fitted_ns: seq * 1000,
+            valid: true,
+            values: SampleValues::Position {
+                raw_nm: 0,
+                position_um: 0.0,
+                sig: 90,
+                flags: 0,
+            },
+        })
     }
-    if let Some((_, text)) = cfg.capball.as_ref().and_then(|c| c.transform_file.as_ref()) {
-        writer.attach("capball-transform.csv", "text/csv", text.as_bytes(), now)?;
+
+    fn trigger(event: TriggerEvent, pose: u16) -> DriverEvent {
+        DriverEvent::Trigger(Trigger {
+            event,
+            pose,
+            nc_ms: 0,
+            host_ns: 0,
+        })
     }
-    LiveLog::new(super::recorder::Recorder::new(writer, &settings)?)
+
+    fn pose(instrument: Instrument, pose: u32, status: PoseStatus, n: u64) -> PoseMsg {
+        PoseMsg {
+            instrument,
+            pose,
+            status,
+            n,
+            mean: BTreeMap::new(),
+            std: BTreeMap::new(),
+            t_first_ns: 0,
+            t_last_ns: 0,
+        }
+    }
+
+    fn silent() -> DriverError {
+        DriverError::Silent {
+            idle: Duration::from_secs(2),
+        }
+    }
+
+    #[test]
+    fn configured_instruments_start_disconnected_and_unknown() {
+        let mut p = pipeline(Scripted::default(), false);
+        let st = p.status(7);
+        assert_eq!(
+            st.instruments.keys().copied().collect::<Vec<_>>(),
+            vec![Instrument::Interferometer, Instrument::Trigger]
+        );
+        assert!(st.instruments.values().all(|s| !s.connected));
+        assert_eq!(st.program, ProgramState::Unknown);
+        assert_eq!((st.queue_len, st.queue_max), (7, 7));
+        assert_eq!(st.queue_capacity, QUEUE_CAPACITY);
+        assert_eq!(p.status(2).queue_max, 7);
+        assert_eq!(
+            st.summary(),
+            "poses 0 (0 ok), samples 0, faults 0, lost 0, connected: none"
+        );
+    }
+
+    #[test]
+    fn connections_and_errors_are_kept_per_instrument() {
+        let mut p = pipeline(Scripted::default(), false);
+        p.handle(DriverEvent::Connected {
+            instrument: Instrument::Interferometer,
+            port: "/dev/li80".into(),
+            identity: "LI-80,SN1".into(),
+        });
+        p.handle(DriverEvent::Connected {
+            instrument: Instrument::Psd,
+            port: "/dev/psd".into(),
+            identity: "PSD-2".into(),
+        });
+        let st = p.status(0);
+        let li = &st.instruments[&Instrument::Interferometer];
+        assert!(li.connected);
+        assert_eq!(
+            (li.port.as_str(), li.identity.as_str()),
+            ("/dev/li80", "LI-80,SN1")
+        );
+        // An instrument that was not configured but speaks gets a place.
+        assert!(st.instruments[&Instrument::Psd].connected);
+        assert!(st.summary().ends_with("connected: interferometer psd"));
+
+        p.handle(DriverEvent::Disconnected {
+            instrument: Instrument::Interferometer,
+            port: "/dev/li80-b".into(),
+            reason: DriverError::EndOfFile,
+        });
+        p.handle(DriverEvent::Error {
+            instrument: Instrument::Interferometer,
+            port: "/dev/li80-b".into(),
+            error: silent(),
+        });
+        let st = p.status(0);
+        let li = &st.instruments[&Instrument::Interferometer];
+        assert!(!li.connected);
+        assert_eq!(li.port, "/dev/li80-b");
+        // The identity of the last connection stays.
+        assert_eq!(li.identity, "LI-80,SN1");
+        assert_eq!(
+            li.last_error.as_deref(),
+            Some("no data for 2.0 s while streaming")
+        );
+        assert!(st.summary().ends_with("connected: psd"));
+    }
+
+    #[test]
+    fn samples_and_triggers_are_counted_as_received() {
+        let mut p = pipeline(Scripted::default(), false);
+        for k in 0..5 {
+            p.handle(sample(Instrument::Interferometer, k));
+        }
+        p.handle(sample(Instrument::Capball, 0));
+        p.handle(trigger(TriggerEvent::ExactStop, 3));
+        let st = p.status(0);
+        assert_eq!(st.instruments[&Instrument::Interferometer].received, 5);
+        assert_eq!(st.instruments[&Instrument::Capball].received, 1);
+        assert_eq!(st.instruments[&Instrument::Trigger].received, 1);
+        // Triggers are not samples.
+        assert_eq!(st.samples(), 6);
+        assert_eq!(st.last_pose, 3);
+    }
+
+    #[test]
+    fn the_program_state_follows_the_triggers() {
+        let mut p = pipeline(Scripted::default(), false);
+        let mut seen = Vec::new();
+        for ev in [
+            TriggerEvent::ProgramStart,
+            TriggerEvent::FeedHold,
+            TriggerEvent::MotionStart,
+            TriggerEvent::ProgramEnd,
+            TriggerEvent::ExactStop,
+        ] {
+            p.handle(trigger(ev, 1));
+            seen.push(p.status(0).program);
+        }
+        assert_eq!(
+            seen,
+            vec![
+                ProgramState::Running,
+                ProgramState::Held,
+                ProgramState::Running,
+                ProgramState::Ended,
+                ProgramState::Running,
+            ]
+        );
+        // Not configured to stop at program end: the run goes on.
+        let out = p.finish(StopReason::Cancelled, 0).unwrap();
+        assert_eq!(out.reason, StopReason::Cancelled);
+    }
+
+    #[test]
+    fn program_end_stops_the_run_only_when_configured() {
+        for stop in [false, true] {
+            let mut p = pipeline(Scripted::default(), stop);
+            p.handle(trigger(TriggerEvent::ProgramStart, 0));
+            assert_eq!(p.state.stop, None);
+            p.handle(trigger(TriggerEvent::ProgramEnd, 0));
+            let want = stop.then_some(StopReason::ProgramEnd);
+            assert_eq!(p.state.stop, want, "stop_at_program_end = {stop}");
+        }
+    }
+
+    #[test]
+    fn driver_counters_come_from_the_sink_latest_snapshot_wins() {
+        let mut p = pipeline(Scripted::default(), false);
+        let mut c = Counters {
+            gaps: 2,
+            gap_samples: 5,
+            resyncs: 1,
+            disconnects: 1,
+            dropped: 3,
+            device_errors: 1,
+            ..Counters::default()
+        };
+        c.rejections.insert(protocol::RejectKind::BadChecksum, 4);
+        p.handle(DriverEvent::Counters {
+            instrument: Instrument::Psd,
+            counters: Counters {
+                gaps: 100,
+                ..Counters::default()
+            },
+        });
+        p.handle(DriverEvent::Counters {
+            instrument: Instrument::Psd,
+            counters: c.clone(),
+        });
+        let st = p.status(0);
+        assert_eq!(st.instruments[&Instrument::Psd].driver.gaps, 2);
+        // gaps + rejections + resyncs + disconnects + dropped + device errors
+        assert_eq!(
+            st.instruments[&Instrument::Psd].faults(),
+            2 + 4 + 1 + 1 + 3 + 1
+        );
+        assert_eq!(st.faults(), 12);
+        // dropped + samples missing in gaps
+        assert_eq!(st.lost(), 8);
+        // The status holds what the sink counted, no count of its own.
+        assert_eq!(p.sink.counts().drivers[&Instrument::Psd].gaps, 2);
+    }
+
+    #[test]
+    fn pose_values_are_counted_once_by_the_sink() {
+        let sink = Scripted {
+            batches: VecDeque::from([
+                vec![
+                    pose(Instrument::Interferometer, 1, PoseStatus::Ok, 150),
+                    pose(Instrument::Capball, 1, PoseStatus::DeviceAway, 0),
+                ],
+                vec![],
+                vec![pose(Instrument::Interferometer, 4, PoseStatus::Ok, 150)],
+            ]),
+            at_finish: vec![pose(
+                Instrument::Interferometer,
+                5,
+                PoseStatus::NeverSteady,
+                150,
+            )],
+            ..Scripted::default()
+        };
+        let mut p = pipeline(sink, false);
+        for k in 0..3 {
+            p.handle(sample(Instrument::Interferometer, k));
+        }
+        let st = p.status(0);
+        assert_eq!((st.poses, st.poses_ok), (3, 2));
+        assert_eq!(st.last_pose, 4);
+        assert_eq!(
+            st.instruments[&Instrument::Interferometer].poses.get("ok"),
+            Some(&2)
+        );
+        // Not configured, but it has pose values: it has a place in the status.
+        assert_eq!(
+            st.instruments[&Instrument::Capball]
+                .poses
+                .get("device_away"),
+            Some(&1)
+        );
+        assert_eq!(
+            st.summary(),
+            "poses 3 (2 ok), samples 3, faults 0, lost 0, connected: none"
+        );
+
+        // The dwells closed at the end count too, and every value is kept.
+        let out = p.finish(StopReason::Cancelled, 0).unwrap();
+        assert_eq!((out.status.poses, out.status.poses_ok), (4, 2));
+        assert_eq!(out.status.last_pose, 5);
+        assert_eq!(
+            out.status.instruments[&Instrument::Interferometer]
+                .poses
+                .get(PoseStatus::NeverSteady.name()),
+            Some(&1)
+        );
+        assert_eq!(
+            out.poses.iter().map(|v| v.pose).collect::<Vec<_>>(),
+            vec![1, 1, 4, 5]
+        );
+    }
+
+    #[test]
+    fn pose_latency_leaves_out_empty_values_and_triggers_that_waited() {
+        // A pose value whose last sample is at the epoch: its latency is the whole clock.
+        for (placing_at_once, n, counted) in
+            [(true, 150, true), (true, 0, false), (false, 150, false)]
+        {
+            let sink = Scripted {
+                batches: VecDeque::from([vec![pose(Instrument::Psd, 1, PoseStatus::Ok, n)]]),
+                placing_at_once,
+                ..Scripted::default()
+            };
+            let mut p = pipeline(sink, false);
+            p.handle(sample(Instrument::Psd, 0));
+            let latency = p.status(0).pose_latency_max_ms;
+            assert_eq!(
+                latency > 0.0,
+                counted,
+                "placing at once {placing_at_once}, n {n}: {latency} ms"
+            );
+        }
+    }
+
+    #[test]
+    fn a_failed_write_stops_the_run_and_says_why() {
+        let sink = Scripted {
+            fail_writes: true,
+            ..Scripted::default()
+        };
+        let mut p = pipeline(sink, false);
+        p.handle(sample(Instrument::Interferometer, 0));
+        p.handle(sample(Instrument::Interferometer, 1));
+        assert_eq!(p.state.stop, Some(StopReason::LogFailed));
+        let st = p.status(0);
+        assert_eq!(st.log_errors, 2);
+        assert_eq!(st.log_failed.as_deref(), Some("no space left on device"));
+        // What arrived is still counted as received.
+        assert_eq!(st.instruments[&Instrument::Interferometer].received, 2);
+        assert!(
+            st.summary()
+                .starts_with("LOG WRITE FAILED, run stopped (no space left on device); poses 0"),
+            "{}",
+            st.summary()
+        );
+    }
+
+    #[test]
+    fn a_log_that_cannot_be_closed_ends_the_run_as_failed_with_its_counts() {
+        let sink = Scripted {
+            batches: VecDeque::from([vec![pose(
+                Instrument::Interferometer,
+                1,
+                PoseStatus::Ok,
+                150,
+            )]]),
+            fail_finish: true,
+            ..Scripted::default()
+        };
+        let mut p = pipeline(sink, false);
+        p.handle(sample(Instrument::Interferometer, 0));
+        let out = p.finish(StopReason::Cancelled, 0).unwrap();
+        assert_eq!(out.reason, StopReason::LogFailed);
+        assert_eq!(out.status.log_errors, 1);
+        assert_eq!(
+            out.status.log_failed.as_deref(),
+            Some("cannot write the footer")
+        );
+        assert_eq!((out.status.poses, out.status.poses_ok), (1, 1));
+    }
 }

@@ -1,10 +1,11 @@
 //! The run's log fed with driver events, in one direction: each event is written to its raw
 //! topic, then handed to the [`PoseEngine`] (the detectors), and the pose values it completes
 //! are written to `/pose`; connections go to `/event`, counters to `/status` once a second.
+//! The recorder keeps the run's one [`RunCounts`] (driver counters, pose values by status).
 
 use std::collections::BTreeMap;
 
-use drivers::{Counters, DriverEvent, Instrument};
+use drivers::DriverEvent;
 use metrolog_log::topics::{EventKind, EventMsg, PoseMsg, StatusMsg};
 use metrolog_log::{
     DetectorSettings, INSTRUMENT_METADATA, LogError, LogOptions, LogWriter, RunMetadata,
@@ -12,13 +13,14 @@ use metrolog_log::{
 
 use detect::PoseEngine;
 
+use super::counts::RunCounts;
+
 /// The log of a run fed with driver events: raw topics, `/pose` from the [`PoseEngine`],
 /// `/event`, and `/status` once a second.
 pub struct Recorder {
     writer: LogWriter,
     engine: PoseEngine,
-    counters: BTreeMap<Instrument, Counters>,
-    poses: BTreeMap<String, u64>,
+    counts: RunCounts,
     last_status_ns: Option<u64>,
     last_ns: u64,
 }
@@ -54,8 +56,7 @@ impl Recorder {
         Ok(Recorder {
             writer,
             engine: PoseEngine::new(settings)?,
-            counters: BTreeMap::new(),
-            poses: BTreeMap::new(),
+            counts: RunCounts::default(),
             last_status_ns: None,
             last_ns: 0,
         })
@@ -65,16 +66,22 @@ impl Recorder {
         &mut self.writer
     }
 
-    /// Writes one driver event (and the pose values it completes); returns those pose values.
-    /// `now_ns` is the host clock (`HostClock::now_ns`), used for the log time of events that
-    /// carry none and for the `/status` cadence.
+    /// The run's counts so far (what `/status` holds).
+    pub fn counts(&self) -> &RunCounts {
+        &self.counts
+    }
+
     /// Whether its pose engine places triggers as they come ([`PoseEngine::placing_at_once`]).
     pub fn placing_at_once(&self) -> bool {
         self.engine.placing_at_once()
     }
 
+    /// Writes one driver event (and the pose values it completes); returns those pose values.
+    /// `now_ns` is the host clock (`HostClock::now_ns`), used for the log time of events that
+    /// carry none and for the `/status` cadence.
     pub fn record(&mut self, ev: &DriverEvent, now_ns: u64) -> Result<Vec<PoseMsg>, LogError> {
         self.last_ns = self.last_ns.max(now_ns);
+        self.counts.on_event(ev);
         let poses = match ev {
             DriverEvent::Sample(s) => {
                 self.writer.write_sample(s)?;
@@ -88,13 +95,7 @@ impl Recorder {
                 self.write_poses(t.host_ns, &p)?;
                 p
             }
-            DriverEvent::Counters {
-                instrument,
-                counters,
-            } => {
-                self.counters.insert(*instrument, counters.clone());
-                Vec::new()
-            }
+            DriverEvent::Counters { .. } => Vec::new(),
             DriverEvent::Connected {
                 instrument,
                 port,
@@ -151,7 +152,7 @@ impl Recorder {
 
     fn write_poses(&mut self, log_ns: u64, poses: &[PoseMsg]) -> Result<(), LogError> {
         for p in poses {
-            *self.poses.entry(p.status.name().to_string()).or_default() += 1;
+            self.counts.on_pose(p);
             self.writer.write_pose(log_ns, p)?;
         }
         Ok(())
@@ -159,15 +160,7 @@ impl Recorder {
 
     /// The `/status` message as it stands.
     pub fn status(&self) -> StatusMsg {
-        StatusMsg {
-            instruments: self
-                .counters
-                .iter()
-                .map(|(i, c)| (i.name().to_string(), c.into()))
-                .collect(),
-            log_messages: self.writer.messages(),
-            poses: self.poses.clone(),
-        }
+        self.counts.status_msg(self.writer.messages())
     }
 
     /// Writes `/status` when a second has passed and flushes when due. Call at least once a
@@ -187,11 +180,20 @@ impl Recorder {
 
     /// Ends the run: closes open dwells (their pose values are returned), writes a last
     /// `/status`, closes the file cleanly and returns its path.
-    pub fn finish(mut self, now_ns: u64) -> Result<(std::path::PathBuf, Vec<PoseMsg>), LogError> {
+    pub fn finish(self, now_ns: u64) -> Result<(std::path::PathBuf, Vec<PoseMsg>), LogError> {
+        let (path, poses, _) = self.finish_counted(now_ns)?;
+        Ok((path, poses))
+    }
+
+    /// [`Recorder::finish`], with the run's final counts.
+    pub fn finish_counted(
+        mut self,
+        now_ns: u64,
+    ) -> Result<(std::path::PathBuf, Vec<PoseMsg>, RunCounts), LogError> {
         let p = self.engine.finish(now_ns);
         self.write_poses(now_ns, &p)?;
         let st = self.status();
         self.writer.write_status(now_ns, &st)?;
-        Ok((self.writer.finish()?, p))
+        Ok((self.writer.finish()?, p, self.counts))
     }
 }

@@ -1,11 +1,16 @@
 //! The inputs of the analysis commands, in one place: which file kinds a command accepts and
 //! how each is read (CSV datasets of `docs/datasets.md`, or an MCAP log through the adapters of
-//! `metrolog-analysis`), and where reports go.
+//! `metrolog-analysis`), and where reports go. Every decision between a CSV and a log is made
+//! here.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
+use geometry::capball::{self, CapballRecord, CapballSetup};
+use geometry::kinematics::Machine;
 use positioning::positioning_data::PositioningData;
+
+use super::progress::read_contents;
 
 /// Reads a positioning run from a CSV dataset or an MCAP log (see
 /// [`metrolog_analysis::positioning`] for how the run is found in a log).
@@ -19,11 +24,120 @@ pub fn load_positioning_with(
     opts: &metrolog_analysis::PositioningOptions,
 ) -> anyhow::Result<PositioningData> {
     if metrolog_analysis::is_mcap(path) {
-        return super::progress::read_contents(path, "reading")
+        return read_contents(path, "reading")
             .and_then(|log| metrolog_analysis::positioning::positioning_from_contents(&log, opts))
             .with_context(|| format!("reading the positioning run of {}", path.display()));
     }
     PositioningData::from_csv_path(path).with_context(|| format!("reading {}", path.display()))
+}
+
+/// Whether `path` holds CapBall data: a CSV whose header names `ex_um` (an MCAP log is
+/// CapBall data only when asked for, e.g. `diagnose --capball`).
+pub fn is_capball_csv(path: &Path) -> bool {
+    if metrolog_analysis::is_mcap(path) {
+        return false;
+    }
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty())
+                .map(|h| h.split(',').any(|c| c.trim() == "ex_um"))
+        })
+        .unwrap_or(false)
+}
+
+/// CapBall records and the machine they were read with.
+pub struct CapballInput {
+    pub records: Vec<CapballRecord>,
+    pub machine: Machine,
+    /// The kinematic convention the log's poses chose (a log read without a given machine).
+    pub machine_name: Option<String>,
+    /// Poses of a log left out, with their status.
+    pub skipped: Vec<(u32, String)>,
+}
+
+/// The CapBall records of a CSV dataset or an MCAP log (the poses that hold the tool on the
+/// ball, see [`metrolog_analysis::capball`]). With `machine` the records are read for it;
+/// without, a log's poses choose the kinematic convention and a CSV is read for paper 001's
+/// machine.
+pub fn load_capball(path: &Path, machine: Option<Machine>) -> anyhow::Result<CapballInput> {
+    if metrolog_analysis::is_mcap(path) {
+        let context = || {
+            format!(
+                "reading the CapBall poses of {} (a CapBall input is a run's MCAP log or a CSV dataset)",
+                path.display()
+            )
+        };
+        let log = read_contents(path, "reading").with_context(context)?;
+        return Ok(match machine {
+            Some(machine) => {
+                let cb = metrolog_analysis::capball::capball_from_contents(&log, &machine)
+                    .with_context(context)?;
+                CapballInput {
+                    records: cb.records,
+                    machine,
+                    machine_name: None,
+                    skipped: cb.skipped,
+                }
+            }
+            None => {
+                let cb = metrolog_analysis::capball::capball_from_contents_auto(&log)
+                    .with_context(context)?;
+                CapballInput {
+                    records: cb.records,
+                    machine: cb.machine,
+                    machine_name: Some(cb.machine_name),
+                    skipped: cb.skipped,
+                }
+            }
+        });
+    }
+    let records =
+        capball::parse_dataset(&read_csv(path)?).with_context(|| format!("{}", path.display()))?;
+    let machine = match machine {
+        Some(m) => m,
+        None => Machine::from_config(&CapballSetup::paper_machine_config())?,
+    };
+    Ok(CapballInput {
+        records,
+        machine,
+        machine_name: None,
+        skipped: Vec::new(),
+    })
+}
+
+/// The machine description of `--machine FILE` (TOML), or paper 001's WCAYFXZT machine.
+pub fn load_machine(path: Option<&PathBuf>) -> anyhow::Result<Machine> {
+    Ok(match path {
+        Some(p) => {
+            Machine::from_toml(&read_csv(p)?).with_context(|| format!("machine {}", p.display()))?
+        }
+        None => Machine::from_config(&CapballSetup::paper_machine_config())?,
+    })
+}
+
+/// The text of an input that must not be a log (a CSV dataset, a description file).
+pub fn read_csv(p: &Path) -> anyhow::Result<String> {
+    if metrolog_analysis::is_mcap(p) {
+        anyhow::bail!(
+            "{}: this input must be a CSV file (`identify capball` reads MCAP logs; the PSD \
+             13-error identification needs the 51-point laser frame and a reference run as CSV — \
+             a log's single PSD segment gives its straightness, printed by `metrolog demo`)",
+            p.display()
+        );
+    }
+    std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))
+}
+
+/// The value of an option that takes `n` comma-separated numbers (`--layout`, `--ball-mm`);
+/// `what` names the option in the error.
+pub fn numbers_arg(s: &str, n: usize, what: &str) -> anyhow::Result<Vec<f64>> {
+    let v: Result<Vec<f64>, _> = s.split(',').map(|x| x.trim().parse::<f64>()).collect();
+    match v {
+        Ok(v) if v.len() == n && v.iter().all(|x| x.is_finite()) => Ok(v),
+        _ => anyhow::bail!("{what} `{s}`: expected {n} comma-separated numbers"),
+    }
 }
 
 /// `--units`: the units of a dataset that does not declare them.

@@ -1,13 +1,22 @@
-//! One module per subcommand.
+//! The subcommands: one module per command, a folder per command family with a module per
+//! subcommand or input kind; a command module takes its arguments and does the I/O, the maths
+//! is in the maths crates and every report's text in `metrolog-analysis`.
+//!
+//! - acquisition: [`run`] (the service), [`demo`] and [`sim`] (the simulator, feature `sim`);
+//! - logs: [`info`], [`replay`], [`recover`];
+//! - analyses: [`analyze`], [`diagnose`] (positioning or CapBall), [`identify`] (CapBall, PSD,
+//!   trajectories, sensor frame), [`volumetric`], [`parts`], [`uncertainty`], [`plan`],
+//!   [`compensate`], [`report`] (with [`pdf`]);
+//! - shared by the commands, importing none of them: [`input`] (the one place that decides
+//!   how an input is read: CSV or log), [`plots`] (the one place commands draw from),
+//!   [`progress`] (progress bars).
 
 pub mod analyze;
 pub mod compensate;
+#[cfg(feature = "sim")]
 pub mod demo;
 pub mod diagnose;
-pub mod diagnose_capball;
 pub mod identify;
-pub mod identify_mc;
-pub mod identify_psd_mc;
 pub mod info;
 pub mod input;
 pub mod parts;
@@ -19,6 +28,7 @@ pub mod recover;
 pub mod replay;
 pub mod report;
 pub mod run;
+#[cfg(feature = "sim")]
 pub mod sim;
 pub mod uncertainty;
 pub mod volumetric;

@@ -1,5 +1,6 @@
-//! A progress bar for commands that read a whole log (an 8-hour log is gigabytes): on stderr,
-//! drawn only when stderr is a terminal (indicatif hides it otherwise), by bytes read.
+//! Progress bars on stderr, drawn only when stderr is a terminal (indicatif hides them
+//! otherwise): bytes read of a whole log (an 8-hour log is gigabytes), and the trials of a
+//! Monte Carlo.
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -40,4 +41,44 @@ pub fn read_contents(
 ) -> Result<metrolog_analysis::LogContents, metrolog_analysis::AnalysisError> {
     let bar = Progress::new(label);
     metrolog_analysis::LogContents::read_progress(path, |d, t| bar.update(d, t))
+}
+
+/// A Monte Carlo's bar: trials of a fixed number, or a spinner with the adaptive procedure's
+/// state.
+pub fn mc_progress_bar(opts: &uncertainty::McOptions) -> ProgressBar {
+    match opts.fixed_trials {
+        Some(n) => {
+            let b = ProgressBar::new(n as u64);
+            b.set_style(
+                ProgressStyle::with_template("Monte Carlo {bar:40} {pos}/{len} trials ({eta})")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            b
+        }
+        None => {
+            let b = ProgressBar::new_spinner();
+            b.set_style(
+                ProgressStyle::with_template("{spinner} adaptive Monte Carlo: {msg}")
+                    .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+            );
+            b.enable_steady_tick(std::time::Duration::from_millis(120));
+            b
+        }
+    }
+}
+
+/// Shows `p` on a bar of [`mc_progress_bar`].
+pub fn update_mc_bar(b: &ProgressBar, p: &uncertainty::McProgress) {
+    if b.length().is_some() {
+        b.set_position(p.trials as u64);
+    } else {
+        let ratio = p
+            .worst_ratio
+            .map(|r| format!(", worst 2s/δ = {r:.2} (stops at ≤ 1)"))
+            .unwrap_or_default();
+        b.set_message(format!(
+            "sequence {}, {} trials{ratio}",
+            p.sequences, p.trials
+        ));
+    }
 }

@@ -151,7 +151,7 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
-    let mut recorder = crate::acquire::pipeline::open_log(cfg, &clock)
+    let mut recorder = crate::acquire::run_log::open_log(cfg, &clock)
         .map_err(|e| crate::exit::LogCreateFailed(format!("{e:#}")))?;
     let log_path = recorder.path().to_path_buf();
     tracing::info!("logging to {}", log_path.display());

@@ -21,8 +21,8 @@ use tokio_tungstenite::tungstenite::handshake::derive_accept_key;
 use tokio_tungstenite::tungstenite::protocol::{Role, WebSocketConfig};
 use tokio_util::sync::CancellationToken;
 
+use super::hub::{Hub, LiveMsg};
 use super::protocol::{self, ClientOp};
-use super::{Hub, LiveMsg};
 
 /// Longest request head accepted.
 pub const MAX_HEAD: usize = 16 << 10;

@@ -8,49 +8,21 @@ use diagnose::capball::{
     self as capball_diagnosis, CapballDiagnosis, DriftRecord, Options, parse_drift_record,
     runs_from_records,
 };
-use geometry::capball::{self, CapballRecord, CapballSetup};
-use geometry::kinematics::Machine;
-
-/// Whether `path` holds CapBall data: a CSV whose header names `ex_um` (an MCAP log is
-/// CapBall data only when asked for with `--capball`).
-pub fn is_capball_csv(path: &Path) -> bool {
-    if metrolog_analysis::is_mcap(path) {
-        return false;
-    }
-    std::fs::read_to_string(path)
-        .ok()
-        .and_then(|t| {
-            t.lines()
-                .find(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty())
-                .map(|h| h.split(',').any(|c| c.trim() == "ex_um"))
-        })
-        .unwrap_or(false)
-}
-
-/// The CapBall records of a CSV dataset or an MCAP log, and the machine they were read with.
-pub fn load(path: &Path) -> anyhow::Result<(Vec<CapballRecord>, Machine, Vec<String>)> {
-    let mut notes = Vec::new();
-    if metrolog_analysis::is_mcap(path) {
-        let cb = super::progress::read_contents(path, "reading")
-            .and_then(|log| metrolog_analysis::capball::capball_from_contents_auto(&log))
-            .with_context(|| format!("reading the CapBall poses of {}", path.display()))?;
-        for (pose, status) in &cb.skipped {
-            notes.push(format!("CapBall pose {pose} skipped ({status})"));
-        }
-        notes.push(format!("machine: {}", cb.machine_name));
-        return Ok((cb.records, cb.machine, notes));
-    }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let recs = capball::parse_dataset(&text).with_context(|| format!("{}", path.display()))?;
-    let machine = Machine::from_config(&CapballSetup::paper_machine_config())?;
-    Ok((recs, machine, notes))
-}
+use geometry::capball::CapballSetup;
 
 /// Diagnose a CapBall dataset (run 1 identifies, the others validate), with an optional drift
 /// record at one fixed pose.
 pub fn diagnose_path(path: &Path, drift: Option<&Path>) -> anyhow::Result<CapballDiagnosis> {
-    let (recs, machine, mut notes) = load(path)?;
+    let input = crate::cmd::input::load_capball(path, None)?;
+    let (recs, machine) = (input.records, input.machine);
+    let mut notes: Vec<String> = input
+        .skipped
+        .iter()
+        .map(|(pose, status)| format!("CapBall pose {pose} skipped ({status})"))
+        .collect();
+    if let Some(name) = &input.machine_name {
+        notes.push(format!("machine: {name}"));
+    }
     if recs.iter().any(|r| r.time_s.is_none()) {
         notes.push(
             "no `time_s` for some poses: their pose number stands in for seconds, so drift rates and periods are per pose".into(),
@@ -85,6 +57,7 @@ pub fn diagnose_path(path: &Path, drift: Option<&Path>) -> anyhow::Result<Capbal
 }
 
 /// The `[capball.truth]` section of a simulator scenario with the found effects (TOML).
+#[cfg(feature = "sim")]
 pub fn scenario_section(d: &CapballDiagnosis, source: &Path) -> anyhow::Result<String> {
     #[derive(serde::Serialize)]
     struct Section {
@@ -114,15 +87,39 @@ pub fn scenario_section(d: &CapballDiagnosis, source: &Path) -> anyhow::Result<S
     ))
 }
 
-/// `metrolog diagnose` for CapBall input.
-pub fn run(args: &crate::cmd::diagnose::Args) -> anyhow::Result<()> {
-    let mut d = diagnose_path(&args.input, args.drift_record.as_deref())?;
-    if let Some(p) = &args.write_model {
-        let text = scenario_section(&d, &args.input)?;
+/// A build without the simulator (`--no-default-features`) cannot write its scenario.
+#[cfg(not(feature = "sim"))]
+pub fn scenario_section(_: &CapballDiagnosis, _: &Path) -> anyhow::Result<String> {
+    Err(no_simulator())
+}
+
+fn no_simulator() -> anyhow::Error {
+    anyhow::anyhow!(
+        "--write-model on CapBall data writes the simulator's [capball.truth] table: this \
+         metrolog was built without the simulator (the service build); build it with the \
+         default features to write the model"
+    )
+}
+
+/// `metrolog diagnose` for CapBall input: the report (JSON or text) on stdout, the extended
+/// model to `write_model`.
+pub fn run(
+    input: &Path,
+    drift_record: Option<&Path>,
+    write_model: Option<&Path>,
+    json: bool,
+) -> anyhow::Result<()> {
+    if write_model.is_some() && !cfg!(feature = "sim") {
+        // Before the diagnosis, which takes a while.
+        return Err(no_simulator());
+    }
+    let mut d = diagnose_path(input, drift_record)?;
+    if let Some(p) = write_model {
+        let text = scenario_section(&d, input)?;
         std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))?;
         d.report.extended_model = Some(p.display().to_string());
     }
-    let text = if args.json {
+    let text = if json {
         serde_json::to_string_pretty(&d.report)? + "\n"
     } else {
         metrolog_analysis::diagnosis_text::capball_text(&d)

@@ -1,0 +1,123 @@
+//! What the log writer's tap and the live view's client sessions share: the [`Hub`] (the
+//! channels, the lossy broadcast of every message and the latched latest ones) and the
+//! [`tap`] that feeds it.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use metrolog_log::{ChannelSpec, MessageTap};
+use tokio::sync::broadcast;
+
+/// Messages a client may fall behind before it starts losing the oldest (at the live rates
+/// — four raw topics at 10 Hz, /status at 1 Hz, a few /pose and triggers — about 5 s).
+pub const BACKLOG: usize = 256;
+
+/// How many of the latest messages of a JSON topic a new subscriber gets at once: the current
+/// pose of every instrument, the recent faults, the last counters and trigger.
+fn latch_depth(topic: &str) -> usize {
+    match topic {
+        "/pose" => 8,
+        "/event" => 16,
+        "/status" | "/cnc/trigger" => 1,
+        _ => 0,
+    }
+}
+
+/// One message as the log holds it: channel (index into [`Hub::channels`]), log time, bytes.
+#[derive(Debug)]
+pub struct LiveMsg {
+    /// Order of publication (a client told the latched messages skips them in the stream).
+    pub seq: u64,
+    pub channel: usize,
+    pub log_ns: u64,
+    pub data: Vec<u8>,
+}
+
+/// What the tap and the client sessions share.
+pub struct Hub {
+    pub channels: Vec<ChannelSpec>,
+    tx: broadcast::Sender<Arc<LiveMsg>>,
+    latest: Mutex<Vec<VecDeque<Arc<LiveMsg>>>>,
+    /// Messages skipped by slow clients, all clients together.
+    pub dropped: AtomicU64,
+    published: AtomicU64,
+    /// Run identity for `serverInfo`.
+    pub session: String,
+    pub machine: String,
+}
+
+impl Hub {
+    pub(crate) fn new(machine: &str, session: String) -> Hub {
+        let channels = metrolog_log::channel_specs();
+        let latest = vec![VecDeque::new(); channels.len()];
+        Hub {
+            channels,
+            tx: broadcast::channel(BACKLOG).0,
+            latest: Mutex::new(latest),
+            dropped: AtomicU64::new(0),
+            published: AtomicU64::new(0),
+            session,
+            machine: machine.to_string(),
+        }
+    }
+
+    /// A receiver of every message published from now on.
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<LiveMsg>> {
+        self.tx.subscribe()
+    }
+
+    /// The latched messages of a channel, oldest first.
+    pub fn latched(&self, channel: usize) -> Vec<Arc<LiveMsg>> {
+        match self.latest.lock() {
+            Ok(l) => l
+                .get(channel)
+                .map(|q| q.iter().cloned().collect())
+                .unwrap_or_default(),
+            Err(_) => Vec::new(),
+        }
+    }
+
+    fn publish(&self, channel: usize, log_ns: u64, data: &[u8]) {
+        let depth = latch_depth(self.channels[channel].topic);
+        if depth == 0 && self.tx.receiver_count() == 0 {
+            return; // nobody watches: no copy
+        }
+        let msg = Arc::new(LiveMsg {
+            seq: self.published.fetch_add(1, Ordering::Relaxed),
+            channel,
+            log_ns,
+            data: data.to_vec(),
+        });
+        if depth > 0
+            && let Ok(mut l) = self.latest.lock()
+        {
+            let q = &mut l[channel];
+            if q.len() == depth {
+                q.pop_front();
+            }
+            q.push_back(msg.clone());
+        }
+        // Err only when no client is connected.
+        let _ = self.tx.send(msg);
+    }
+}
+
+/// The tap for [`metrolog_log::LogWriter::set_tap`]: every JSON message, and at most `raw_hz`
+/// raw batches per second and raw topic (by log time), go to the hub.
+pub fn tap(hub: Arc<Hub>, raw_hz: u32) -> MessageTap {
+    let gap_ns = 1_000_000_000 / u64::from(raw_hz.max(1));
+    let mut last_raw: Vec<Option<u64>> = vec![None; hub.channels.len()];
+    Box::new(move |topic, log_ns, data| {
+        let Some(i) = hub.channels.iter().position(|c| c.topic == topic) else {
+            return;
+        };
+        if hub.channels[i].message_encoding == "protobuf" {
+            if raw_hz == 0 || last_raw[i].is_some_and(|t| log_ns < t.saturating_add(gap_ns)) {
+                return;
+            }
+            last_raw[i] = Some(log_ns);
+        }
+        hub.publish(i, log_ns, data);
+    })
+}

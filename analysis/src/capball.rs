@@ -17,7 +17,7 @@ use geometry::capball::{CapballRecord, CapballSetup};
 use geometry::kinematics::{Machine, Pose};
 use nalgebra::Vector3;
 
-use super::{AnalysisError, LogContents, is_ok};
+use crate::contents::{AnalysisError, LogContents, is_ok};
 use types::Instrument;
 
 /// The CapBall dataset of a log.

@@ -37,7 +37,7 @@ use std::path::{Path, PathBuf};
 use positioning::axis_model::Direction;
 use positioning::positioning_data::{PositioningData, Reading};
 
-use super::{AnalysisError, LogContents, is_ok};
+use crate::contents::{AnalysisError, LogContents, is_ok};
 use metrolog_log::topics::PoseMsg;
 use metrolog_log::trajectory::TrajectoryRow;
 use types::Instrument;
@@ -378,7 +378,7 @@ mod tests {
             path: "mem.mcap".into(),
             poses,
             attachments: [(
-                super::super::TRAJECTORY_ATTACHMENT.to_string(),
+                metrolog_log::TRAJECTORY_ATTACHMENT.to_string(),
                 traj.into_bytes(),
             )]
             .into(),

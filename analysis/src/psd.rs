@@ -14,7 +14,7 @@
 
 use std::path::Path;
 
-use super::{AnalysisError, LogContents, is_ok};
+use crate::contents::{AnalysisError, LogContents, is_ok};
 use metrolog_log::trajectory::TrajectoryRow;
 use types::Instrument;
 

@@ -9,7 +9,8 @@ use geometry::kinematics::Pose;
 use positioning::positioning_data::PositioningData;
 
 use super::capball::identify_subset;
-use super::{AnalysisError, LogContents, PositioningOptions};
+use crate::contents::{AnalysisError, LogContents};
+use crate::positioning::PositioningOptions;
 
 fn opt(v: Option<f64>) -> String {
     v.map_or_else(|| "—".into(), |v| format!("{v:.2}"))

@@ -14,6 +14,7 @@ use protocol::convert::{CapBallCalibration, CapBallPoly, CapBallTransform};
 
 use crate::sample_path::{FrameConverter, Reading, SamplePath};
 use crate::serial_driver::{SerialDriver, SerialSession, idle_timeout, is_ok};
+use crate::serial_link::Port;
 use crate::stamper::SampleStamper;
 use crate::{DriverError, Instrument, SampleValues};
 
@@ -85,11 +86,17 @@ impl SerialDriver for Cb3Driver {
     fn idle_timeout(&self) -> Duration {
         idle_timeout(self.rate_hz)
     }
-    async fn stop(&self, s: &mut SerialSession<'_, Cb3Frames>) -> Result<(), DriverError> {
+    async fn stop<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, Cb3Frames, P>,
+    ) -> Result<(), DriverError> {
         s.expect("STOP\n", is_ok).await.map(drop)
     }
 
-    async fn setup(&self, s: &mut SerialSession<'_, Cb3Frames>) -> Result<String, DriverError> {
+    async fn setup<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, Cb3Frames, P>,
+    ) -> Result<String, DriverError> {
         s.path.stamper.set_rate(self.rate_hz);
         s.expect("STOP\n", is_ok).await?;
         s.reset_decoder();
@@ -122,5 +129,5 @@ pub fn spawn_cb3(
     let driver = Cb3Driver {
         rate_hz: cfg.rate_hz,
     };
-    tokio::spawn(crate::serial_driver::run(driver, path, cancel))
+    crate::serial_driver::spawn(driver, path, cancel)
 }

@@ -13,6 +13,7 @@ use protocol::li80::{Decoder, Line};
 
 use crate::sample_path::{FrameConverter, Reading, SamplePath};
 use crate::serial_driver::{SerialDriver, SerialSession, idle_timeout, is_ok};
+use crate::serial_link::Port;
 use crate::stamper::SampleStamper;
 use crate::{DriverError, Instrument, Sample, SampleValues};
 use detect::Unwrap;
@@ -126,11 +127,17 @@ impl SerialDriver for Li80Driver {
     fn idle_timeout(&self) -> Duration {
         idle_timeout(self.rate_hz)
     }
-    async fn stop(&self, s: &mut SerialSession<'_, Li80Frames>) -> Result<(), DriverError> {
+    async fn stop<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, Li80Frames, P>,
+    ) -> Result<(), DriverError> {
         s.expect("STREAM OFF\n", is_ok).await.map(drop)
     }
 
-    async fn setup(&self, s: &mut SerialSession<'_, Li80Frames>) -> Result<String, DriverError> {
+    async fn setup<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, Li80Frames, P>,
+    ) -> Result<String, DriverError> {
         s.path.stamper.set_rate(self.rate_hz);
         s.expect("STREAM OFF\n", is_ok).await?;
         s.reset_decoder();
@@ -155,6 +162,16 @@ pub fn spawn_li80(
     tx: crate::EventSender,
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
+    let (driver, path) = li80(&cfg, clock, tx);
+    crate::serial_driver::spawn(driver, path, cancel)
+}
+
+/// The LI-80's session and sample path for `cfg`.
+fn li80(
+    cfg: &Li80Config,
+    clock: crate::HostClock,
+    tx: crate::EventSender,
+) -> (Li80Driver, SamplePath<Li80Frames>) {
     let frames = Li80Frames {
         port: cfg.port.clone(),
         alpha_um_per_m_k: cfg.alpha_um_per_m_k,
@@ -173,5 +190,8 @@ pub fn spawn_li80(
     let driver = Li80Driver {
         rate_hz: cfg.rate_hz,
     };
-    tokio::spawn(crate::serial_driver::run(driver, path, cancel))
+    (driver, path)
 }
+
+#[cfg(test)]
+mod tests;

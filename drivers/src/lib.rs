@@ -1,42 +1,24 @@
-//! Async drivers of metrolog's instruments. Each driver owns its port, identifies and configures
-//! the device, decodes the stream with the `protocol` decoders, timestamps and converts every
-//! sample, counts every fault, and survives unplug/replug. Drivers never block on the consumer:
-//! they send into a bounded channel and count what could not be delivered.
+//! Async drivers of metrolog's instruments: each driver task owns its port, identifies and
+//! configures the device, decodes the stream with the `protocol` decoders, timestamps, converts
+//! and counts every sample, survives unplug/replug, and hands everything on as [`DriverEvent`]s
+//! through a bounded queue it never waits on (docs/design.md, "Data flow").
 //!
-//! Public surface (the modules are private; this is everything the daemon needs):
-//! - [`Sample`], [`SampleValues`], [`Trigger`], [`DriverEvent`] — what the drivers yield,
-//!   through an [`EventSender`];
-//! - [`DriverError`] — why a port or device failed (in `DriverEvent::{Error, Disconnected}`);
-//! - [`Counters`] — per-instrument counters;
-//! - [`Instrument`], with the pose-valued instruments and their detector channels;
-//! - [`spawn_li80`], [`spawn_cb3`], [`spawn_psd`], [`spawn_slcan`], [`spawn_socketcan`] with
-//!   their configurations — start a driver task;
-//! - [`trigger_from_frame`] and [`from_socketcan`] — the one decoding path of SLCAN and
-//!   SocketCAN frames (the CAN trigger event is the one enum `protocol::can::TriggerEvent`,
-//!   which the pose detector takes as it is);
-//! - [`HostClock`] — the host monotonic clock as ns since the Unix epoch (`metrolog-types`);
-//!   the clock fits the stamper uses are `metrolog-detect`'s.
+//! What others use, all re-exported here (the modules are private):
+//! - [`spawn_li80`], [`spawn_cb3`], [`spawn_psd`], [`spawn_slcan`] and, with the cargo feature
+//!   `socketcan` (default), `spawn_socketcan`, with their configurations;
+//! - what they yield: [`DriverEvent`] through an [`EventSender`], [`DriverError`], and the
+//!   shared vocabulary of `metrolog-types` ([`Sample`], [`Trigger`], [`Counters`], ...);
+//! - [`trigger_from_frame`] (and `from_socketcan`): the one decoding path of CAN triggers.
 //!
-//! A sample's way through a serial driver is one direction (docs/design.md):
-//!
-//! ```text
-//! port bytes ─ SerialLink (protocol decoder) ─ FrameConverter (the instrument's: frame → Reading)
-//!   ─ SampleStamper (unwrap sequence and device clock, ClockFit) ─ EventReporter (count, emit
-//!   DriverEvent into the bounded queue)
-//! ```
-//!
-//! The instrument's `SerialDriver` (e.g. `Li80Driver`) only issues its command sequence through
-//! a `SerialSession`, which reads and routes data arriving meanwhile down the same way.
-//!
-//! Every serial driver runs the same loop: open the port (8N1, no flow control), stop a stream
-//! the device may still be sending, identify, configure, start streaming; then read in large
-//! batches (about every 10 ms, every second read waiting for fresh bytes so the clock fit gets
-//! precise arrival times), decode, convert with `protocol::convert`, stamp and count. A read
-//! error, end of file or silence while streaming reports `Disconnected` and reopens the port
-//! with backoff (100 ms doubling to 2 s); a device that answers `ERR` or nothing reports
-//! `Error` naming the port, the command and the answer, and is retried. Cancelling stops the
-//! stream and still delivers every sample sent before the device's answer.
+//! A serial driver's way, one direction: port bytes → `SerialLink` (protocol decoder, arrival
+//! time) → the instrument's `FrameConverter` → `SampleStamper` (sequence, device clock fit) →
+//! `EventReporter` (count, emit); the instrument's `SerialDriver` only issues its commands
+//! (connect, stop a stale stream, identify, configure, stream; reopen with backoff 100 ms to
+//! 2 s on loss; a stop delivers every sample sent before the device's answer). Sessions are
+//! generic over the byte stream, so the tests run real drivers over `tokio::io::duplex`.
 
+#[cfg(feature = "socketcan")]
+mod can_socket;
 mod cb3;
 mod error;
 mod event;
@@ -49,15 +31,17 @@ mod serial_link;
 mod stamper;
 #[doc(hidden)]
 pub mod synthetic;
+#[cfg(test)]
+mod test_port;
 mod trigger;
 
+#[cfg(feature = "socketcan")]
+pub use can_socket::{from_socketcan, spawn_socketcan};
 pub use cb3::{Cb3Config, spawn_cb3};
 pub use error::DriverError;
 pub use event::{DriverEvent, EventSender};
 pub use li80::{Li80Config, spawn_li80};
 pub use psd::{HeadCorrection, PsdAxis, PsdConfig, spawn_psd};
-pub use trigger::{
-    SlcanConfig, SocketCanConfig, from_socketcan, spawn_slcan, spawn_socketcan, trigger_from_frame,
-};
+pub use trigger::{SlcanConfig, SocketCanConfig, spawn_slcan, trigger_from_frame};
 /// The shared vocabulary the drivers' events are made of (`metrolog-types`).
 pub use types::{Counters, HostClock, Instrument, Sample, SampleValues, Trigger};

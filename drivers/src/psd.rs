@@ -14,6 +14,7 @@ use protocol::psd::{DataLine, Decoder, Line};
 
 use crate::sample_path::{FrameConverter, Reading, SamplePath};
 use crate::serial_driver::{SerialDriver, SerialSession, idle_timeout};
+use crate::serial_link::Port;
 use crate::stamper::SampleStamper;
 use crate::{DriverError, Instrument, SampleValues};
 
@@ -136,12 +137,18 @@ impl SerialDriver for PsdDriver {
     fn idle_timeout(&self) -> Duration {
         idle_timeout(self.rate_hz)
     }
-    async fn stop(&self, s: &mut SerialSession<'_, PsdFrames>) -> Result<(), DriverError> {
+    async fn stop<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, PsdFrames, P>,
+    ) -> Result<(), DriverError> {
         s.send("INIT:CONT OFF\n").await?;
         s.expect("*OPC?\n", |a| a.trim() == "1").await.map(drop)
     }
 
-    async fn setup(&self, s: &mut SerialSession<'_, PsdFrames>) -> Result<String, DriverError> {
+    async fn setup<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, PsdFrames, P>,
+    ) -> Result<String, DriverError> {
         if let Some(m) = &s.path.converter.cfg.error_map
             && let Err(cause) = m.validate()
         {
@@ -201,7 +208,7 @@ pub fn spawn_psd(
         clock,
         tx,
     );
-    tokio::spawn(crate::serial_driver::run(driver, path, cancel))
+    crate::serial_driver::spawn(driver, path, cancel)
 }
 
 #[cfg(test)]

@@ -106,6 +106,7 @@ impl<C: FrameConverter> SamplePath<C> {
     }
 
     /// Take one reading (of a transport without a decoder: SocketCAN).
+    #[cfg(feature = "socketcan")]
     pub(crate) fn take_reading(&mut self, r: Reading, host_ns: u64) {
         route(&mut self.reporter, &mut self.stamper, r, host_ns);
     }

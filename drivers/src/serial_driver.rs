@@ -4,6 +4,10 @@
 //! A sample's way is one direction: [`SerialLink`] (port bytes → protocol decoder) →
 //! [`SamplePath`] (converter → stamper → reporter → `DriverEvent`). The instrument's
 //! [`SerialDriver`] only issues commands through the session; nothing calls back into it.
+//!
+//! Sessions and the loop are generic over the byte stream ([`Port`]); [`run`] takes the step
+//! that opens it, so a driver runs unchanged over an in-memory stream in the tests. [`spawn`]
+//! runs a driver on its serial port.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -12,7 +16,7 @@ use tokio_util::sync::CancellationToken;
 
 use crate::DriverError;
 use crate::sample_path::{FrameConverter, SamplePath};
-use crate::serial_link::{SerialLink, open_port};
+use crate::serial_link::{Port, SerialLink, open_port};
 
 /// How long a command waits for its answer.
 pub(crate) const ANSWER_TIMEOUT: Duration = Duration::from_secs(1);
@@ -37,13 +41,13 @@ pub(crate) fn is_ok(answer: &str) -> bool {
 }
 
 /// One connection: the open port and the sample path its items take.
-pub(crate) struct SerialSession<'p, C: FrameConverter> {
-    link: SerialLink<C::Decoder>,
+pub(crate) struct SerialSession<'p, C: FrameConverter, P> {
+    link: SerialLink<C::Decoder, P>,
     pub(crate) path: &'p mut SamplePath<C>,
     answers: VecDeque<String>,
 }
 
-impl<C: FrameConverter> SerialSession<'_, C> {
+impl<C: FrameConverter, P: Port> SerialSession<'_, C, P> {
     /// Read once, send every item down the sample path, keep the answers. Returns the byte
     /// count. Cancel-safe: the only await is the read itself.
     pub(crate) async fn read_once(&mut self) -> Result<usize, DriverError> {
@@ -167,14 +171,14 @@ pub(crate) trait SerialDriver: Send + Sync {
     fn idle_timeout(&self) -> Duration;
     /// Stop streaming and wait for the device's answer, handling every data line before it,
     /// so a run that ends on purpose loses nothing the device sent.
-    fn stop(
+    fn stop<P: Port>(
         &self,
-        s: &mut SerialSession<'_, Self::Converter>,
+        s: &mut SerialSession<'_, Self::Converter, P>,
     ) -> impl Future<Output = Result<(), DriverError>> + Send;
     /// Stop, identify, configure and start streaming; returns the identity string.
-    fn setup(
+    fn setup<P: Port>(
         &self,
-        s: &mut SerialSession<'_, Self::Converter>,
+        s: &mut SerialSession<'_, Self::Converter, P>,
     ) -> impl Future<Output = Result<String, DriverError>> + Send;
 }
 
@@ -183,8 +187,8 @@ pub(crate) fn idle_timeout(rate_hz: u32) -> Duration {
     Duration::from_secs(2) + Duration::from_secs_f64(5.0 / rate_hz.max(1) as f64)
 }
 
-async fn stream<C: FrameConverter>(
-    s: &mut SerialSession<'_, C>,
+async fn stream<C: FrameConverter, P: Port>(
+    s: &mut SerialSession<'_, C, P>,
     idle: Duration,
 ) -> Result<(), DriverError> {
     let mut cycle = 0u32;
@@ -209,10 +213,27 @@ enum Ended {
     Failed(DriverError),
 }
 
+/// Start `driver` as a task on its serial port (the reporter's port path, opened at the
+/// driver's baud rate, 8N1). It runs until `cancel` fires, reconnecting with backoff.
+pub(crate) fn spawn<D>(
+    driver: D,
+    path: SamplePath<D::Converter>,
+    cancel: CancellationToken,
+) -> tokio::task::JoinHandle<()>
+where
+    D: SerialDriver + 'static,
+    D::Converter: 'static,
+{
+    let (port, baud) = (path.reporter.port.clone(), driver.baud());
+    tokio::spawn(run(driver, path, move || open_port(&port, baud), cancel))
+}
+
 /// The driver task: connect, configure, stream; on loss report, back off and start again.
-pub(crate) async fn run<D: SerialDriver>(
+/// `open` opens the port (again after every loss); an error is retried with backoff.
+pub(crate) async fn run<D: SerialDriver, P: Port>(
     driver: D,
     mut path: SamplePath<D::Converter>,
+    mut open: impl FnMut() -> std::io::Result<P> + Send,
     cancel: CancellationToken,
 ) {
     let mut backoff = BACKOFF_MIN;
@@ -222,7 +243,7 @@ pub(crate) async fn run<D: SerialDriver>(
         if cancel.is_cancelled() {
             break;
         }
-        let port = match open_port(&port_path, driver.baud()) {
+        let port = match open() {
             Ok(p) => p,
             Err(e) => {
                 if open_failures == 0 {

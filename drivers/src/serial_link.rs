@@ -1,8 +1,12 @@
-//! One open serial port with the protocol decoder of its instrument: bytes in, decoded frames
+//! One open byte stream with the protocol decoder of its instrument: bytes in, decoded frames
 //! and rejections out, each dated by its read's arrival time on the host clock.
+//!
+//! The stream is anything that reads and writes asynchronously ([`Port`]): a serial port
+//! opened by [`open_port`] in service, an in-memory `tokio::io::duplex` in the tests. Opening
+//! is a separate step: the driver loop asks its opener for a new stream after every loss.
 
 use protocol::{Decoded, StreamDecoder};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio_serial::SerialPort;
 
 use crate::{DriverError, HostClock};
@@ -10,9 +14,13 @@ use crate::{DriverError, HostClock};
 /// Read buffer: large, so that one read takes everything the kernel holds.
 const READ_BUF: usize = 64 * 1024;
 
-/// A port opened 8N1 without flow control, its decoder and its read buffer.
-pub(crate) struct SerialLink<D> {
-    port: tokio_serial::SerialStream,
+/// A byte stream a serial driver talks over.
+pub(crate) trait Port: AsyncRead + AsyncWrite + Unpin + Send {}
+impl<T: AsyncRead + AsyncWrite + Unpin + Send> Port for T {}
+
+/// An open stream, its decoder and its read buffer.
+pub(crate) struct SerialLink<D, P> {
+    port: P,
     decoder: D,
     buf: Box<[u8]>,
     clock: HostClock,
@@ -33,13 +41,9 @@ pub(crate) fn open_port(path: &str, baud: u32) -> std::io::Result<tokio_serial::
     Ok(port)
 }
 
-impl<D: StreamDecoder + Send> SerialLink<D> {
-    pub(crate) fn new(
-        port: tokio_serial::SerialStream,
-        decoder: D,
-        clock: HostClock,
-        path: &str,
-    ) -> Self {
+impl<D: StreamDecoder + Send, P: Port> SerialLink<D, P> {
+    /// `port` (already open) with `decoder`; `path` names it in errors.
+    pub(crate) fn new(port: P, decoder: D, clock: HostClock, path: &str) -> Self {
         SerialLink {
             port,
             decoder,

@@ -3,7 +3,8 @@
 //! Both transports turn what they receive into a [`protocol::slcan::CanFrame`] and hand it to
 //! [`trigger_from_frame`]: frames with another identifier (or extended frames) are ignored,
 //! frames with the configured identifier must carry a valid trigger payload
-//! (instruments.md §4) or are counted as rejections.
+//! (instruments.md §4) or are counted as rejections. The SLCAN driver is here; the SocketCAN
+//! transport (cargo feature `socketcan`) is `can_socket`, on the same [`trigger_path`].
 
 use std::time::Duration;
 
@@ -12,6 +13,7 @@ use protocol::slcan::{CanFrame, Decoder, Message};
 
 use crate::sample_path::{FrameConverter, Reading, SamplePath};
 use crate::serial_driver::{SerialDriver, SerialSession};
+use crate::serial_link::Port;
 use crate::stamper::SampleStamper;
 use crate::{DriverError, EventSender, HostClock, Instrument, Trigger};
 
@@ -49,7 +51,7 @@ pub fn trigger_from_frame(
 }
 
 /// What a CAN frame means: nothing when it is not ours, else a trigger or a bad payload.
-fn frame_reading(frame: &CanFrame, can_id: u32, host_ns: u64) -> Option<Reading> {
+pub(crate) fn frame_reading(frame: &CanFrame, can_id: u32, host_ns: u64) -> Option<Reading> {
     match trigger_from_frame(frame, can_id, host_ns) {
         Ok(Some(t)) => Some(Reading::Trigger(t)),
         Ok(None) => None,
@@ -63,7 +65,7 @@ fn frame_reading(frame: &CanFrame, can_id: u32, host_ns: u64) -> Option<Reading>
 
 /// SLCAN messages to readings: data frames through [`trigger_from_frame`], acknowledgements
 /// as answers.
-struct SlcanFrames {
+pub(crate) struct SlcanFrames {
     port: String,
     can_id: u32,
 }
@@ -108,11 +110,17 @@ impl SerialDriver for SlcanDriver {
         // shows as a read error.
         Duration::from_secs(24 * 3600)
     }
-    async fn stop(&self, s: &mut SerialSession<'_, SlcanFrames>) -> Result<(), DriverError> {
+    async fn stop<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, SlcanFrames, P>,
+    ) -> Result<(), DriverError> {
         s.expect("C\r", |a| a == ACK || a == NACK).await.map(drop)
     }
 
-    async fn setup(&self, s: &mut SerialSession<'_, SlcanFrames>) -> Result<String, DriverError> {
+    async fn setup<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, SlcanFrames, P>,
+    ) -> Result<String, DriverError> {
         // Close first: the channel may be open from an earlier run (a nack just means it was
         // closed already).
         s.expect("C\r", |a| a == ACK || a == NACK).await?;
@@ -127,7 +135,8 @@ impl SerialDriver for SlcanDriver {
     }
 }
 
-fn trigger_path(
+/// The sample path of triggers from `port` (an SLCAN port or a CAN interface).
+pub(crate) fn trigger_path(
     port: &str,
     can_id: u32,
     clock: HostClock,
@@ -152,85 +161,7 @@ pub fn spawn_slcan(
 ) -> tokio::task::JoinHandle<()> {
     let path = trigger_path(&cfg.port, cfg.can_id, clock, tx);
     let driver = SlcanDriver { can_id: cfg.can_id };
-    tokio::spawn(crate::serial_driver::run(driver, path, cancel))
-}
-
-/// A SocketCAN frame as the SLCAN path sees it (`None` for remote and error frames).
-pub fn from_socketcan(f: &socketcan::CanFrame) -> Option<CanFrame> {
-    use socketcan::{EmbeddedFrame, Frame};
-    match f {
-        socketcan::CanFrame::Data(d) => Some(CanFrame {
-            id: d.raw_id(),
-            extended: d.is_extended(),
-            data: d.data().to_vec(),
-            timestamp_ms: None,
-        }),
-        _ => None,
-    }
-}
-
-/// Start the SocketCAN trigger driver task. It runs until `cancel` fires, reopening the
-/// interface with backoff.
-pub fn spawn_socketcan(
-    cfg: SocketCanConfig,
-    clock: HostClock,
-    tx: EventSender,
-    cancel: tokio_util::sync::CancellationToken,
-) -> tokio::task::JoinHandle<()> {
-    tokio::spawn(async move {
-        let mut path = trigger_path(&cfg.interface, cfg.can_id, clock, tx);
-        let mut backoff = Duration::from_millis(100);
-        while !cancel.is_cancelled() {
-            match socketcan::tokio::CanSocket::open(&cfg.interface) {
-                Err(e) => path.reporter.error(DriverError::CanInterface {
-                    interface: cfg.interface.clone(),
-                    cause: std::sync::Arc::new(e),
-                }),
-                Ok(sock) => {
-                    backoff = Duration::from_millis(100);
-                    let identity = format!("SocketCAN {}", cfg.interface);
-                    path.reporter.connected(identity, &path.stamper);
-                    path.reporter.accepting = true;
-                    loop {
-                        let r = tokio::select! {
-                            _ = cancel.cancelled() => return,
-                            r = sock.read_frame() => r,
-                        };
-                        match r {
-                            Ok(f) => socketcan_frame(&mut path, &f, cfg.can_id),
-                            Err(e) => {
-                                let reason = DriverError::ReadFailed { cause: e.into() };
-                                path.reporter.disconnected(reason, &path.stamper);
-                                break;
-                            }
-                        }
-                    }
-                }
-            }
-            tokio::select! {
-                _ = cancel.cancelled() => break,
-                _ = tokio::time::sleep(backoff) => {}
-            }
-            backoff = (backoff * 2).min(Duration::from_secs(2));
-        }
-        path.tick(true);
-    })
-}
-
-/// One received SocketCAN frame down the trigger path; error frames are device errors.
-fn socketcan_frame(path: &mut SamplePath<SlcanFrames>, f: &socketcan::CanFrame, can_id: u32) {
-    let host_ns = path.reporter.clock.now_ns();
-    match from_socketcan(f) {
-        Some(cf) => {
-            if let Some(r) = frame_reading(&cf, can_id, host_ns) {
-                path.take_reading(r, host_ns)
-            }
-        }
-        None if matches!(f, socketcan::CanFrame::Error(_)) => {
-            path.reporter.counters.device_errors += 1
-        }
-        None => {}
-    }
+    crate::serial_driver::spawn(driver, path, cancel)
 }
 
 #[cfg(test)]
@@ -288,35 +219,5 @@ mod tests {
         let e = trigger_from_frame(&frame(0x181, false, vec![1, 5, 1, 0, 0, 0, 0, 0]), 0x181, 0)
             .unwrap_err();
         assert_eq!(reject_kind(&e), RejectKind::Malformed);
-    }
-
-    #[test]
-    fn socketcan_frames_take_the_slcan_path() {
-        use socketcan::EmbeddedFrame;
-        let id = socketcan::StandardId::new(0x181).unwrap();
-        let sc = socketcan::CanFrame::new(id, &[4, 0, 0, 0, 0x10, 0, 0, 0]).unwrap();
-        let cf = from_socketcan(&sc).unwrap();
-        assert_eq!(cf, frame(0x181, false, vec![4, 0, 0, 0, 0x10, 0, 0, 0]));
-        let t = trigger_from_frame(&cf, 0x181, 1).unwrap().unwrap();
-        assert_eq!(
-            (t.event, t.pose, t.nc_ms),
-            (TriggerEvent::ProgramStart, 0, 16)
-        );
-        // Through the shared path: counted as a trigger; a bad payload as a rejection.
-        let (tx, mut rx) = tokio::sync::mpsc::channel(4);
-        let mut path = trigger_path("can0", 0x181, HostClock::new(), tx);
-        path.reporter.accepting = true;
-        socketcan_frame(&mut path, &sc, 0x181);
-        let bad = socketcan::CanFrame::new(id, &[1]).unwrap();
-        socketcan_frame(&mut path, &bad, 0x181);
-        assert_eq!(path.reporter.counters.samples, 1);
-        assert_eq!(
-            path.reporter
-                .counters
-                .rejections
-                .get(&RejectKind::BadLength),
-            Some(&1)
-        );
-        assert!(matches!(rx.try_recv(), Ok(crate::DriverEvent::Trigger(t)) if t.pose == 0));
     }
 }

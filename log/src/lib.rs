@@ -1,16 +1,19 @@
-//! The MCAP log: one file per run, the single source of truth of a measurement.
+//! metrolog's log format: one MCAP file per run, the single source of truth of a measurement
+//! (docs/log-format.md). Protocol and types only: this crate links no serial or CAN I/O and no
+//! maths (`protocol` and `types` are its only crates of ours; the pose detection that produces
+//! `/pose` is `metrolog-detect`'s, run by the service and by replay).
 //!
-//! - [`topics`]: the message of each topic (JSON, with a JSON schema per topic);
-//! - [`writer::LogWriter`]: writes a log (zstd chunks closed and fsynced at least once a
-//!   second, attachments, metadata);
-//! - [`reader::read_log`]: reads a log record by record and stops at the first damaged byte,
-//!   so the intact prefix of a file whose writer was killed is read;
-//! - [`trajectory`]: the pose table of a run (`pose,x_mm,y_mm,z_mm[,a_deg,c_deg]`), stored in
-//!   the log as the [`TRAJECTORY_ATTACHMENT`]; the one parser of that format.
-//!
-//! The steady-value detection that produces `/pose` is not here: it is `metrolog-detect`'s
-//! `PoseEngine`, run by the acquisition service and by replay, which hand its pose values to
-//! the writer. This crate links no serial or CAN I/O and no maths: `protocol` and `types` only.
+//! What others use, re-exported here:
+//! - writing: [`LogWriter`] with [`LogOptions`], [`RunMetadata`], the attachment and metadata
+//!   names ([`TRAJECTORY_ATTACHMENT`], [`RUN_METADATA`], ...), [`channel_specs`] and
+//!   [`MessageTap`] for the live view;
+//! - reading: [`read_log`] and its variants (record by record, stopping at the first damaged
+//!   byte, so a killed writer's file gives its intact prefix), [`LogItem`], [`ReadSummary`],
+//!   [`recover()`];
+//! - decoding: [`decode_message`] ([`LogMessage`], [`DecodeError`]) over every format; the
+//!   messages of each topic in [`topics`]; the raw protobuf batches of formats 2 and 3 in
+//!   [`raw`] ([`BatchError`] says what is wrong with one and where);
+//! - the trajectory table of a run ([`trajectory`]: [`parse_trajectory`], the one parser).
 //!
 //! # Use
 //!
@@ -51,9 +54,13 @@ pub mod writer;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+pub use raw::BatchError;
 pub use reader::{
     LogItem, ReadSummary, read_log, read_log_progress, read_log_until, read_run_metadata,
 };
+pub use recover::recover;
+pub use topics::{DecodeError, LogMessage, decode_message};
+pub use trajectory::{TrajectoryRow, parse_trajectory, write_trajectory};
 /// The detector settings a run stores (`metrolog-types`), re-exported for the log's readers.
 pub use types::{DetectorSettings, NC_SETTLE_US, TriggerTime};
 pub use writer::{ChannelSpec, LogOptions, LogWriter, MessageTap, channel_specs};

@@ -567,7 +567,7 @@ pub enum DecodeError {
     #[error("bad JSON: {0}")]
     Json(#[from] serde_json::Error),
     #[error("bad protobuf batch: {0}")]
-    Protobuf(String),
+    Protobuf(#[from] crate::raw::BatchError),
 }
 
 /// A message of one of metrolog's topics, decoded, whatever the log format.
@@ -592,10 +592,8 @@ pub fn decode_message(
     data: &[u8],
 ) -> Result<Option<LogMessage>, DecodeError> {
     if encoding == "protobuf" {
-        return match crate::raw::Batch::decode(topic, data).map_err(DecodeError::Protobuf)? {
-            Some(b) => Ok(Some(LogMessage::Samples(
-                b.samples().map_err(DecodeError::Protobuf)?,
-            ))),
+        return match crate::raw::Batch::decode(topic, data)? {
+            Some(b) => Ok(Some(LogMessage::Samples(b.samples()?))),
             None => Ok(None),
         };
     }

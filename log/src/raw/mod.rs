@@ -14,6 +14,7 @@
 //! viewers' own protobuf reader (`protobufjs`, in the node check of `daemon/tests`) decode
 //! the messages with it.
 
+mod columns;
 pub mod v2;
 pub mod v3;
 
@@ -116,6 +117,74 @@ impl Builder {
     }
 }
 
+/// Why a raw batch does not give its samples back: what is wrong, in which topic's batch,
+/// which column and, where it matters, which sample (0-based in the batch).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BatchError {
+    /// The message is not a protobuf message of the topic's batch type.
+    #[error("{topic} batch does not decode: {source}")]
+    Decode {
+        topic: &'static str,
+        source: prost::DecodeError,
+    },
+    /// A per-sample column has `len` entries where the batch has `n` samples.
+    #[error("{topic} batch: columns of {n} samples, but `{column}` has {len}")]
+    ColumnLength {
+        topic: &'static str,
+        column: &'static str,
+        len: usize,
+        n: usize,
+    },
+    /// The material temperature counts do not add up to the material temperatures stored.
+    #[error("{topic} batch: `material_count` adds up to {total}, `material_c` has {len}")]
+    MaterialCount {
+        topic: &'static str,
+        total: u64,
+        len: usize,
+    },
+    /// A column of bytes (signal strength, flags) holds a larger value.
+    #[error("{topic} batch, sample {index}: `{column}` is {value}, above 255")]
+    AboveByte {
+        topic: &'static str,
+        column: &'static str,
+        index: usize,
+        value: u32,
+    },
+    /// A timestamp before 1970 or beyond 2554 (not ns since the Unix epoch in a `u64`);
+    /// `index` is `None` for the header's base time of format 3.
+    #[error(
+        "{topic} batch: `{column}`{} is {seconds}.{nanos:09} s, outside the log's range",
+        index.map(|i| format!(" of sample {i}")).unwrap_or_default()
+    )]
+    Timestamp {
+        topic: &'static str,
+        column: &'static str,
+        index: Option<usize>,
+        seconds: i64,
+        nanos: i32,
+    },
+    /// A format-3 header of `n` samples without the base time `column`.
+    #[error("{topic} batch: the header of {n} samples has no `{column}`")]
+    MissingTime {
+        topic: &'static str,
+        column: &'static str,
+        n: usize,
+    },
+    /// A CB-3 ADC code (a running sum of its difference column) outside 24 bits.
+    #[error("{topic} batch, sample {index}: `{column}` gives a CapBall code of {code}, not 24-bit")]
+    Code {
+        topic: &'static str,
+        column: &'static str,
+        index: usize,
+        code: i64,
+    },
+    /// A CapBall calibration with other than 9 polynomial coefficients and 16 transform entries.
+    #[error(
+        "{CAPBALL_TOPIC} batch: a CapBall calibration of {poly} polynomial coefficients and {transform} transform entries (9 and 16 expected)"
+    )]
+    Calibration { poly: usize, transform: usize },
+}
+
 /// A decoded raw batch of either format.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Batch {
@@ -133,11 +202,12 @@ struct FormatProbe {
 
 impl Batch {
     /// Decodes a message of a raw topic, format 2 or 3; `Ok(None)` for another topic.
-    pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, String> {
-        if !RAW_TOPICS.iter().any(|(t, _)| *t == topic) {
+    pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, BatchError> {
+        let Some(&(topic, _)) = RAW_TOPICS.iter().find(|(t, _)| *t == topic) else {
             return Ok(None);
-        }
-        let probe = FormatProbe::decode(data).map_err(|e| e.to_string())?;
+        };
+        let probe =
+            FormatProbe::decode(data).map_err(|source| BatchError::Decode { topic, source })?;
         Ok(if probe.format2_header.is_some() {
             v2::Batch::decode(topic, data)?.map(Batch::Format2)
         } else {
@@ -165,7 +235,7 @@ impl Batch {
     }
 
     /// The samples back, in order. A batch whose columns differ in length is an error.
-    pub fn samples(&self) -> Result<Vec<Sample>, String> {
+    pub fn samples(&self) -> Result<Vec<Sample>, BatchError> {
         match self {
             Batch::Format2(b) => b.samples(),
             Batch::Format3(b) => b.samples(),
@@ -583,16 +653,134 @@ mod tests {
         let mut b = v3::CapballBatch::from_samples(&samples, Some(&cal));
         b.code_2_delta.pop();
         let e = v3::Batch::Capball(b.clone()).samples().unwrap_err();
-        assert!(e.contains("columns"), "{e}");
+        assert!(e.to_string().contains("columns"), "{e}");
+        assert_eq!(
+            e,
+            BatchError::ColumnLength {
+                topic: CAPBALL_TOPIC,
+                column: "code_2_delta",
+                len: 6,
+                n: 7
+            }
+        );
         b.code_2_delta.push(1 << 30);
         let e = v3::Batch::Capball(b.clone()).samples().unwrap_err();
-        assert!(e.contains("24-bit"), "{e}");
+        assert!(e.to_string().contains("24-bit"), "{e}");
+        assert!(
+            matches!(
+                e,
+                BatchError::Code {
+                    column: "code_2_delta",
+                    index: 6,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
         b.calibration.as_mut().unwrap().poly.pop();
         let e = v3::Batch::Capball(b).samples().unwrap_err();
-        assert!(e.contains("calibration"), "{e}");
+        assert!(e.to_string().contains("calibration"), "{e}");
+        assert_eq!(
+            e,
+            BatchError::Calibration {
+                poly: 8,
+                transform: 16
+            }
+        );
         let mut p = v3::PsdBatch::from_samples(&samples);
         p.header.as_mut().unwrap().count = 99;
         assert!(v3::Batch::Psd(p).samples().is_err());
+    }
+
+    /// Each error names the topic, the column and, for a value, the sample.
+    #[test]
+    fn errors_say_what_is_wrong_and_where() {
+        let s = |k: u64, sig: u8| {
+            let v = SampleValues::Position {
+                raw_nm: 1,
+                position_um: 0.001,
+                sig,
+                flags: 0,
+            };
+            sample(Instrument::Interferometer, v, k)
+        };
+        let mut b = v3::PositionBatch::from_samples(&[s(0, 90), s(1, 91), s(2, 92)]);
+        b.sig[2] = 300;
+        let e = v3::Batch::Position(b.clone()).samples().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "/interferometer/position batch, sample 2: `sig` is 300, above 255"
+        );
+        b.header.as_mut().unwrap().host_time = None;
+        let e = v3::Batch::Position(b.clone()).samples().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "/interferometer/position batch: the header of 3 samples has no `host_time`"
+        );
+        b.header.as_mut().unwrap().time.as_mut().unwrap().seconds = -1;
+        let e = v3::Batch::Position(b).samples().unwrap_err();
+        assert!(
+            matches!(
+                e,
+                BatchError::Timestamp {
+                    column: "time",
+                    index: None,
+                    seconds: -1,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        let mut h = v2::BatchHeader {
+            seq: vec![1, 2],
+            device_t_us: vec![1, 2],
+            fitted_time: vec![v2::timestamp(1), v2::timestamp(2)],
+            host_time: vec![v2::timestamp(1), v2::timestamp(2)],
+            valid: vec![true, true],
+        };
+        h.host_time[1].nanos = 1_000_000_000;
+        let m = v2::PsdBatch {
+            header: Some(h),
+            x_um: vec![1.0; 2],
+            y_um: vec![1.0; 2],
+            sum_pa: vec![1.0; 2],
+            head_c: vec![1.0; 2],
+        };
+        let e = v2::Batch::Psd(m).samples().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "/psd/sample batch: `host_time` of sample 1 is 0.1000000000 s, outside the log's range"
+        );
+        let v = SampleValues::Environment {
+            air_c: 20.0,
+            air_pa: 101_325.0,
+            rh_pct: 50.0,
+            material_c: vec![20.0, 20.5],
+            n_air: 1.000_27,
+        };
+        let mut env =
+            v3::EnvironmentBatch::from_samples(&[sample(Instrument::Interferometer, v, 0)]);
+        env.material_count[0] = 3;
+        let e = v3::Batch::Environment(env).samples().unwrap_err();
+        assert_eq!(
+            e,
+            BatchError::MaterialCount {
+                topic: ENVIRONMENT_TOPIC,
+                total: 3,
+                len: 2
+            }
+        );
+        let e = Batch::decode(PSD_TOPIC, &[0xff]).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                BatchError::Decode {
+                    topic: PSD_TOPIC,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
     }
 
     /// A format-2 message (header at tag 1) is read as format 2.

@@ -2,11 +2,11 @@
 //! `google.protobuf.Timestamp` per sample and the CapBall as nine doubles per sample. Logs of
 //! this format are read, no longer written (format 3, [`super`]).
 
-use prost::Message;
 use prost_types::Timestamp;
-use types::{Instrument, Sample, SampleValues};
+use types::Sample;
 
-use super::{CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC};
+use super::columns::{self, Col, Header, Values, capball_doubles, col, decoded, samples};
+use super::{BatchError, CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC};
 
 /// Per-sample columns common to every raw batch.
 #[derive(Clone, PartialEq, prost::Message)]
@@ -110,29 +110,47 @@ pub(super) fn timestamp(ns: u64) -> Timestamp {
     }
 }
 
-pub(super) fn timestamp_ns(t: &Timestamp) -> Result<u64, String> {
+/// A `Timestamp` as ns since the Unix epoch; `None` outside `u64` ns (or not normalised).
+pub(super) fn timestamp_ns(t: &Timestamp) -> Option<u64> {
     if t.seconds < 0 || !(0..1_000_000_000).contains(&t.nanos) {
-        return Err(format!(
-            "timestamp {}.{:09} is outside the log's range",
-            t.seconds, t.nanos
-        ));
+        return None;
     }
     (t.seconds as u64)
         .checked_mul(1_000_000_000)
         .and_then(|s| s.checked_add(t.nanos as u64))
-        .ok_or_else(|| format!("timestamp {} s overflows", t.seconds))
 }
 
 impl BatchHeader {
-    /// The header of sample `i`: (seq, device_t_us, fitted_ns, host_ns, valid).
-    fn get(&self, i: usize) -> Result<(u64, u64, u64, u64, bool), String> {
-        Ok((
-            self.seq[i],
-            self.device_t_us[i],
-            timestamp_ns(&self.fitted_time[i])?,
-            timestamp_ns(&self.host_time[i])?,
-            self.valid[i],
-        ))
+    /// The `column` of `topic`'s batch as ns since the Unix epoch.
+    fn times(
+        topic: &'static str,
+        column: &'static str,
+        ts: &[Timestamp],
+    ) -> Result<Col<'static, u64>, BatchError> {
+        let ns = ts
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                timestamp_ns(t).ok_or(BatchError::Timestamp {
+                    topic,
+                    column,
+                    index: Some(i),
+                    seconds: t.seconds,
+                    nanos: t.nanos,
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(decoded(column, ns))
+    }
+
+    fn columns(&self, topic: &'static str) -> Result<Header<'_>, BatchError> {
+        Ok(Header {
+            seq: col("seq", &self.seq),
+            device_t_us: col("device_t_us", &self.device_t_us),
+            fitted_ns: Self::times(topic, "fitted_time", &self.fitted_time)?,
+            host_ns: Self::times(topic, "host_time", &self.host_time)?,
+            valid: col("valid", &self.valid),
+        })
     }
 }
 
@@ -174,121 +192,44 @@ impl Batch {
     }
 
     /// Decodes a format-2 message of a raw topic; `Ok(None)` for another topic.
-    pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, String> {
-        let e = |e: prost::DecodeError| e.to_string();
-        Ok(Some(match topic {
-            POSITION_TOPIC => Batch::Position(PositionBatch::decode(data).map_err(e)?),
-            ENVIRONMENT_TOPIC => Batch::Environment(EnvironmentBatch::decode(data).map_err(e)?),
-            CAPBALL_TOPIC => Batch::Capball(CapballBatch::decode(data).map_err(e)?),
-            PSD_TOPIC => Batch::Psd(PsdBatch::decode(data).map_err(e)?),
-            _ => return Ok(None),
-        }))
+    pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, BatchError> {
+        let variants = (
+            Batch::Position,
+            Batch::Environment,
+            Batch::Capball,
+            Batch::Psd,
+        );
+        columns::decode(topic, data, variants)
     }
 
     /// The samples back, in order. A batch whose columns differ in length is an error.
-    pub fn samples(&self) -> Result<Vec<Sample>, String> {
+    pub fn samples(&self) -> Result<Vec<Sample>, BatchError> {
         let Some(h) = self.header() else {
             return Ok(Vec::new());
         };
-        let n = h.seq.len();
-        let mut lens = vec![
-            h.device_t_us.len(),
-            h.fitted_time.len(),
-            h.host_time.len(),
-            h.valid.len(),
-        ];
-        match self {
+        let values = match self {
             Batch::Position(b) => {
-                lens.extend([b.raw_nm.len(), b.position_um.len(), b.sig.len()]);
-                lens.push(b.flags.len());
+                Values::position(col("raw_nm", &b.raw_nm), &b.position_um, &b.sig, &b.flags)
             }
-            Batch::Environment(b) => {
-                lens.extend([b.air_c.len(), b.air_pa.len(), b.rh_pct.len()]);
-                lens.extend([b.n_air.len(), b.material_count.len()]);
-                let total: u64 = b.material_count.iter().map(|&c| u64::from(c)).sum();
-                if total != b.material_c.len() as u64 {
-                    return Err(format!(
-                        "material_count adds up to {total}, material_c has {}",
-                        b.material_c.len()
-                    ));
-                }
-            }
+            Batch::Environment(b) => Values::environment(
+                &b.air_c,
+                &b.air_pa,
+                &b.rh_pct,
+                &b.n_air,
+                &b.material_c,
+                &b.material_count,
+            ),
             Batch::Capball(b) => {
-                lens.extend([b.volts_1.len(), b.volts_2.len(), b.volts_3.len()]);
-                lens.extend([b.d1_um.len(), b.d2_um.len(), b.d3_um.len()]);
-                lens.extend([b.ex_um.len(), b.ey_um.len(), b.ez_um.len()]);
-                lens.push(b.flags.len());
+                let doubles = [
+                    &b.volts_1, &b.volts_2, &b.volts_3, &b.d1_um, &b.d2_um, &b.d3_um, &b.ex_um,
+                    &b.ey_um, &b.ez_um,
+                ];
+                Values::capball(capball_doubles(doubles.map(Vec::as_slice)), &b.flags)
             }
-            Batch::Psd(b) => {
-                lens.extend([b.x_um.len(), b.y_um.len(), b.sum_pa.len(), b.head_c.len()]);
-            }
-        }
-        if let Some(bad) = lens.iter().find(|&&l| l != n) {
-            return Err(format!(
-                "a {} batch has columns of {n} and {bad} samples",
-                self.topic()
-            ));
-        }
-        let mut out = Vec::with_capacity(n);
-        let mut material = 0usize;
-        for i in 0..n {
-            let (seq, device_t_us, fitted_ns, host_ns, valid) = h.get(i)?;
-            let (instrument, values) = match self {
-                Batch::Position(b) => (
-                    Instrument::Interferometer,
-                    SampleValues::Position {
-                        raw_nm: b.raw_nm[i],
-                        position_um: b.position_um[i],
-                        sig: u8::try_from(b.sig[i]).map_err(|_| "sig above 255".to_string())?,
-                        flags: b.flags[i],
-                    },
-                ),
-                Batch::Environment(b) => {
-                    let k = b.material_count[i] as usize;
-                    let m = b.material_c[material..material + k].to_vec();
-                    material += k;
-                    (
-                        Instrument::Interferometer,
-                        SampleValues::Environment {
-                            air_c: b.air_c[i],
-                            air_pa: b.air_pa[i],
-                            rh_pct: b.rh_pct[i],
-                            material_c: m,
-                            n_air: b.n_air[i],
-                        },
-                    )
-                }
-                Batch::Capball(b) => (
-                    Instrument::Capball,
-                    SampleValues::Capball {
-                        volts: [b.volts_1[i], b.volts_2[i], b.volts_3[i]],
-                        d_um: [b.d1_um[i], b.d2_um[i], b.d3_um[i]],
-                        e_um: [b.ex_um[i], b.ey_um[i], b.ez_um[i]],
-                        flags: u8::try_from(b.flags[i])
-                            .map_err(|_| "flags above 255".to_string())?,
-                    },
-                ),
-                Batch::Psd(b) => (
-                    Instrument::Psd,
-                    SampleValues::Psd {
-                        x_um: b.x_um[i],
-                        y_um: b.y_um[i],
-                        sum_pa: b.sum_pa[i],
-                        head_c: b.head_c[i],
-                    },
-                ),
-            };
-            out.push(Sample {
-                instrument,
-                seq,
-                device_t_us,
-                host_ns,
-                fitted_ns,
-                valid,
-                values,
-            });
-        }
-        Ok(out)
+            Batch::Psd(b) => Values::psd(&b.x_um, &b.y_um, &b.sum_pa, &b.head_c),
+        };
+        let topic = self.topic();
+        samples(topic, h.seq.len(), &h.columns(topic)?, &values)
     }
 }
 
@@ -309,6 +250,16 @@ mod tests {
             x_um: vec![1.0],
             ..Default::default()
         });
-        assert!(b.samples().unwrap_err().contains("columns"));
+        let e = b.samples().unwrap_err();
+        assert!(e.to_string().contains("columns"), "{e}");
+        assert_eq!(
+            e,
+            BatchError::ColumnLength {
+                topic: PSD_TOPIC,
+                column: "x_um",
+                len: 1,
+                n: 2
+            }
+        );
     }
 }

@@ -6,14 +6,16 @@
 //! itself, except for the two time columns, whose first entry is 0 and whose base is the
 //! `Timestamp` in the header (no integer beyond 2^53 reaches a JavaScript viewer).
 
-use prost::Message;
 use prost_types::Timestamp;
 use protocol::cb3::volts_code;
 use protocol::convert::{CapBallCalibration, CapBallPoly, CapBallTransform};
-use types::{Instrument, Sample, SampleValues};
+use types::{Sample, SampleValues};
 
+use super::columns::{
+    self, Col, Header, Values, capball_doubles, check_lengths, col, decoded, samples,
+};
 use super::v2::{timestamp, timestamp_ns};
-use super::{CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC};
+use super::{BatchError, CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC};
 
 /// Per-sample columns common to every raw batch. Tag 1 of a batch is never used in format 3
 /// (it is format 2's header; `raw::Batch::decode` tells the formats apart by it).
@@ -198,46 +200,32 @@ impl SampleHeader {
         self.count as usize
     }
 
-    /// (seq, device_t_us, fitted_ns, host_ns, valid) of every sample.
-    #[allow(clippy::type_complexity)]
-    fn columns(&self) -> Result<(Vec<u64>, Vec<u64>, Vec<u64>, Vec<u64>), String> {
+    /// Every sample's header, the differences summed.
+    fn columns(&self, topic: &'static str) -> Result<Header<'_>, BatchError> {
         let n = self.len();
-        let lens = [
-            self.seq_delta.len(),
-            self.device_t_us_delta.len(),
-            self.time_delta_ns.len(),
-            self.host_time_delta_ns.len(),
-            self.valid.len(),
-        ];
-        if let Some(bad) = lens.iter().find(|&&l| l != n) {
-            return Err(format!(
-                "a batch header of {n} samples has a column of {bad}"
-            ));
-        }
-        let base = |t: &Option<Timestamp>, what: &str| match t {
-            Some(t) => timestamp_ns(t),
+        let base = |t: &Option<Timestamp>, column: &'static str| match t {
+            Some(t) => timestamp_ns(t).ok_or(BatchError::Timestamp {
+                topic,
+                column,
+                index: None,
+                seconds: t.seconds,
+                nanos: t.nanos,
+            }),
             None if n == 0 => Ok(0),
-            None => Err(format!("a batch header without its {what}")),
+            None => Err(BatchError::MissingTime { topic, column, n }),
         };
-        Ok((
-            undelta(&self.seq_delta, 0),
-            undelta(&self.device_t_us_delta, 0),
-            undelta(&self.time_delta_ns, base(&self.time, "time")?),
-            undelta(
-                &self.host_time_delta_ns,
-                base(&self.host_time, "host_time")?,
+        let time = base(&self.time, "time")?;
+        let host_time = base(&self.host_time, "host_time")?;
+        Ok(Header {
+            seq: decoded("seq_delta", undelta(&self.seq_delta, 0)),
+            device_t_us: decoded("device_t_us_delta", undelta(&self.device_t_us_delta, 0)),
+            fitted_ns: decoded("time_delta_ns", undelta(&self.time_delta_ns, time)),
+            host_ns: decoded(
+                "host_time_delta_ns",
+                undelta(&self.host_time_delta_ns, host_time),
             ),
-        ))
-    }
-}
-
-/// A value column of `len` entries where `n` are expected.
-fn check_len(topic: &str, n: usize, lens: &[usize]) -> Result<(), String> {
-    match lens.iter().find(|&&l| l != n) {
-        Some(bad) => Err(format!(
-            "a {topic} batch has columns of {n} and {bad} samples"
-        )),
-        None => Ok(()),
+            valid: col("valid", &self.valid),
+        })
     }
 }
 
@@ -326,13 +314,12 @@ impl CapballCalibration {
         }
     }
 
-    pub fn to_calibration(&self) -> Result<CapBallCalibration, String> {
+    pub fn to_calibration(&self) -> Result<CapBallCalibration, BatchError> {
         if self.poly.len() != 9 || self.transform.len() != 16 {
-            return Err(format!(
-                "a CapBall calibration of {} polynomial coefficients and {} transform entries (9 and 16 expected)",
-                self.poly.len(),
-                self.transform.len()
-            ));
+            return Err(BatchError::Calibration {
+                poly: self.poly.len(),
+                transform: self.transform.len(),
+            });
         }
         Ok(CapBallCalibration {
             poly: std::array::from_fn(|i| CapBallPoly {
@@ -433,48 +420,53 @@ impl CapballBatch {
         true
     }
 
-    /// (volts, d_um, e_um) of every sample.
-    #[allow(clippy::type_complexity)]
-    fn values(&self, n: usize) -> Result<Vec<([f64; 3], [f64; 3], [f64; 3])>, String> {
-        let t = CAPBALL_TOPIC;
-        if let Some(c) = &self.calibration {
-            let cal = c.to_calibration()?;
-            let codes = [&self.code_1_delta, &self.code_2_delta, &self.code_3_delta];
-            check_len(t, n, &codes.map(|c| c.len()))?;
-            let mut acc = [0i64; 3];
-            return (0..n)
-                .map(|i| {
-                    let mut code = [0i32; 3];
-                    for k in 0..3 {
-                        acc[k] += i64::from(codes[k][i]);
-                        code[k] = i32::try_from(acc[k])
-                            .ok()
-                            .filter(|c| (-(1 << 23)..(1 << 23)).contains(c))
-                            .ok_or_else(|| format!("a CapBall code of {} is not 24-bit", acc[k]))?;
-                    }
-                    let v = cal.convert(code);
-                    Ok((v.volts, v.d_um, v.e_um))
-                })
-                .collect();
+    /// The nine value columns of the batch's `n` samples: stored as doubles, or converted
+    /// from the codes with the batch's calibration (named by the code column they come from).
+    fn doubles(&self, n: usize) -> Result<[Col<'_, f64>; 9], BatchError> {
+        const CODES: [&str; 3] = ["code_1_delta", "code_2_delta", "code_3_delta"];
+        let Some(c) = &self.calibration else {
+            let cols = [
+                &self.volts_1,
+                &self.volts_2,
+                &self.volts_3,
+                &self.d1_um,
+                &self.d2_um,
+                &self.d3_um,
+                &self.ex_um,
+                &self.ey_um,
+                &self.ez_um,
+            ];
+            return Ok(capball_doubles(cols.map(Vec::as_slice)));
+        };
+        let cal = c.to_calibration()?;
+        let codes = [&self.code_1_delta, &self.code_2_delta, &self.code_3_delta];
+        let lengths: [_; 3] = std::array::from_fn(|k| (CODES[k], codes[k].len()));
+        check_lengths(CAPBALL_TOPIC, n, &lengths)?;
+        let mut out: [Vec<f64>; 9] = std::array::from_fn(|_| Vec::with_capacity(n));
+        let mut acc = [0i64; 3];
+        let deltas = codes[0].iter().zip(codes[1]).zip(codes[2]);
+        for (i, ((d1, d2), d3)) in deltas.enumerate() {
+            let mut code = [0i32; 3];
+            for (k, d) in [d1, d2, d3].into_iter().enumerate() {
+                acc[k] += i64::from(*d);
+                code[k] = i32::try_from(acc[k])
+                    .ok()
+                    .filter(|c| (-(1 << 23)..(1 << 23)).contains(c))
+                    .ok_or(BatchError::Code {
+                        topic: CAPBALL_TOPIC,
+                        column: CODES[k],
+                        index: i,
+                        code: acc[k],
+                    })?;
+            }
+            let v = cal.convert(code);
+            let values = v.volts.iter().chain(&v.d_um).chain(&v.e_um);
+            out.iter_mut().zip(values).for_each(|(c, x)| c.push(*x));
         }
-        let cols = [
-            &self.volts_1,
-            &self.volts_2,
-            &self.volts_3,
-            &self.d1_um,
-            &self.d2_um,
-            &self.d3_um,
-            &self.ex_um,
-            &self.ey_um,
-            &self.ez_um,
-        ];
-        check_len(t, n, &cols.map(|c| c.len()))?;
-        Ok((0..n)
-            .map(|i| {
-                let c = |k: usize| [cols[k][i], cols[k + 1][i], cols[k + 2][i]];
-                (c(0), c(3), c(6))
-            })
-            .collect())
+        // Volts, distance and error of sensor k come from the codes of sensor k.
+        Ok(std::array::from_fn(|k| {
+            decoded(CODES[k % 3], std::mem::take(&mut out[k]))
+        }))
     }
 }
 
@@ -491,15 +483,14 @@ pub enum Batch {
 
 impl Batch {
     /// Decodes a format-3 message of a raw topic; `Ok(None)` for another topic.
-    pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, String> {
-        let e = |e: prost::DecodeError| e.to_string();
-        Ok(Some(match topic {
-            POSITION_TOPIC => Batch::Position(PositionBatch::decode(data).map_err(e)?),
-            ENVIRONMENT_TOPIC => Batch::Environment(EnvironmentBatch::decode(data).map_err(e)?),
-            CAPBALL_TOPIC => Batch::Capball(CapballBatch::decode(data).map_err(e)?),
-            PSD_TOPIC => Batch::Psd(PsdBatch::decode(data).map_err(e)?),
-            _ => return Ok(None),
-        }))
+    pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, BatchError> {
+        let variants = (
+            Batch::Position,
+            Batch::Environment,
+            Batch::Capball,
+            Batch::Psd,
+        );
+        columns::decode(topic, data, variants)
     }
 
     pub fn topic(&self) -> &'static str {
@@ -530,112 +521,33 @@ impl Batch {
     }
 
     /// The samples back, in order. A batch whose columns differ in length is an error.
-    pub fn samples(&self) -> Result<Vec<Sample>, String> {
+    pub fn samples(&self) -> Result<Vec<Sample>, BatchError> {
         let Some(h) = self.header() else {
             return Ok(Vec::new());
         };
         let n = h.len();
-        let (seq, dev, fitted, host) = h.columns()?;
-        let topic = self.topic();
-        let values: Vec<(Instrument, SampleValues)> = match self {
+        let values = match self {
             Batch::Position(b) => {
-                check_len(topic, n, &[b.raw_nm_delta.len(), b.position_um.len()])?;
-                check_len(topic, n, &[b.sig.len(), b.flags.len()])?;
                 let mut raw = 0i64;
-                (0..n)
-                    .map(|i| {
-                        raw = raw.wrapping_add(b.raw_nm_delta[i]);
-                        let sig = u8::try_from(b.sig[i]).map_err(|_| "sig above 255")?;
-                        Ok((
-                            Instrument::Interferometer,
-                            SampleValues::Position {
-                                raw_nm: raw,
-                                position_um: b.position_um[i],
-                                sig,
-                                flags: b.flags[i],
-                            },
-                        ))
-                    })
-                    .collect::<Result<_, &str>>()?
+                let raw_nm = b.raw_nm_delta.iter().map(|&d| {
+                    raw = raw.wrapping_add(d);
+                    raw
+                });
+                let raw_nm = decoded("raw_nm_delta", raw_nm.collect());
+                Values::position(raw_nm, &b.position_um, &b.sig, &b.flags)
             }
-            Batch::Environment(b) => {
-                check_len(topic, n, &[b.air_c.len(), b.air_pa.len(), b.rh_pct.len()])?;
-                check_len(topic, n, &[b.n_air.len(), b.material_count.len()])?;
-                let total: u64 = b.material_count.iter().map(|&c| u64::from(c)).sum();
-                if total != b.material_c.len() as u64 {
-                    return Err(format!(
-                        "material_count adds up to {total}, material_c has {}",
-                        b.material_c.len()
-                    ));
-                }
-                let mut at = 0usize;
-                (0..n)
-                    .map(|i| {
-                        let k = b.material_count[i] as usize;
-                        let material_c = b.material_c[at..at + k].to_vec();
-                        at += k;
-                        (
-                            Instrument::Interferometer,
-                            SampleValues::Environment {
-                                air_c: b.air_c[i],
-                                air_pa: b.air_pa[i],
-                                rh_pct: b.rh_pct[i],
-                                material_c,
-                                n_air: b.n_air[i],
-                            },
-                        )
-                    })
-                    .collect()
-            }
-            Batch::Capball(b) => {
-                check_len(topic, n, &[b.flags.len()])?;
-                let v = b.values(n)?;
-                (0..n)
-                    .map(|i| {
-                        let flags = u8::try_from(b.flags[i]).map_err(|_| "flags above 255")?;
-                        let (volts, d_um, e_um) = v[i];
-                        Ok((
-                            Instrument::Capball,
-                            SampleValues::Capball {
-                                volts,
-                                d_um,
-                                e_um,
-                                flags,
-                            },
-                        ))
-                    })
-                    .collect::<Result<_, &str>>()?
-            }
-            Batch::Psd(b) => {
-                check_len(topic, n, &[b.x_um.len(), b.y_um.len()])?;
-                check_len(topic, n, &[b.sum_pa.len(), b.head_c.len()])?;
-                (0..n)
-                    .map(|i| {
-                        (
-                            Instrument::Psd,
-                            SampleValues::Psd {
-                                x_um: b.x_um[i],
-                                y_um: b.y_um[i],
-                                sum_pa: b.sum_pa[i],
-                                head_c: b.head_c[i],
-                            },
-                        )
-                    })
-                    .collect()
-            }
+            Batch::Environment(b) => Values::environment(
+                &b.air_c,
+                &b.air_pa,
+                &b.rh_pct,
+                &b.n_air,
+                &b.material_c,
+                &b.material_count,
+            ),
+            Batch::Capball(b) => Values::capball(b.doubles(n)?, &b.flags),
+            Batch::Psd(b) => Values::psd(&b.x_um, &b.y_um, &b.sum_pa, &b.head_c),
         };
-        Ok(values
-            .into_iter()
-            .enumerate()
-            .map(|(i, (instrument, values))| Sample {
-                instrument,
-                seq: seq[i],
-                device_t_us: dev[i],
-                host_ns: host[i],
-                fitted_ns: fitted[i],
-                valid: h.valid[i],
-                values,
-            })
-            .collect())
+        let topic = self.topic();
+        samples(topic, n, &h.columns(topic)?, &values)
     }
 }

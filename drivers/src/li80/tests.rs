@@ -1,0 +1,219 @@
+//! The LI-80 driver over an in-memory port, the device played byte for byte from
+//! instruments.md §1: the command sequence, streaming, a device error, a rejected line, a
+//! gap, an unplug with reconnect, and a stop that keeps the samples sent before its answer.
+//!
+//! Time is tokio's paused clock on one thread: it only moves when both sides wait, so the
+//! driver's answer timeouts and backoff never fire while the device has something to do.
+
+use protocol::RejectKind;
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+
+use super::*;
+use crate::serial_driver::run;
+use crate::test_port::{Device, next_event, nmea, socket};
+use crate::{Counters, DriverEvent, HostClock};
+
+const PORT: &str = "/dev/metrolog-li80";
+
+fn config() -> Li80Config {
+    Li80Config {
+        port: PORT.into(),
+        rate_hz: 1000,
+        alpha_um_per_m_k: 11.7,
+    }
+}
+
+/// The device's side of the driver's setup (instruments.md §1), the `$ENV` record answering
+/// `ENV?` being `env`. `stale` is what a device still streaming sends before its `OK`.
+async fn answer_setup(dev: &mut Device, stale: &str, env: &str) {
+    dev.expect("STREAM OFF\n").await;
+    dev.send(stale).await;
+    dev.send("OK\r\n").await;
+    dev.expect("*IDN?\n").await;
+    dev.send("LI-80,A1234,2.1.0\r\n").await;
+    dev.expect("RATE 1000\n").await;
+    dev.send("OK\r\n").await;
+    dev.expect("DATUM\n").await;
+    dev.send("OK\r\n").await;
+    dev.expect("ENV?\n").await;
+    dev.send(&nmea(env)).await;
+    dev.expect("STREAM ON\n").await;
+    dev.send("OK\r\n").await;
+}
+
+/// The next event, which must be a sample.
+async fn next_sample(rx: &mut mpsc::Receiver<DriverEvent>) -> Sample {
+    match next_event(rx).await {
+        DriverEvent::Sample(s) => s,
+        ev => panic!("expected a sample, got {ev:?}"),
+    }
+}
+
+/// The next event, which must be the `$ENV` sample of a setup; returns its refractive index.
+async fn expect_environment(rx: &mut mpsc::Receiver<DriverEvent>, seq: u64) -> f64 {
+    let s = next_sample(rx).await;
+    assert_eq!(
+        (s.instrument, s.seq, s.device_t_us),
+        (Instrument::Interferometer, seq, 500)
+    );
+    assert!(s.valid);
+    assert_eq!(
+        s.fitted_ns, s.host_ns,
+        "an `$ENV` sample keeps its arrival time"
+    );
+    let SampleValues::Environment {
+        air_c,
+        air_pa,
+        rh_pct,
+        material_c,
+        n_air,
+    } = s.values
+    else {
+        panic!("expected an environment sample, got {:?}", s.values)
+    };
+    assert_eq!((air_c, air_pa, rh_pct), (20.0, 101_325.0, 50.0));
+    assert_eq!(material_c, [20.0]);
+    // Standard air at 632.991 nm: n - 1 ≈ 2.7e-4.
+    assert!((1.000_26..1.000_28).contains(&n_air), "n_air {n_air}");
+    n_air
+}
+
+async fn expect_connected(rx: &mut mpsc::Receiver<DriverEvent>) {
+    match next_event(rx).await {
+        DriverEvent::Connected {
+            instrument,
+            port,
+            identity,
+        } => {
+            assert_eq!(instrument, Instrument::Interferometer);
+            assert_eq!(port, PORT);
+            assert_eq!(identity, "LI-80,A1234,2.1.0");
+        }
+        ev => panic!("expected Connected, got {ev:?}"),
+    }
+}
+
+/// A `$POS` sample with `seq`, `raw_nm`, `sig`, `flags` and validity as given, its position
+/// air-compensated with `n_air` (the material at 20 °C: no thermal correction).
+fn check_position(s: &Sample, n_air: f64, want: (u64, i64, u8, u32, bool)) {
+    let (seq, raw, sig_want, flags_want, valid) = want;
+    assert_eq!(
+        (s.instrument, s.seq, s.valid),
+        (Instrument::Interferometer, seq, valid)
+    );
+    let SampleValues::Position {
+        raw_nm,
+        position_um,
+        sig,
+        flags,
+    } = s.values
+    else {
+        panic!("expected a position sample, got {:?}", s.values)
+    };
+    assert_eq!((raw_nm, sig, flags), (raw, sig_want, flags_want));
+    assert_eq!(position_um, raw as f64 / n_air * 1e-3);
+}
+
+#[tokio::test(start_paused = true)]
+async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
+    let (tx, mut rx) = mpsc::channel(1024);
+    let (socket, open) = socket();
+    let cancel = CancellationToken::new();
+    let (driver, path) = li80(&config(), HostClock::new(), tx);
+    let mut dev = socket.plug();
+    let task = tokio::spawn(run(driver, path, open, cancel.clone()));
+
+    // A device left streaming by an earlier run: its lines before `OK` are no samples.
+    let stale = nmea("POS,900,900000,12345,80,0") + &nmea("POS,901,901000,12346,80,0");
+    answer_setup(&mut dev, &stale, "ENV,0,500,20.00,101325,50.0,20.00").await;
+    let n_air = expect_environment(&mut rx, 0).await;
+    expect_connected(&mut rx).await;
+
+    // Streaming: samples in order, compensated; a weak beam is invalid.
+    dev.send(&(nmea("POS,1,1000,632991,87,0") + &nmea("POS,2,2000,-1000,10,1")))
+        .await;
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (1, 632_991, 87, 0, true),
+    );
+    check_position(&next_sample(&mut rx).await, n_air, (2, -1000, 10, 1, false));
+
+    // A device fault is reported with its code and text.
+    dev.send(&nmea("ERR,3,beam lost")).await;
+    match next_event(&mut rx).await {
+        DriverEvent::Error { error, port, .. } => {
+            assert_eq!(port, PORT);
+            assert!(
+                matches!(&error, DriverError::DeviceReported { code: 3, text, .. } if text == "beam lost"),
+                "{error:?}"
+            );
+        }
+        ev => panic!("expected the device's error, got {ev:?}"),
+    }
+
+    // A line with a wrong checksum (0x65 is right for this body) is rejected, so sample 3 is
+    // missing: a gap of one before sample 4.
+    dev.send("$POS,3,3000,5,87,0*00\r\n").await;
+    dev.send(&nmea("POS,4,4000,7,87,0")).await;
+    check_position(&next_sample(&mut rx).await, n_air, (4, 7, 87, 0, true));
+
+    // Unplugged: the driver reads end of file, reports it, and reconnects to the next device
+    // plugged in, which it configures from scratch.
+    let mut dev2 = socket.plug();
+    drop(dev);
+    match next_event(&mut rx).await {
+        DriverEvent::Disconnected { reason, port, .. } => {
+            assert_eq!(port, PORT);
+            assert!(matches!(reason, DriverError::EndOfFile), "{reason:?}");
+        }
+        ev => panic!("expected Disconnected, got {ev:?}"),
+    }
+    answer_setup(&mut dev2, "", "ENV,0,500,20.00,101325,50.0,20.00").await;
+    // The `$ENV` sequence starts afresh with the new session.
+    expect_environment(&mut rx, 0).await;
+    expect_connected(&mut rx).await;
+    // The device restarted its count: no gap, no resync.
+    dev2.send(&nmea("POS,1,1000,100,90,0")).await;
+    check_position(&next_sample(&mut rx).await, n_air, (1, 100, 90, 0, true));
+
+    // Cancelled: the driver stops the stream, and what the device sent before its `OK` still
+    // arrives.
+    cancel.cancel();
+    dev2.expect("STREAM OFF\n").await;
+    dev2.send(&(nmea("POS,2,2000,200,90,0") + &nmea("POS,3,3000,300,90,0") + "OK\r\n"))
+        .await;
+    task.await.unwrap();
+    let mut last_counters = None;
+    let mut samples = Vec::new();
+    while let Ok(ev) = rx.try_recv() {
+        match ev {
+            DriverEvent::Sample(s) => samples.push(s),
+            DriverEvent::Counters { counters, .. } => last_counters = Some(counters),
+            ev => panic!("unexpected event after the stop: {ev:?}"),
+        }
+    }
+    assert_eq!(samples.len(), 2);
+    check_position(&samples[0], n_air, (2, 200, 90, 0, true));
+    check_position(&samples[1], n_air, (3, 300, 90, 0, true));
+
+    let c = last_counters.expect("a last counters snapshot");
+    let want = Counters {
+        // 2 `$ENV`, 3 + 1 + 2 `$POS`
+        samples: 8,
+        invalid: 1,
+        dropped: 0,
+        gaps: 1,
+        gap_samples: 1,
+        resyncs: 0,
+        device_errors: 1,
+        disconnects: 1,
+        reconnects: 1,
+        // The answer lines of both setups (`ENV?` is answered by a record) and of the stop.
+        answers: 5 + 5 + 1,
+        rejections: [(RejectKind::BadChecksum, 1)].into_iter().collect(),
+        clock_drift_ppm: c.clock_drift_ppm,
+    };
+    assert_eq!(c, want);
+}

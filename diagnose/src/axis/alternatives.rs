@@ -10,14 +10,15 @@
 //! A rival with more parameters must come within [`MARGIN_RICHER`]: one whose better fit only
 //! pays for its extra parameters shows no more than that they are not supported.
 
-use super::Options;
 use super::correlation::design_lag1;
 use super::family::Family;
-use super::fit::{FinalFit, Obs, heldout_rms};
+use super::fit::{FinalFit, heldout_rms};
 use super::projector::{Projector, dotw};
+use super::run::Run;
 use super::search::{
     Selected, Step, absorbed_by_baseline, cols_rss, families, search, theta_uncertainty,
 };
+use super::types::Options;
 
 /// BIC difference below which two effects are not told apart: under 6 is at most "positive"
 /// evidence on the Kass–Raftery scale, short of "strong".
@@ -38,7 +39,7 @@ pub(super) struct Rival {
 
 /// The rivals of each selected step (same order as `steps`).
 pub(super) fn rivals(
-    obs: &Obs,
+    obs: &Run,
     opt: &Options,
     use_temp: bool,
     steps: &[Step],
@@ -72,7 +73,7 @@ const REFINE_MIN: f64 = 2.0;
 /// per cycle are split into two smooth effects where those explain the run better
 /// ([`Context::split_offsets`]).
 pub(super) fn refine(
-    obs: &Obs,
+    obs: &Run,
     opt: &Options,
     use_temp: bool,
     steps: &mut Vec<Step>,
@@ -156,7 +157,7 @@ struct Joint {
 }
 
 struct Context<'a> {
-    obs: &'a Obs,
+    obs: &'a Run,
     opt: &'a Options,
     fin: &'a FinalFit,
     /// Share of the likelihood ratio counted with correlated noise ((1 − ρ)/(1 + ρ)).
@@ -166,7 +167,7 @@ struct Context<'a> {
 }
 
 impl<'a> Context<'a> {
-    fn new(obs: &'a Obs, opt: &'a Options, fin: &'a FinalFit) -> Self {
+    fn new(obs: &'a Run, opt: &'a Options, fin: &'a FinalFit) -> Self {
         let rho = design_lag1(obs, &fin.w, &fin.cols, &fin.resid).clamp(0.0, 0.95);
         Context {
             obs,

@@ -6,12 +6,13 @@
 
 use std::collections::BTreeMap;
 
-use super::family::{Family, cycle_length_s};
-use super::fit::{FinalFit, Obs, fit_mean, heldout_residuals, heldout_rms};
+use super::family::Family;
+use super::fit::{FinalFit, fit_mean, heldout_residuals, heldout_rms};
 use super::outliers::weights;
 use super::projector::Projector;
+use super::run::Run;
 use super::search::{Spread, Step, search};
-use super::{Finding, Options};
+use super::types::{Finding, Options};
 use positioning::axis_model::Effect;
 use positioning::positioning_data::PositioningData;
 
@@ -42,7 +43,7 @@ type Described = (BTreeMap<String, f64>, BTreeMap<String, f64>, String, Effect);
 /// The finding of a mean effect added by the forward selection; `col0` is its first column
 /// in the final fit.
 pub(super) fn mean_finding(
-    obs: &Obs,
+    obs: &Run,
     data: &PositioningData,
     fin: &FinalFit,
     st: &Step,
@@ -164,7 +165,7 @@ fn warmup(c: &Coefs, has_times: bool) -> Described {
     )
 }
 
-fn cyclic(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
+fn cyclic(obs: &Run, c: &Coefs, has_times: bool) -> Described {
     let (a, b, ub) = (c.beta[0], c.beta[1], &c.ub);
     let th = c.theta;
     let amp = a.hypot(b);
@@ -181,7 +182,8 @@ fn cyclic(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
     }
     // Worded from the evidence: the period is not tied to the run's structure, but without
     // temperatures a coolant cycle is a hypothesis to confirm, not a finding.
-    let cycle = cycle_length_s(obs)
+    let cycle = obs
+        .cycle_length_s()
         .map(|pc| format!(" (one measuring cycle lasts {})", dur(pc, has_times)))
         .unwrap_or_default();
     let temps = if obs.temp_c.is_some() {
@@ -208,7 +210,7 @@ fn cyclic(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
     )
 }
 
-fn thermal(obs: &Obs, data: &PositioningData, fin: &FinalFit, st: &Step, c: &Coefs) -> Described {
+fn thermal(obs: &Run, data: &PositioningData, fin: &FinalFit, st: &Step, c: &Coefs) -> Described {
     let th = c.theta;
     let t_end = obs.t.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let grown = 1.0 - (-t_end / th).exp();
@@ -250,7 +252,7 @@ fn thermal(obs: &Obs, data: &PositioningData, fin: &FinalFit, st: &Step, c: &Coe
     (params, params_u, cause, effect)
 }
 
-fn step(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
+fn step(obs: &Run, c: &Coefs, has_times: bool) -> Described {
     let (size, t_s) = (c.beta[0], c.theta);
     let first = obs
         .time_order
@@ -288,7 +290,7 @@ fn step(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
     )
 }
 
-fn reversal_drift(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
+fn reversal_drift(obs: &Run, c: &Coefs, has_times: bool) -> Described {
     let change = c.beta[0];
     let cause = format!(
         "the reversal value B = x̄↑ − x̄↓ changes by {change:+.2} µm from the start to the end of \
@@ -337,7 +339,7 @@ fn cycle_offsets(c: &Coefs) -> Described {
 /// The measured material temperature explains the scale change better than a time constant:
 /// α is the coefficient of x·T.
 fn thermal_temp(
-    obs: &Obs,
+    obs: &Run,
     data: &PositioningData,
     fin: &FinalFit,
     st: &Step,
@@ -412,7 +414,7 @@ struct TargetScatter {
 }
 
 /// `trim`: each target's largest squared residual left out (and one degree of freedom).
-fn target_scatter(obs: &Obs, fin: &FinalFit, trim: bool) -> TargetScatter {
+fn target_scatter(obs: &Run, fin: &FinalFit, trim: bool) -> TargetScatter {
     let m = obs.n_targets;
     let mut ss_t = vec![0.0; m];
     let mut max_t = vec![0.0_f64; m];
@@ -464,7 +466,7 @@ fn anomaly_evidence(sc: &TargetScatter, t: usize, ln_n: f64) -> Option<(f64, f64
 
 /// Local anomaly: one target with its own variance (module docs).
 pub(super) fn local_anomaly(
-    obs: &Obs,
+    obs: &Run,
     data: &PositioningData,
     fin: &FinalFit,
     opt: &Options,
@@ -533,7 +535,7 @@ pub(super) fn local_anomaly(
 
 /// Gain of a local anomaly at target `t` on held-out cycles: predicted vs observed per-target
 /// RMS residual, with a common scatter (before) and the target's own (after).
-fn anomaly_heldout_gain(obs: &Obs, fin: &FinalFit, t: usize) -> (f64, f64) {
+fn anomaly_heldout_gain(obs: &Run, fin: &FinalFit, t: usize) -> (f64, f64) {
     let m = obs.n_targets;
     let ho = heldout_residuals(obs, &fin.w, &fin.cols, &fin.eval);
     let mut sse = vec![vec![0.0; m]; obs.n_folds];
@@ -578,7 +580,7 @@ fn anomaly_heldout_gain(obs: &Obs, fin: &FinalFit, t: usize) -> (f64, f64) {
 
 /// The outliers finding, if any reading was flagged.
 pub(super) fn outlier_finding(
-    obs: &Obs,
+    obs: &Run,
     fin: &FinalFit,
     anomaly: Option<&Anomaly>,
 ) -> Option<(Finding, Effect)> {

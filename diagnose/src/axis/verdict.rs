@@ -7,11 +7,12 @@
 
 use std::collections::BTreeMap;
 
-use super::Finding;
 use super::correlation::design_lag1;
-use super::fit::{FinalFit, Obs, heldout_rms};
+use super::fit::{FinalFit, heldout_rms};
+use super::obs::Obs;
 use super::outliers::robust_scale;
 use super::tails::{EVENTS_BAYES_FACTOR, ln_bayes_factor_events};
+use super::types::Finding;
 
 /// Residual RMS above this many times the short-term noise is structure, not noise.
 const UNEXPLAINED_RATIO: f64 = 3.0;

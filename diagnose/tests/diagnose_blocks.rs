@@ -60,7 +60,11 @@ fn report(data: &PositioningData) -> (bool, Vec<String>) {
         .any(|n| n.contains("within the blocks the readings trend"));
     (
         noted,
-        d.report.findings.into_iter().map(|f| f.effect).collect(),
+        d.report
+            .findings
+            .into_iter()
+            .map(|f| f.effect.name().to_string())
+            .collect(),
     )
 }
 

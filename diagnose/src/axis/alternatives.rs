@@ -10,6 +10,8 @@
 //! A rival with more parameters must come within [`MARGIN_RICHER`]: one whose better fit only
 //! pays for its extra parameters shows no more than that they are not supported.
 
+use positioning::axis_model::EffectKind;
+
 use super::correlation::design_lag1;
 use super::family::Family;
 use super::fit::{FinalFit, heldout_rms};
@@ -50,7 +52,7 @@ pub(super) fn rivals(
         .map(|i| {
             families(obs, use_temp)
                 .into_iter()
-                .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+                .filter(|g| steps.iter().all(|s| s.sel.family.kind() != g.kind()))
                 .filter_map(|g| ctx.in_place(steps, i, g))
                 .filter(|r| {
                     let richer =
@@ -95,7 +97,7 @@ pub(super) fn refine(
         let fams: Vec<Family> = families(obs, use_temp)
             .into_iter()
             .filter(|g| *g != Family::CycleOffsets)
-            .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+            .filter(|g| steps.iter().all(|s| s.sel.family.kind() != g.kind()))
             .collect();
         if let Some([a, b]) = ctx.split_offsets(steps, i, &fams) {
             steps[i] = a;
@@ -112,7 +114,7 @@ pub(super) fn refine(
                     steps
                         .iter()
                         .enumerate()
-                        .all(|(k, s)| k == i || s.sel.family.slot() != g.slot())
+                        .all(|(k, s)| k == i || s.sel.family.kind() != g.kind())
                 })
                 .filter_map(|g| ctx.in_place(steps, i, g))
                 .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -203,7 +205,7 @@ impl<'a> Context<'a> {
     fn best_joint(&self, steps: &[Step], i: usize, use_temp: bool) -> Option<Joint> {
         families(self.obs, use_temp)
             .into_iter()
-            .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+            .filter(|g| steps.iter().all(|s| s.sel.family.kind() != g.kind()))
             .filter_map(|g| self.joint_in_place(steps, i, g))
             .filter(|j| j.delta_bic < -REFINE_MIN)
             .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
@@ -349,15 +351,18 @@ pub(super) fn cols_except(steps: &[Step], skip: &[usize]) -> Vec<Vec<f64>> {
 }
 
 /// What would tell two effects over time apart, for the report's sentence.
-pub(super) fn tell_apart(a: &str, b: &str) -> &'static str {
-    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
-    if pair("exponential_warmup", "linear_drift") {
+pub(super) fn tell_apart(a: Option<EffectKind>, b: Option<EffectKind>) -> &'static str {
+    use EffectKind::{CycleOffsets, ExponentialWarmup, LinearDrift, Step};
+    let pair = |x: EffectKind, y: EffectKind| {
+        (a == Some(x) && b == Some(y)) || (a == Some(y) && b == Some(x))
+    };
+    if pair(ExponentialWarmup, LinearDrift) {
         "a warm-up levels off and a linear drift does not: a longer run, or a temperature record \
          of the axis, shows which"
-    } else if pair("step", "cycle_offsets") || pair("linear_drift", "cycle_offsets") {
+    } else if pair(Step, CycleOffsets) || pair(LinearDrift, CycleOffsets) {
         "offsets per cycle change from one cycle to the next at random; more cycles, or the \
          machine's log of re-datums and interruptions, show which"
-    } else if pair("step", "linear_drift") || pair("step", "exponential_warmup") {
+    } else if pair(Step, LinearDrift) || pair(Step, ExponentialWarmup) {
         "a step happens between two readings; the machine's log at that time (a re-datum, a \
          bumped optic) or a repeat of the run shows which"
     } else {

@@ -1,5 +1,8 @@
-//! The candidate mean effects: their regressors (columns) and the grids their non-linear
-//! parameter is searched on (names and parameters of `docs/datasets.md`).
+//! The forms in which the mean effects of the axis model are searched: their regressors
+//! (columns) and the grids their non-linear parameter is searched on. Each is a form of one
+//! [`EffectKind`] (names and parameters of `docs/datasets.md`).
+
+use positioning::axis_model::EffectKind;
 
 use super::obs::Obs;
 
@@ -16,15 +19,17 @@ pub(super) enum Family {
 }
 
 impl Family {
-    pub(super) fn name(self) -> &'static str {
+    /// The model effect this family fits (a scale change fitted to the material temperature
+    /// is a scale change): two families of one kind are never in a model together.
+    pub(super) fn kind(self) -> EffectKind {
         match self {
-            Family::Linear => "linear_drift",
-            Family::Warmup => "exponential_warmup",
-            Family::Cyclic => "cyclic_drift",
-            Family::Thermal | Family::ThermalTemp => "thermal_expansion",
-            Family::Step => "step",
-            Family::ReversalDrift => "reversal_drift",
-            Family::CycleOffsets => "cycle_offsets",
+            Family::Linear => EffectKind::LinearDrift,
+            Family::Warmup => EffectKind::ExponentialWarmup,
+            Family::Cyclic => EffectKind::CyclicDrift,
+            Family::Thermal | Family::ThermalTemp => EffectKind::ThermalExpansion,
+            Family::Step => EffectKind::Step,
+            Family::ReversalDrift => EffectKind::ReversalDrift,
+            Family::CycleOffsets => EffectKind::CycleOffsets,
         }
     }
     /// Parameters counted by the BIC (grid-searched ones included).
@@ -38,18 +43,6 @@ impl Family {
             Family::CycleOffsets => obs.n_cycles.saturating_sub(1).max(1),
         }
     }
-    pub(super) fn slot(self) -> usize {
-        match self {
-            Family::Linear => 0,
-            Family::Warmup => 1,
-            Family::Cyclic => 2,
-            Family::Thermal | Family::ThermalTemp => 3,
-            Family::Step => 4,
-            Family::ReversalDrift => 5,
-            Family::CycleOffsets => 6,
-        }
-    }
-
     /// A grid-searched family, whose columns are kept for the run (the search's cache).
     pub(super) fn is_searched_dense(self) -> bool {
         matches!(self, Family::Warmup | Family::Cyclic | Family::Thermal)

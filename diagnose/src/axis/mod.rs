@@ -21,7 +21,7 @@
 //! - Without real times (no `time_s` column) row numbers stand in for seconds: the report says
 //!   so, and rates, periods and time constants are then per reading.
 
-use positioning::axis_model::{AxisModel, Effect};
+use positioning::axis_model::AxisModel;
 use positioning::positioning_data::PositioningData;
 
 mod alternatives;
@@ -43,8 +43,8 @@ mod verdict;
 
 pub use model::{AxisTable, axis_model_from_toml, baseline_model, reproduction_check};
 pub use types::{
-    Alternative, Baseline, DiagnoseError, Diagnosis, DiagnosisReport, Finding, Options,
-    Reproduction,
+    Alternative, Baseline, DiagnoseError, Diagnosis, DiagnosisReport, Finding, Found, Options,
+    Reproduction, Stated,
 };
 
 use fit::{FinalFit, heldout_rms, in_sample_residuals, rms};
@@ -98,21 +98,21 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     let mut col0 = 0;
     for (i, (st, rv)) in steps.iter().zip(&rivals).enumerate() {
         let spread = spread_of(&obs, &fin, &steps, i);
-        let (mut f, e) = report::mean_finding(&obs, data, &fin, st, col0, spread.as_ref());
+        let mut f = report::mean_finding(&obs, data, &fin, st, col0, spread.as_ref());
         for r in rv {
             f.alternatives.push(rival_finding(&obs, data, opt, &fin, r));
         }
         note_alternatives(&mut f);
-        found.push((f, e));
+        found.push(f);
         col0 += st.sel.cols.len();
     }
     let anomaly = report::local_anomaly(&obs, data, &fin, opt);
     if let Some(a) = &anomaly {
-        found.push((a.finding.clone(), a.effect.clone()));
+        found.push(a.finding.clone());
     }
     let res = verdict::residue(&obs, &fin);
     // Parameters fitted in correlated noise are less certain than white noise implies.
-    for (f, _) in found.iter_mut() {
+    for f in found.iter_mut() {
         for u in f.params_u.values_mut() {
             *u *= res.u_factor();
         }
@@ -140,12 +140,9 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         _ => {}
     }
     if unexplained {
-        let demoted = verdict::demoted_next_to_unexplained(
-            &found.iter().map(|f| f.0.clone()).collect::<Vec<_>>(),
-            res.rms_left_um,
-        );
+        let demoted = verdict::demoted_next_to_unexplained(&found, res.rms_left_um);
         for &(i, why) in demoted.iter().rev() {
-            let (f, _) = found.remove(i);
+            let f = found.remove(i);
             notes.push(format!(
                 "{} would lower the held-out error from {:.2} to {:.2} µm: not reported, {why}",
                 f.effect, f.heldout_rms_before_um, f.heldout_rms_after_um
@@ -153,8 +150,12 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         }
     }
     // Most significant first (a stable sort keeps the order of ties).
-    found.sort_by(|a, b| b.0.significance.total_cmp(&a.0.significance));
-    let (mut findings, effects): (Vec<Finding>, Vec<Effect>) = found.into_iter().unzip();
+    found.sort_by(|a, b| b.significance.total_cmp(&a.significance));
+    let effects = found
+        .iter()
+        .filter_map(|f| f.effect.model_effect().copied())
+        .collect();
+    let mut findings = found;
     if unexplained {
         // Not a model effect: the extended model does not simulate it.
         findings.push(verdict::unexplained_finding(&obs, &fin, &res));
@@ -277,10 +278,10 @@ fn rival_finding(
     let mut cols = r.step.before_cols.clone();
     cols.extend(r.step.sel.cols.iter().cloned());
     let fin_r = settle(obs, opt, fin.out.clone(), cols);
-    let (f, _) = report::mean_finding(obs, data, &fin_r, &r.step, r.step.before_cols.len(), None);
+    let f = report::mean_finding(obs, data, &fin_r, &r.step, r.step.before_cols.len(), None);
     Alternative {
         effect: f.effect,
-        params: f.params,
+        stated: f.stated,
         params_u: f.params_u,
         delta_bic: r.delta_bic,
     }
@@ -293,7 +294,7 @@ fn note_alternatives(f: &mut Finding) {
             " The data cannot tell it from {} (BIC {:+.1}): {}.",
             a.effect,
             a.delta_bic,
-            alternatives::tell_apart(&f.effect, &a.effect)
+            alternatives::tell_apart(f.effect.kind(), a.effect.kind())
         ));
     }
 }

@@ -154,7 +154,7 @@ fn prefer_pair(
     for a in 0..cands.len() {
         for b in a + 1..cands.len() {
             let (fa, fb) = (cands[a].0, cands[b].0);
-            if fa.slot() == fb.slot() {
+            if fa.kind() == fb.kind() {
                 continue;
             }
             let mut cols = fa.columns(obs, cands[a].1.theta);
@@ -415,7 +415,7 @@ pub(super) fn forward_select(
                      it (each target is measured over a short part of the run, or the pattern \
                      follows the run's own order of targets): the data cannot tell it from the \
                      baseline, so it is not reported",
-                    fam.name()
+                    fam.kind()
                 );
                 if !notes.contains(&note) {
                     notes.push(note);
@@ -478,7 +478,7 @@ fn best_partner(
         // Offsets per cycle (one per cycle) whiten correlated noise as well as they explain a
         // second effect: they are no partner (1000 correlated-noise runs naming an effect:
         // 2.9 → 2.2 %, two-effect classes unchanged).
-        .filter(|(f, _)| f.slot() != fam.slot() && *f != Family::CycleOffsets)
+        .filter(|(f, _)| f.kind() != fam.kind() && *f != Family::CycleOffsets)
         .filter_map(|&(f, th)| {
             let pc = f.columns(obs, th);
             // Only an effect the data can report is credited with the structure it explains:
@@ -524,7 +524,7 @@ fn candidates(
     let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
     families(obs, use_temp)
         .into_iter()
-        .filter(|f| selected.iter().all(|s| s.family.slot() != f.slot()))
+        .filter(|f| selected.iter().all(|s| s.family.kind() != f.kind()))
         .filter_map(|fam| {
             let c = search(obs, p, y_perp, fam)?;
             let dbic = n_eff * (c.rss / rss0).ln() + fam.n_params(obs) as f64 * ln_n;

@@ -31,10 +31,10 @@ mod report;
 mod select;
 
 pub use checks::{Profile, ResidualSummary};
-pub use model::{Candidate, CapballRun, RotaryAxis, axis_harmonic_um};
+pub use model::{Candidate, CapballRun};
 pub use report::{
     Absorption, CapballBaseline, CapballDiagnosis, CapballDiagnosisReport, CapballFinding,
-    ParameterShift,
+    CapballFound, ParameterShift,
 };
 
 use nalgebra::DVector;
@@ -459,13 +459,14 @@ fn shortlist(ctx: &report::Context, cur: &ModelFit, periods: &Periods) -> Vec<se
             .collect();
         scored.sort_by(|a, b| b.0.total_cmp(&a.0));
         // Grid neighbours of the best (nearby periods) are the same effect: keep one per kind.
-        let mut kinds: Vec<String> = Vec::new();
+        let same = |a: &Candidate, b: &Candidate| match (a, b) {
+            (Candidate::CyclicDrift { .. }, Candidate::CyclicDrift { .. }) => true,
+            _ => a == b,
+        };
+        let mut kinds: Vec<Candidate> = Vec::new();
         for (_, s) in scored {
-            let kind = match s.term.cand {
-                Candidate::CyclicDrift { .. } => "cyclic".to_string(),
-                c => format!("{c:?}"),
-            };
-            if kinds.contains(&kind) {
+            let kind = s.term.cand;
+            if kinds.iter().any(|k| same(k, &kind)) {
                 continue;
             }
             kinds.push(kind);
@@ -531,7 +532,7 @@ fn forward_select(
             .iter()
             .filter(|t| top - (t.bic + t.stat) < opt.min_bic_gain)
             .filter_map(|t| t.next.terms.last().map(|x| x.cand))
-            .filter(|c| Some(c.effect()) != best.next.terms.last().map(|x| x.cand.effect()))
+            .filter(|c| Some(c.kind()) != best.next.terms.last().map(|x| x.cand.kind()))
             .collect();
         steps.push(Step {
             before: cur.clone(),

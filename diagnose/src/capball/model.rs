@@ -266,3 +266,10 @@ pub(crate) fn absorbed_fraction(j: &DMatrix<f64>, v: &DVector<f64>, keep: &[bool
         None => 0.0,
     }
 }
+
+/// `n` values from `lo` to `hi`, evenly spaced in the logarithm.
+pub(crate) fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64))
+        .collect()
+}

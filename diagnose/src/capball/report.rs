@@ -9,9 +9,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::checks::{self, ResidualSummary};
-use super::model::{Candidate, CapballRun, absorbed_fraction, lstsq};
+use super::model::{Candidate, CapballRun, absorbed_fraction, log_grid, lstsq};
 use super::select::{ModelFit, identifiable_basis, model_basis, screen, validate, zero_rows};
-use super::{DriftRecord, Options, Periods, SHIFT_NAMED_SIGMA, Step, log_grid};
+use super::types::{DriftRecord, Options, Periods, SHIFT_NAMED_SIGMA, Step};
 use geometry::capball::{CapballSetup, Identification, N_PARAMS, PARAM_NAMES};
 use geometry::capball_effects::{
     AxisHarmonic, CapballEffect, CapballEffectKind, Channel, CyclicDrift, RotaryAxis,

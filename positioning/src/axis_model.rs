@@ -281,7 +281,7 @@ mod tests {
             Effect::CycleOffsets { std_um: 1.0 },
         ];
         for e in all {
-            let v = toml::Value::try_from(&e).expect("serialise");
+            let v = toml::Value::try_from(e).expect("serialise");
             assert_eq!(v["effect"].as_str(), Some(e.kind().name()));
             let k = toml::Value::try_from(e.kind()).expect("serialise");
             assert_eq!(k.as_str(), Some(e.kind().name()));

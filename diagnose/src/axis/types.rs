@@ -164,13 +164,31 @@ impl Finding {
     }
 }
 
+/// A finding's or an alternative's `effect`, `params` and `params_u`, as the report writes
+/// them.
+#[derive(Serialize)]
+struct Named<'a> {
+    effect: &'static str,
+    params: BTreeMap<&'static str, f64>,
+    params_u: &'a BTreeMap<&'static str, f64>,
+}
+
+impl<'a> Named<'a> {
+    fn new(effect: &Found, stated: &Stated, params_u: &'a BTreeMap<&'static str, f64>) -> Self {
+        Named {
+            effect: effect.name(),
+            params: stated_params(effect, stated),
+            params_u,
+        }
+    }
+}
+
 impl Serialize for Finding {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         #[derive(Serialize)]
         struct Repr<'a> {
-            effect: &'static str,
-            params: BTreeMap<&'static str, f64>,
-            params_u: &'a BTreeMap<&'static str, f64>,
+            #[serde(flatten)]
+            named: Named<'a>,
             significance: f64,
             heldout_rms_before_um: f64,
             heldout_rms_after_um: f64,
@@ -179,9 +197,7 @@ impl Serialize for Finding {
             alternatives: &'a [Alternative],
         }
         Repr {
-            effect: self.effect.name(),
-            params: self.params(),
-            params_u: &self.params_u,
+            named: Named::new(&self.effect, &self.stated, &self.params_u),
             significance: self.significance,
             heldout_rms_before_um: self.heldout_rms_before_um,
             heldout_rms_after_um: self.heldout_rms_after_um,
@@ -216,15 +232,12 @@ impl Serialize for Alternative {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         #[derive(Serialize)]
         struct Repr<'a> {
-            effect: &'static str,
-            params: BTreeMap<&'static str, f64>,
-            params_u: &'a BTreeMap<&'static str, f64>,
+            #[serde(flatten)]
+            named: Named<'a>,
             delta_bic: f64,
         }
         Repr {
-            effect: self.effect.name(),
-            params: self.params(),
-            params_u: &self.params_u,
+            named: Named::new(&self.effect, &self.stated, &self.params_u),
             delta_bic: self.delta_bic,
         }
         .serialize(s)

@@ -280,7 +280,7 @@ pub(crate) struct Context<'a> {
 
 impl Context<'_> {
     /// White-noise variance on the validation runs (pooled over channels), from the baseline.
-    pub fn val_noise_var(&self) -> f64 {
+    pub(super) fn val_noise_var(&self) -> f64 {
         let p = DVector::from_column_slice(&self.ident_params());
         let mut acc = 0.0;
         for (run, keep) in self.validation.iter().zip(self.val_keep) {

@@ -16,11 +16,11 @@ pub(crate) struct Term {
 }
 
 impl Term {
-    pub fn rank(&self) -> usize {
+    pub(super) fn rank(&self) -> usize {
         self.basis.ncols()
     }
     /// The term's reduced columns for a run, given the current 14 parameters.
-    pub fn columns(
+    pub(super) fn columns(
         &self,
         setup: &CapballSetup,
         run: &CapballRun,
@@ -44,7 +44,7 @@ pub(crate) struct ModelFit {
 }
 
 impl ModelFit {
-    pub fn n_params(&self) -> usize {
+    pub(super) fn n_params(&self) -> usize {
         N_PARAMS + self.terms.iter().map(Term::rank).sum::<usize>()
     }
 }

@@ -24,8 +24,8 @@ pub fn positioning_text(d: &Diagnosis) -> String {
     }
     for (k, f) in r.findings.iter().enumerate() {
         let params: Vec<String> = f
-            .params
-            .iter()
+            .params()
+            .into_iter()
             .map(|(name, v)| match f.params_u.get(name) {
                 Some(u) => format!("{name} = {v:.4} ± {u:.2}"),
                 None => format!("{name} = {v:.4}"),
@@ -33,7 +33,7 @@ pub fn positioning_text(d: &Diagnosis) -> String {
             .collect();
         write_finding(
             &mut s,
-            (k + 1, &f.effect, f.significance),
+            (k + 1, f.effect.name(), f.significance),
             &params,
             ("held-out", f.heldout_rms_before_um, f.heldout_rms_after_um),
             &f.cause,
@@ -93,17 +93,16 @@ pub fn capball_text(d: &CapballDiagnosis) -> String {
     }
     for (k, f) in r.findings.iter().enumerate() {
         let params: Vec<String> = f
-            .params
-            .iter()
-            .filter(|(n, _)| !matches!(n.as_str(), "cos_um" | "sin_um" | "identification_poses"))
+            .summary_params()
+            .into_iter()
             .map(|(n, v)| match f.params_u.get(n) {
-                Some(u) => format!("{n} = {} ± {}", compact(v), compact(u)),
-                None => format!("{n} = {}", compact(v)),
+                Some(u) => format!("{n} = {} ± {}", compact(&v), compact(u)),
+                None => format!("{n} = {}", compact(&v)),
             })
             .collect();
         write_finding(
             &mut s,
-            (k + 1, &f.effect, f.significance),
+            (k + 1, f.effect.name(), f.significance),
             &params,
             (
                 "validation",

@@ -93,8 +93,8 @@ fn diagnosis_section(data: &PositioningData, s: &mut String) {
             }
             for (k, f) in r.findings.iter().enumerate() {
                 let params: Vec<String> = f
-                    .params
-                    .iter()
+                    .params()
+                    .into_iter()
                     .map(|(n, v)| match f.params_u.get(n) {
                         Some(u) => format!("{n} = {v:.3} ± {u:.3}"),
                         None => format!("{n} = {v:.3}"),

@@ -75,7 +75,10 @@ fn run_diag(d: &Dataset) -> CapballDiagnosisReport {
 }
 
 fn names(r: &CapballDiagnosisReport) -> Vec<String> {
-    r.findings.iter().map(|f| f.effect.clone()).collect()
+    r.findings
+        .iter()
+        .map(|f| f.effect.name().to_string())
+        .collect()
 }
 
 fn num(v: &Value) -> f64 {
@@ -86,7 +89,7 @@ fn num(v: &Value) -> f64 {
 /// (for an axis error: axis and harmonic right, amplitude checked only when no part of it is
 /// absorbed, i.e. not for harmonic 1 of C whose co-rotating part is an eccentricity).
 fn params_ok(d: &Dataset, r: &CapballDiagnosisReport, effect: &str) -> bool {
-    let Some(f) = r.findings.iter().find(|f| f.effect == effect) else {
+    let Some(f) = r.findings.iter().find(|f| f.effect.name() == effect) else {
         return false;
     };
     let within = |est: f64, truth: f64, u: f64| (est - truth).abs() <= 3.0 * u.max(1e-9);
@@ -96,11 +99,11 @@ fn params_ok(d: &Dataset, r: &CapballDiagnosisReport, effect: &str) -> bool {
             let Some((period, amps)) = t.cyclic else {
                 return false;
             };
-            let p = num(&f.params["period_s"]);
+            let p = num(&f.params()["period_s"]);
             let up = num(&f.params_u["period_s"]);
             let ok_amp = ["x", "y", "z"].iter().enumerate().all(|(k, c)| {
                 within(
-                    num(&f.params["amplitude_um"][c]),
+                    num(&f.params()["amplitude_um"][c]),
                     amps[k].0,
                     num(&f.params_u["amplitude_um"][c]),
                 )
@@ -113,7 +116,7 @@ fn params_ok(d: &Dataset, r: &CapballDiagnosisReport, effect: &str) -> bool {
             };
             ["x", "y", "z"].iter().enumerate().all(|(k, c)| {
                 within(
-                    num(&f.params["rate_um_per_h"][c]),
+                    num(&f.params()["rate_um_per_h"][c]),
                     rate[k],
                     num(&f.params_u["rate_um_per_h"][c]),
                 )
@@ -121,27 +124,27 @@ fn params_ok(d: &Dataset, r: &CapballDiagnosisReport, effect: &str) -> bool {
         }
         "sensor_gain" => {
             let Some((ch, g)) = t.gain else { return false };
-            f.params["channel"] == ["x", "y", "z"][ch]
+            f.params()["channel"] == ["x", "y", "z"][ch]
                 && within(
-                    num(&f.params["gain_pct"]),
+                    num(&f.params()["gain_pct"]),
                     100.0 * g,
                     num(&f.params_u["gain_pct"]),
                 )
         }
         "axis_error" => {
             let Some(m) = t.axis else { return false };
-            let same = f.params["axis"] == m.axis.to_string()
-                && num(&f.params["harmonic"]) == m.harmonic as f64;
+            let same = f.params()["axis"] == m.axis.to_string()
+                && num(&f.params()["harmonic"]) == m.harmonic as f64;
             if m.axis == 'C' && m.harmonic == 1 {
                 return same;
             }
             same && within(
-                num(&f.params["amplitude_um"]),
+                num(&f.params()["amplitude_um"]),
                 m.amplitude_um,
                 num(&f.params_u["amplitude_um"]),
             )
         }
-        "outliers" => num(&f.params["count"]) >= t.outliers as f64,
+        "outliers" => num(&f.params()["count"]) >= t.outliers as f64,
         _ => false,
     }
 }
@@ -210,8 +213,8 @@ fn sweep(per_class: usize, seed0: u64) -> Vec<(Class, bool, Tally)> {
                     for f in &r.findings {
                         println!(
                             "    {} {} sig {:.1} val {:.3}->{:.3} | {}",
-                            f.effect,
-                            serde_json::to_string(&f.params).unwrap_or_default(),
+                            f.effect.name(),
+                            serde_json::to_string(&f.params()).unwrap_or_default(),
                             f.significance,
                             f.heldout_rms_before_um,
                             f.heldout_rms_after_um,
@@ -270,11 +273,11 @@ fn paper_cooling_cycle_is_named_with_its_gain() {
     let f = r
         .findings
         .iter()
-        .find(|f| f.effect == "cyclic_drift")
+        .find(|f| f.effect.name() == "cyclic_drift")
         .expect("cyclic drift named");
     assert!(f.heldout_rms_after_um < f.heldout_rms_before_um);
     assert!(
-        (num(&f.params["period_s"]) - 1500.0).abs() < 3.0 * num(&f.params_u["period_s"]).max(1.0)
+        (num(&f.params()["period_s"]) - 1500.0).abs() < 3.0 * num(&f.params_u["period_s"]).max(1.0)
     );
     assert!(params_ok(&d, &r, "cyclic_drift"), "{:?}", f);
 }
@@ -324,7 +327,7 @@ fn c_axial_once_per_rev_is_absorbed() {
     let a = r
         .absorbed
         .iter()
-        .find(|a| a.effect == "axis_error" && a.detail == "C harmonic 1")
+        .find(|a| a.effect.name() == "axis_error" && a.detail == "C harmonic 1")
         .expect("C harmonic 1 listed as absorbed");
     assert!(a.invisible >= 2, "{a:?}");
     assert!(

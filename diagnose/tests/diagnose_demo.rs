@@ -33,7 +33,12 @@ fn demo_like(seed: u64) -> Vec<String> {
     };
     let d = simulate(&model, &standard_schedule(5, 5, 60.0), seed);
     let r = diagnose(&d, &Options::default()).unwrap();
-    let names: Vec<String> = r.report.findings.iter().map(|f| f.effect.clone()).collect();
+    let names: Vec<String> = r
+        .report
+        .findings
+        .iter()
+        .map(|f| f.effect.name().to_string())
+        .collect();
     eprintln!("seed {seed}: {names:?}");
     names
 }

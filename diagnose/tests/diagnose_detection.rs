@@ -122,9 +122,9 @@ pub fn rate(cat: &str, per_category: usize, seed0: u64) -> (usize, usize, usize)
             (f.is_empty(), f.is_empty(), f.is_empty())
         } else {
             (
-                f.iter().any(|x| x.effect == cat),
-                f.first().is_some_and(|x| x.effect == cat),
-                f.len() == 1 && f[0].effect == cat,
+                f.iter().any(|x| x.effect.name() == cat),
+                f.first().is_some_and(|x| x.effect.name() == cat),
+                f.len() == 1 && f[0].effect.name() == cat,
             )
         };
         named += hit as usize;
@@ -136,7 +136,7 @@ pub fn rate(cat: &str, per_category: usize, seed0: u64) -> (usize, usize, usize)
                 data.n_targets(),
                 data.n_cycles(),
                 f.iter()
-                    .map(|x| (&x.effect, x.significance))
+                    .map(|x| (x.effect.name(), x.significance))
                     .collect::<Vec<_>>()
             );
         }

@@ -501,10 +501,10 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
             let (data, truth, oracle) = random_case(seed, class);
             let d = diagnose(&data, &Options::default()).expect("diagnose");
             let f = &d.report.findings;
-            let named = |e: &str| f.iter().any(|x| x.effect == e);
+            let named = |e: &str| f.iter().any(|x| x.effect.name() == e);
             let rival = |e: &str| {
                 f.iter()
-                    .any(|x| x.effect == e || x.alternatives.iter().any(|a| a.effect == e))
+                    .any(|x| x.effect.name() == e || x.alternatives.iter().any(|a| a.effect.name() == e))
             };
             let mut t = Tally {
                 runs: 1,
@@ -532,17 +532,17 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
             }
             t.with_alt = usize::from(f.iter().any(|x| !x.alternatives.is_empty()));
             t.machine_wrong = usize::from(f.iter().any(|x| {
-                !expect.contains(&x.effect.as_str())
+                !expect.contains(&x.effect.name())
                     && !matches!(
-                        x.effect.as_str(),
+                        x.effect.name(),
                         "step" | "cycle_offsets" | "outliers" | "unexplained"
                     )
             }));
             t.any_finding = usize::from(!f.is_empty());
-            t.wrong = usize::from(f.iter().any(|x| !expect.contains(&x.effect.as_str())));
+            t.wrong = usize::from(f.iter().any(|x| !expect.contains(&x.effect.name())));
             for (e, p, v) in &truth {
-                if let Some(x) = f.iter().find(|x| x.effect == *e)
-                    && let (Some(est), Some(u)) = (x.params.get(*p), x.params_u.get(*p))
+                if let Some(x) = f.iter().find(|x| x.effect.name() == *e)
+                    && let (Some(est), Some(u)) = (x.params().get(*p), x.params_u.get(*p))
                 {
                     t.params += 1;
                     t.params_ok += usize::from((est - v).abs() <= 2.0 * u);
@@ -558,12 +558,12 @@ fn run_class(class: &str, expect: &[&str], count: usize, seed0: u64) -> Tally {
                     data.n_cycles(),
                     f.iter()
                         .map(|x| (
-                            &x.effect,
+                            x.effect.name(),
                             x.significance,
-                            &x.params,
+                            x.params(),
                             x.alternatives
                                 .iter()
-                                .map(|a| (&a.effect, a.delta_bic))
+                                .map(|a| (a.effect.name(), a.delta_bic))
                                 .collect::<Vec<_>>()
                         ))
                         .collect::<Vec<_>>()

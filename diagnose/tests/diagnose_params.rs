@@ -28,9 +28,9 @@ fn cyclic_drift_parameters_within_their_uncertainty() {
     let d = simulate(&m, &standard_schedule(11, 20, 10.0), 3);
     let r = diagnose(&d, &Options::default()).unwrap();
     let f = &r.report.findings[0];
-    assert_eq!(f.effect, "cyclic_drift");
-    let (p, up) = (f.params["period_s"], f.params_u["period_s"]);
-    let (a, ua) = (f.params["amplitude_um"], f.params_u["amplitude_um"]);
+    assert_eq!(f.effect.name(), "cyclic_drift");
+    let (p, up) = (f.params()["period_s"], f.params_u["period_s"]);
+    let (a, ua) = (f.params()["amplitude_um"], f.params_u["amplitude_um"]);
     assert!((p - 1500.0).abs() < 4.0 * up, "period {p} ± {up}");
     assert!((a - 1.2).abs() < 4.0 * ua, "amplitude {a} ± {ua}");
     assert!(f.heldout_rms_after_um < f.heldout_rms_before_um);
@@ -63,16 +63,16 @@ fn warmup_and_linear_drift_parameters() {
     let d = simulate(&m, &standard_schedule(9, 20, 20.0), 4);
     let r = diagnose(&d, &Options::default()).unwrap();
     let f = &r.report.findings[0];
-    assert_eq!(f.effect, "exponential_warmup");
-    assert!((f.params["amplitude_um"] + 2.0).abs() < 4.0 * f.params_u["amplitude_um"]);
-    assert!((f.params["tau_s"] - 1800.0).abs() < 4.0 * f.params_u["tau_s"]);
+    assert_eq!(f.effect.name(), "exponential_warmup");
+    assert!((f.params()["amplitude_um"] + 2.0).abs() < 4.0 * f.params_u["amplitude_um"]);
+    assert!((f.params()["tau_s"] - 1800.0).abs() < 4.0 * f.params_u["tau_s"]);
 
     let m = axis(9, 0.3, vec![Effect::LinearDrift { rate_um_per_h: 0.8 }]);
     let d = simulate(&m, &standard_schedule(9, 20, 20.0), 5);
     let r = diagnose(&d, &Options::default()).unwrap();
     let f = &r.report.findings[0];
-    assert_eq!(f.effect, "linear_drift");
-    assert!((f.params["rate_um_per_h"] - 0.8).abs() < 4.0 * f.params_u["rate_um_per_h"]);
+    assert_eq!(f.effect.name(), "linear_drift");
+    assert!((f.params()["rate_um_per_h"] - 0.8).abs() < 4.0 * f.params_u["rate_um_per_h"]);
 }
 
 #[test]
@@ -97,12 +97,15 @@ fn uncompensated_material_temperature_gives_the_expansion_coefficient() {
     d.alpha_um_per_m_k = Some(11.7);
     let r = diagnose(&d, &Options::default()).unwrap();
     let f = &r.report.findings[0];
-    assert_eq!(f.effect, "thermal_expansion");
-    let (a, u) = (f.params["alpha_um_per_m_k"], f.params_u["alpha_um_per_m_k"]);
+    assert_eq!(f.effect.name(), "thermal_expansion");
+    let (a, u) = (
+        f.params()["alpha_um_per_m_k"],
+        f.params_u["alpha_um_per_m_k"],
+    );
     assert!((a - alpha).abs() < 4.0 * u + 0.3, "alpha {a} ± {u}");
     assert!(f.cause.contains("material_compensation"), "{}", f.cause);
     let end = alpha * dt_k * (1.0 - (-sched.last().unwrap().time_s / tau_s).exp());
-    assert!((f.params["scale_ppm"] - end).abs() < 4.0 * f.params_u["scale_ppm"] + 0.5);
+    assert!((f.params()["scale_ppm"] - end).abs() < 4.0 * f.params_u["scale_ppm"] + 0.5);
 }
 
 #[test]

@@ -35,16 +35,16 @@ fn b02_x_reversal_at_every_target_and_a_mild_drift() {
     // The per-cycle mean falls by a few µm: a drift over time, downwards.
     let f = d.report.findings.first().expect("the drift is found");
     assert!(
-        ["linear_drift", "exponential_warmup"].contains(&f.effect.as_str()),
+        ["linear_drift", "exponential_warmup"].contains(&f.effect.name()),
         "{e:?}"
     );
     let v = f
-        .params
+        .params()
         .get("rate_um_per_h")
-        .or(f.params.get("amplitude_um"))
+        .or(f.params().get("amplitude_um"))
         .copied()
         .unwrap_or(0.0);
-    assert!(v < 0.0, "{:?}", f.params);
+    assert!(v < 0.0, "{:?}", f.params());
     // No temperatures were logged: no cause may claim a measured temperature.
     assert!(
         d.report
@@ -63,8 +63,8 @@ fn w42_y_warm_up_per_reading() {
     assert_eq!(e.first(), Some(&"exponential_warmup"), "{e:?}");
     assert!(!e.contains(&"cyclic_drift"), "{e:?}");
     let f = &d.report.findings[0];
-    let a = f.params["amplitude_um"];
-    let tau = f.params["tau_s"];
+    let a = f.params()["amplitude_um"];
+    let tau = f.params()["tau_s"];
     // The per-cycle mean falls 26.6 → −17.0 µm in shrinking steps (10 readings per cycle).
     assert!((-90.0..-35.0).contains(&a), "amplitude {a}");
     assert!((5.0..40.0).contains(&tau), "tau {tau} readings");

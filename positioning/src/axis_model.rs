@@ -28,7 +28,7 @@ pub struct AxisModel {
 }
 
 /// An effect beyond the static baseline (names and parameters of `docs/datasets.md`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "effect", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Effect {
     /// Every target shifts steadily with time: `rate · t`.
@@ -57,6 +57,62 @@ pub enum Effect {
     /// Each cycle is shifted by its own offset, drawn with standard deviation `std_um` when
     /// simulated (the reference re-mounted between cycles).
     CycleOffsets { std_um: f64 },
+}
+
+/// Which effect an [`Effect`] is, without its parameters: what a search tries and a report
+/// names (the names are those of the TOML `effect` tag and of `docs/datasets.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EffectKind {
+    LinearDrift,
+    ExponentialWarmup,
+    CyclicDrift,
+    ThermalExpansion,
+    LocalAnomaly,
+    Outliers,
+    Step,
+    ReversalDrift,
+    CycleOffsets,
+}
+
+impl EffectKind {
+    /// The effect's name, as in the TOML `effect` tag and the diagnosis report.
+    pub fn name(self) -> &'static str {
+        match self {
+            EffectKind::LinearDrift => "linear_drift",
+            EffectKind::ExponentialWarmup => "exponential_warmup",
+            EffectKind::CyclicDrift => "cyclic_drift",
+            EffectKind::ThermalExpansion => "thermal_expansion",
+            EffectKind::LocalAnomaly => "local_anomaly",
+            EffectKind::Outliers => "outliers",
+            EffectKind::Step => "step",
+            EffectKind::ReversalDrift => "reversal_drift",
+            EffectKind::CycleOffsets => "cycle_offsets",
+        }
+    }
+}
+
+impl std::fmt::Display for EffectKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl Effect {
+    /// Which effect this is.
+    pub fn kind(&self) -> EffectKind {
+        match self {
+            Effect::LinearDrift { .. } => EffectKind::LinearDrift,
+            Effect::ExponentialWarmup { .. } => EffectKind::ExponentialWarmup,
+            Effect::CyclicDrift { .. } => EffectKind::CyclicDrift,
+            Effect::ThermalExpansion { .. } => EffectKind::ThermalExpansion,
+            Effect::LocalAnomaly { .. } => EffectKind::LocalAnomaly,
+            Effect::Outliers { .. } => EffectKind::Outliers,
+            Effect::Step { .. } => EffectKind::Step,
+            Effect::ReversalDrift { .. } => EffectKind::ReversalDrift,
+            Effect::CycleOffsets { .. } => EffectKind::CycleOffsets,
+        }
+    }
 }
 
 /// Direction of approach to a target.
@@ -186,6 +242,50 @@ mod tests {
         assert!((m.deterministic_um(0, Direction::Down, 0.0) + 1.0).abs() < 1e-12);
         assert_eq!(m.noise_std_um(1), 2.0);
         assert_eq!(m.noise_std_um(0), 0.5);
+    }
+
+    /// A kind's name is the `effect` tag its effect is written with.
+    #[test]
+    fn kind_names_are_the_toml_tags() {
+        let all = [
+            Effect::LinearDrift { rate_um_per_h: 1.0 },
+            Effect::ExponentialWarmup {
+                amplitude_um: 1.0,
+                tau_s: 1.0,
+            },
+            Effect::CyclicDrift {
+                period_s: 1.0,
+                amplitude_um: 1.0,
+                phase_rad: 0.0,
+            },
+            Effect::ThermalExpansion {
+                scale_ppm: 1.0,
+                tau_s: 1.0,
+            },
+            Effect::LocalAnomaly {
+                index: 1,
+                std_ratio: 2.0,
+            },
+            Effect::Outliers {
+                rate: 0.1,
+                magnitude_um: 1.0,
+            },
+            Effect::Step {
+                time_s: 1.0,
+                size_um: 1.0,
+            },
+            Effect::ReversalDrift {
+                change_um: 1.0,
+                duration_s: 1.0,
+            },
+            Effect::CycleOffsets { std_um: 1.0 },
+        ];
+        for e in all {
+            let v = toml::Value::try_from(e).expect("serialise");
+            assert_eq!(v["effect"].as_str(), Some(e.kind().name()));
+            let k = toml::Value::try_from(e.kind()).expect("serialise");
+            assert_eq!(k.as_str(), Some(e.kind().name()));
+        }
     }
 
     #[test]

@@ -7,25 +7,23 @@ use std::time::{Duration, Instant};
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 
+use crate::error::SimError;
+use crate::instrument::Device;
 use crate::pty::{Pty, ReadOutcome};
 use crate::record::{Fate, FaultCounts};
 use crate::scenario::StreamFaults;
-use crate::{Device, Shared, SimError};
+use crate::shared::{Control, DeviceState, Shared};
+
+/// Default rate of every streaming device after power-up (instruments.md, common rules).
+pub(crate) const POWER_UP_RATE_HZ: f64 = 10.0;
 
 /// Pending output beyond this is discarded (the host is not reading): about 0.5 s of the
 /// fastest stream.
 pub(crate) const OUTPUT_CAP: usize = 256 * 1024;
 /// Longest command line kept; longer input is discarded up to the next terminator.
 const MAX_COMMAND: usize = 256;
-
-/// Requests to a device task.
-pub(crate) enum Control {
-    Unplug(oneshot::Sender<()>),
-    Replug(oneshot::Sender<Result<PathBuf, SimError>>),
-    Shutdown(oneshot::Sender<()>),
-}
 
 /// A device's free-running clock: restarts at power-up, runs `ppm` fast against true time.
 #[derive(Debug, Clone, Copy)]
@@ -462,7 +460,7 @@ impl<M: Model> Runner<M> {
     /// Publish the device's state for [`crate::SimHandle::state`].
     pub(crate) fn publish(&self) {
         let (active, rate_hz) = self.model.activity();
-        let st = crate::DeviceState {
+        let st = DeviceState {
             plugged: self.pty.is_some(),
             host_connected: self.connected,
             active: active && self.pty.is_some(),

@@ -75,186 +75,31 @@
 
 mod device;
 mod devices;
+mod error;
+mod instrument;
 pub mod physics;
 mod pty;
 pub mod record;
 pub mod scenario;
+mod shared;
 
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
-use tokio::sync::{mpsc, oneshot, watch};
+use tokio::sync::{mpsc, watch};
 
+pub use error::SimError;
+pub use instrument::Device;
 pub use physics::{CapballTruth, PoseTiming, Schedule};
 pub use record::{Fate, FaultCounts, PoseTruth, Record, SentSample, SentValues, TriggerFate};
 pub use scenario::{Coords, ProgramStart, Scenario, ScenarioError};
+pub use shared::DeviceState;
 
-use device::Control;
 use physics::World;
-
-/// The simulated devices (same names as `drivers::Instrument`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Device {
-    /// LI-80 laser interferometer.
-    Interferometer,
-    /// CB-3 CapBall ADC.
-    Capball,
-    /// PSD-2 transimpedance board.
-    Psd,
-    /// SLCAN adapter with the CNC's exact-stop triggers.
-    Trigger,
-}
-
-impl Device {
-    pub const ALL: [Device; 4] = [
-        Device::Interferometer,
-        Device::Capball,
-        Device::Psd,
-        Device::Trigger,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Device::Interferometer => "interferometer",
-            Device::Capball => "capball",
-            Device::Psd => "psd",
-            Device::Trigger => "trigger",
-        }
-    }
-
-    /// File name of the stable symlink in the simulation directory.
-    pub fn link_name(self) -> &'static str {
-        match self {
-            Device::Interferometer => "li80",
-            Device::Capball => "cb3",
-            Device::Psd => "psd2",
-            Device::Trigger => "slcan",
-        }
-    }
-
-    fn index(self) -> usize {
-        self as usize
-    }
-}
-
-/// Why the simulation could not do what was asked.
-#[derive(Debug, thiserror::Error)]
-pub enum SimError {
-    /// invalid scenario: {0}
-    #[error("invalid scenario: {0}")]
-    Scenario(#[from] ScenarioError),
-    /// cannot create the simulation directory {path}: {source}
-    #[error("cannot create the simulation directory {path}: {source}")]
-    Dir {
-        path: String,
-        source: std::io::Error,
-    },
-    /// cannot create the pseudo-terminal for {path}: {source}
-    #[error("cannot create the pseudo-terminal for {path}: {source}")]
-    Pty {
-        path: String,
-        source: std::io::Error,
-    },
-    /// the simulation is not running inside a tokio runtime
-    #[error(
-        "the simulation is not running inside a tokio runtime: call Sim::start from async code"
-    )]
-    NoRuntime,
-    /// the device task of {0} has ended (the simulation was shut down)
-    #[error("the device task of {0} has ended (the simulation was shut down)")]
-    Stopped(&'static str),
-}
-
-/// What a device is doing, as seen from the device.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-pub struct DeviceState {
-    /// The device is plugged in (its link exists).
-    pub plugged: bool,
-    /// A host has its port open.
-    pub host_connected: bool,
-    /// Streaming samples (the SLCAN adapter: CAN channel open with `O`).
-    pub active: bool,
-    /// The configured sample rate, Hz (0 for the SLCAN adapter).
-    pub rate_hz: u32,
-    /// Power-ups so far (1 after start, +1 per replug).
-    pub power_ups: u32,
-}
-
-/// Program state shared by the tasks.
-#[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct ProgramState {
-    pub started: Option<Instant>,
-    pub done: bool,
-}
-
-/// What every device task shares.
-pub(crate) struct Shared {
-    pub world: World,
-    pub t0: Instant,
-    pub program: watch::Sender<ProgramState>,
-    pub states: watch::Sender<[DeviceState; 4]>,
-    record: Mutex<Record>,
-    controls: Vec<mpsc::Sender<Control>>,
-    runtime: tokio::runtime::Handle,
-}
-
-impl Shared {
-    pub fn lock_record(&self) -> MutexGuard<'_, Record> {
-        // A panic in another task must not take the record with it.
-        self.record.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// Start the CNC program at `at` (once): fill in the truth and arm the timed faults.
-    pub fn start_program_at(self: &Arc<Self>, at: Instant) {
-        let mut first = false;
-        self.program.send_if_modified(|p| {
-            if p.started.is_none() {
-                p.started = Some(at);
-                first = true;
-                true
-            } else {
-                false
-            }
-        });
-        if !first {
-            return;
-        }
-        let start_s = at.saturating_duration_since(self.t0).as_secs_f64();
-        let truth = self.world.truth();
-        {
-            let mut r = self.lock_record();
-            r.truth = truth;
-            r.program_started_s = Some(start_s);
-        }
-        for u in self.world.scenario.faults.unplugs.clone() {
-            let me = self.clone();
-            self.runtime.spawn(async move {
-                tokio::time::sleep_until((at + Duration::from_secs_f64(u.at_s)).into()).await;
-                let _ = me.control(u.device, Control::Unplug).await;
-                tokio::time::sleep(Duration::from_secs_f64(u.duration_s)).await;
-                let _ = me.control(u.device, Control::Replug).await;
-            });
-        }
-    }
-
-    async fn control<T>(
-        &self,
-        d: Device,
-        make: impl FnOnce(oneshot::Sender<T>) -> Control,
-    ) -> Result<T, SimError> {
-        let (tx, rx) = oneshot::channel();
-        self.controls[d.index()]
-            .send(make(tx))
-            .await
-            .map_err(|_| SimError::Stopped(d.name()))?;
-        rx.await.map_err(|_| SimError::Stopped(d.name()))
-    }
-}
+use shared::{Control, ProgramState, Shared};
 
 /// Entry point: `Sim::start`.
 pub struct Sim;

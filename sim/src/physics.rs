@@ -12,6 +12,19 @@ use crate::scenario::{Axis, Capball, CapballModel, Coords, Program, Psd, Scenari
 use geometry::capball::CapballSetup;
 use geometry::kinematics::Pose;
 
+impl Scenario {
+    /// The host-side CapBall transform `T` (4×4, `v = T·[d; 1]`) that inverts this scenario's
+    /// sensor geometry exactly: what the cube calibration would find.
+    pub fn capball_transform(&self) -> [[f64; 4]; 4] {
+        capball_host_transform(&self.capball)
+    }
+
+    /// Real seconds from the program start to the program-end frame.
+    pub fn program_duration_s(&self) -> f64 {
+        Schedule::new(&self.program).end_s
+    }
+}
+
 /// Timing of one pose, real seconds after the program start.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseTiming {
@@ -111,23 +124,16 @@ impl CapballModel {
     /// measuring loop (linear and cyclic, by time), axis harmonics (by angle), then the gain
     /// of the reading. The per-visit scatter is the device's (it needs the visit).
     fn add_drift(&self, e: [f64; 3], pose: &Coords, t_s: f64) -> [f64; 3] {
-        use diagnose::capball::{RotaryAxis, axis_harmonic_um};
         let h = t_s / 3600.0;
         let mut out = [0, 1, 2].map(|k| e[k] + self.drift_um_per_h[k] * h);
         if let Some(c) = &self.cyclic_drift {
-            let w = std::f64::consts::TAU * t_s / c.period_s;
-            for ((o, a), ph) in out.iter_mut().zip(c.amplitude_um).zip(c.phase_rad) {
-                *o += a * (w + ph).sin();
+            for (o, d) in out.iter_mut().zip(c.at_um(t_s)) {
+                *o += d;
             }
         }
         let p = metrology_pose(pose);
         for a in &self.axis_errors {
-            let axis = if a.axis == "A" {
-                RotaryAxis::A
-            } else {
-                RotaryAxis::C
-            };
-            let d = axis_harmonic_um(axis, a.harmonic, a.cos_um, a.sin_um, &p);
+            let d = a.error_um(&p);
             for (o, dk) in out.iter_mut().zip(d) {
                 *o += dk;
             }
@@ -607,10 +613,8 @@ mod tests {
     #[test]
     fn setup_errors_move_with_their_frames() {
         // Tool offset alone: the spindle does not turn, e = tool offset at any pose.
-        let m = CapballModel {
-            tool_x_um: 5.0,
-            ..zero_model()
-        };
+        let mut m = zero_model();
+        m.setup.tool_x_um = 5.0;
         let p = Coords {
             a_deg: -30.0,
             c_deg: 70.0,
@@ -624,10 +628,8 @@ mod tests {
         // Ball offset +3 µm along table X; C = 90° turns the table by −90° about Z (ISO 841:
         // C moves the tool relative to the table), so the ball sits at (0, −3, 0) µm and
         // e = p_tool − p_ball = (0, +3, 0).
-        let m = CapballModel {
-            ball_x_um: 3.0,
-            ..zero_model()
-        };
+        let mut m = zero_model();
+        m.setup.ball_x_um = 3.0;
         let p = Coords {
             c_deg: 90.0,
             ..Coords::default()
@@ -643,11 +645,11 @@ mod tests {
     fn squareness_scales_with_the_lever_arm() {
         // EB0Z: the Z direction tilted about Y by θ; at z = 100 mm the tool moves by
         // θ × (0, 0, 100 mm) = (100 mm · θ, 0, 0) = 2 µm for θ = 20 µrad.
-        let m = CapballModel {
-            eb0z_urad: 20.0,
+        let mut m = CapballModel {
             drift_um_per_h: [0.0, 0.0, 1.0],
             ..zero_model()
         };
+        m.link.eb0z_urad = 20.0;
         let p = Coords {
             z_mm: 100.0,
             ..Coords::default()
@@ -659,7 +661,7 @@ mod tests {
 
     #[test]
     fn capball_effects_beyond_the_14_parameters() {
-        use crate::scenario::{CapballAxisHarmonic, CapballCyclicDrift};
+        use geometry::capball_effects::{AxisHarmonic, CyclicDrift, RotaryAxis};
         let p = Coords {
             a_deg: -30.0,
             c_deg: 90.0,
@@ -668,7 +670,7 @@ mod tests {
         // A cooling cycle of 1500 s, 1/1/3 µm half peak-to-valley: at a quarter period the
         // sine peaks; at a full period it is back to zero.
         let m = CapballModel {
-            cyclic_drift: Some(CapballCyclicDrift {
+            cyclic_drift: Some(CyclicDrift {
                 period_s: 1500.0,
                 amplitude_um: [1.0, 1.0, 3.0],
                 phase_rad: [0.0; 3],
@@ -682,17 +684,17 @@ mod tests {
         );
         assert!(m.error_um(&p, 1500.0)[2].abs() < 1e-9);
         // Gain: +2 % on x scales the tool offset's x.
-        let m = CapballModel {
-            tool_x_um: 10.0,
+        let mut m = CapballModel {
             gain_pct: [2.0, 0.0, 0.0],
             ..zero_model()
         };
+        m.setup.tool_x_um = 10.0;
         assert!((m.error_um(&p, 0.0)[0] - 10.2).abs() < 1e-9);
         // C harmonic 2, cos along the cradle's x (= machine x, A turns about x): at C = 90°
         // cos(180°) = −1.
         let m = CapballModel {
-            axis_errors: vec![CapballAxisHarmonic {
-                axis: "C".into(),
+            axis_errors: vec![AxisHarmonic {
+                axis: RotaryAxis::C,
                 harmonic: 2,
                 cos_um: [0.5, 0.0, 0.0],
                 sin_um: [0.0; 3],

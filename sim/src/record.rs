@@ -6,7 +6,7 @@ use positioning::axis_model::Direction;
 use protocol::can::TriggerEvent;
 use serde::Serialize;
 
-use crate::Device;
+use crate::instrument::Device;
 
 /// Everything sent so far (a snapshot from [`crate::SimHandle::record`]).
 #[derive(Debug, Clone, Default, Serialize)]

@@ -5,11 +5,13 @@
 
 use std::path::Path;
 
+use geometry::capball::{CapballErrors, LinkErrors, SetupErrors};
+use geometry::capball_effects::{AxisHarmonic, CapballEffect, CyclicDrift};
 use positioning::axis_model::AxisModel;
 use protocol::can::TriggerEvent;
 use serde::{Deserialize, Serialize};
 
-use crate::Device;
+use crate::instrument::Device;
 
 /// A complete simulation scenario.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -369,30 +371,13 @@ impl Default for Capball {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CapballModel {
-    /// Squareness of Y to X (rotation of the Y direction about Z), µrad.
-    pub ec0y_urad: f64,
-    /// Squareness of Z to X (rotation of the Z direction about Y), µrad.
-    pub eb0z_urad: f64,
-    /// Squareness of Z to Y (rotation of the Z direction about X), µrad.
-    pub ea0z_urad: f64,
-    /// Orientation of the A axis line about Y, µrad.
-    pub eb0a_urad: f64,
-    /// Orientation of the A axis line about Z, µrad.
-    pub ec0a_urad: f64,
-    /// Orientation of the C axis line about X (relative to A), µrad.
-    pub ea0c_urad: f64,
-    /// Orientation of the C axis line about Y (relative to A), µrad.
-    pub eb0c_urad: f64,
-    /// Offset of the C axis line from the A axis along Y, µm.
-    pub ey0c_um: f64,
-    /// Ball centre, actual − nominal, table frame, µm.
-    pub ball_x_um: f64,
-    pub ball_y_um: f64,
-    pub ball_z_um: f64,
-    /// Tool point, actual − nominal, spindle frame, µm.
-    pub tool_x_um: f64,
-    pub tool_y_um: f64,
-    pub tool_z_um: f64,
+    /// The eight link errors, by their names in [`geometry::capball::LinkErrors`] (µrad; `ey0c_um` µm).
+    #[serde(flatten)]
+    pub link: LinkErrors,
+    /// The six setup errors: ball centre (actual − nominal, table frame) and tool point
+    /// (actual − nominal, spindle frame), µm ([`geometry::capball::SetupErrors`]).
+    #[serde(flatten)]
+    pub setup: SetupErrors,
     /// Linear drift of the measuring loop (e.g. spindle growth), µm per (scaled) hour, machine
     /// frame. Not one of the 14 parameters: a non-zero drift biases the identification as it
     /// would on a real machine. Default 0.
@@ -401,14 +386,14 @@ pub struct CapballModel {
     /// Periodic drift of the measuring loop (paper 001: the spindle's cooling cycle), machine
     /// frame, a function of (scaled) time. Not one of the 14 parameters. Default none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub cyclic_drift: Option<CapballCyclicDrift>,
+    pub cyclic_drift: Option<CyclicDrift>,
     /// Gain error of the reading along machine x, y, z, percent (`docs/datasets.md`,
     /// `sensor_gain`): the error the CapBall reports is `(1 + g/100)` times the true one.
     #[serde(default)]
     pub gain_pct: [f64; 3],
     /// Motion errors of the A and C axes the link-error model lacks (harmonics of the angle).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub axis_errors: Vec<CapballAxisHarmonic>,
+    pub axis_errors: Vec<AxisHarmonic>,
     /// Scatter of the measuring loop from one pose visit to the next (what a dwell's steady
     /// value does not average out: real CapBalls show 0.1–0.4 µm), µm, per machine direction.
     /// Default 0.
@@ -416,117 +401,31 @@ pub struct CapballModel {
     pub pose_noise_um: f64,
 }
 
-/// A periodic drift of the measuring loop: `amplitude_um[k] · sin(2π t / period_s +
-/// phase_rad[k])` in machine direction k (x, y, z), t in scaled seconds. `amplitude_um` is half
-/// the peak-to-valley (`docs/datasets.md`, `cyclic_drift`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CapballCyclicDrift {
-    pub period_s: f64,
-    pub amplitude_um: [f64; 3],
-    #[serde(default)]
-    pub phase_rad: [f64; 3],
-}
-
-/// A motion error of a rotary axis as harmonic `harmonic` of its angle θ, as the change of the
-/// volumetric error `cos_um · cos(kθ) + sin_um · sin(kθ)` in the axis's housing frame (for C
-/// the A cradle, for A the machine frame), µm (`docs/datasets.md`, `axis_error`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CapballAxisHarmonic {
-    /// `A` or `C`.
-    pub axis: String,
-    pub harmonic: u32,
-    pub cos_um: [f64; 3],
-    pub sin_um: [f64; 3],
-}
-
 impl CapballModel {
     /// The 14 parameters as metrology's types.
-    pub fn errors(&self) -> geometry::capball::CapballErrors {
-        use geometry::capball::{CapballErrors, LinkErrors, SetupErrors};
+    pub fn errors(&self) -> CapballErrors {
         CapballErrors {
-            link: LinkErrors {
-                ec0y_urad: self.ec0y_urad,
-                eb0z_urad: self.eb0z_urad,
-                ea0z_urad: self.ea0z_urad,
-                eb0a_urad: self.eb0a_urad,
-                ec0a_urad: self.ec0a_urad,
-                ea0c_urad: self.ea0c_urad,
-                eb0c_urad: self.eb0c_urad,
-                ey0c_um: self.ey0c_um,
-            },
-            setup: SetupErrors {
-                ball_x_um: self.ball_x_um,
-                ball_y_um: self.ball_y_um,
-                ball_z_um: self.ball_z_um,
-                tool_x_um: self.tool_x_um,
-                tool_y_um: self.tool_y_um,
-                tool_z_um: self.tool_z_um,
-            },
+            link: self.link,
+            setup: self.setup,
         }
     }
 
     /// A model from metrology's parameters, without drift.
-    pub fn from_errors(e: &geometry::capball::CapballErrors) -> Self {
-        let (l, s) = (&e.link, &e.setup);
+    pub fn from_errors(e: &CapballErrors) -> Self {
         CapballModel {
-            ec0y_urad: l.ec0y_urad,
-            eb0z_urad: l.eb0z_urad,
-            ea0z_urad: l.ea0z_urad,
-            eb0a_urad: l.eb0a_urad,
-            ec0a_urad: l.ec0a_urad,
-            ea0c_urad: l.ea0c_urad,
-            eb0c_urad: l.eb0c_urad,
-            ey0c_um: l.ey0c_um,
-            ball_x_um: s.ball_x_um,
-            ball_y_um: s.ball_y_um,
-            ball_z_um: s.ball_z_um,
-            tool_x_um: s.tool_x_um,
-            tool_y_um: s.tool_y_um,
-            tool_z_um: s.tool_z_um,
+            link: e.link,
+            setup: e.setup,
             ..Self::zero_effects()
         }
     }
-}
 
-impl CapballModel {
     /// The model a CapBall diagnosis found (`metrolog diagnose --write-model`): the 14
     /// parameters identified with the effects modelled, plus the effects as this scenario
     /// section takes them; times are those of the diagnosed dataset's clock.
     pub fn from_diagnosis(d: &diagnose::capball::CapballDiagnosis) -> Self {
-        use serde_json::Value;
-        let mut m = Self::from_errors(&geometry::capball::CapballErrors::from_slice(
-            &d.params_extended,
-        ));
-        let xyz = |v: &Value| ["x", "y", "z"].map(|k| v[k].as_f64().unwrap_or(0.0));
-        for f in &d.report.findings {
-            let p = |k: &str| f.params.get(k).cloned().unwrap_or(Value::Null);
-            match f.effect.as_str() {
-                "linear_drift" => m.drift_um_per_h = xyz(&p("rate_um_per_h")),
-                "cyclic_drift" => {
-                    m.cyclic_drift = Some(CapballCyclicDrift {
-                        period_s: p("period_s").as_f64().unwrap_or(1.0),
-                        amplitude_um: xyz(&p("amplitude_um")),
-                        phase_rad: xyz(&p("phase_rad")),
-                    })
-                }
-                "sensor_gain" => {
-                    let ch = match p("channel").as_str() {
-                        Some("y") => 1,
-                        Some("z") => 2,
-                        _ => 0,
-                    };
-                    m.gain_pct[ch] = p("gain_pct").as_f64().unwrap_or(0.0);
-                }
-                "axis_error" => m.axis_errors.push(CapballAxisHarmonic {
-                    axis: p("axis").as_str().unwrap_or("C").to_string(),
-                    harmonic: p("harmonic").as_u64().unwrap_or(1) as u32,
-                    cos_um: xyz(&p("cos_um")),
-                    sin_um: xyz(&p("sin_um")),
-                }),
-                _ => {}
-            }
+        let mut m = Self::from_errors(&CapballErrors::from_slice(&d.params_extended));
+        for e in d.report.findings.iter().filter_map(|f| f.effect.effect()) {
+            m.add_effect(e);
         }
         // The white noise the diagnosis measured on the identification run becomes the
         // per-visit scatter.
@@ -536,23 +435,23 @@ impl CapballModel {
         m
     }
 
+    /// Adds an effect to the model (an effect of a kind it holds once replaces it).
+    pub fn add_effect(&mut self, e: &CapballEffect) {
+        match *e {
+            CapballEffect::LinearDrift { rate_um_per_h } => self.drift_um_per_h = rate_um_per_h,
+            CapballEffect::CyclicDrift(c) => self.cyclic_drift = Some(c),
+            CapballEffect::SensorGain { channel, gain_pct } => {
+                self.gain_pct[channel.index()] = gain_pct
+            }
+            CapballEffect::AxisError(h) => self.axis_errors.push(h),
+        }
+    }
+
     /// All 14 parameters zero and no effects (a base for struct updates).
     pub fn zero_effects() -> Self {
         CapballModel {
-            ec0y_urad: 0.0,
-            eb0z_urad: 0.0,
-            ea0z_urad: 0.0,
-            eb0a_urad: 0.0,
-            ec0a_urad: 0.0,
-            ea0c_urad: 0.0,
-            eb0c_urad: 0.0,
-            ey0c_um: 0.0,
-            ball_x_um: 0.0,
-            ball_y_um: 0.0,
-            ball_z_um: 0.0,
-            tool_x_um: 0.0,
-            tool_y_um: 0.0,
-            tool_z_um: 0.0,
+            link: LinkErrors::default(),
+            setup: SetupErrors::default(),
             drift_um_per_h: [0.0; 3],
             cyclic_drift: None,
             gain_pct: [0.0; 3],
@@ -565,20 +464,24 @@ impl CapballModel {
 impl Default for CapballModel {
     fn default() -> Self {
         CapballModel {
-            ec0y_urad: 12.0,
-            eb0z_urad: -18.0,
-            ea0z_urad: 9.0,
-            eb0a_urad: 25.0,
-            ec0a_urad: -15.0,
-            ea0c_urad: 20.0,
-            eb0c_urad: -15.0,
-            ey0c_um: 4.0,
-            ball_x_um: 3.0,
-            ball_y_um: -2.0,
-            ball_z_um: 1.5,
-            tool_x_um: -1.5,
-            tool_y_um: 2.5,
-            tool_z_um: 4.0,
+            link: LinkErrors {
+                ec0y_urad: 12.0,
+                eb0z_urad: -18.0,
+                ea0z_urad: 9.0,
+                eb0a_urad: 25.0,
+                ec0a_urad: -15.0,
+                ea0c_urad: 20.0,
+                eb0c_urad: -15.0,
+                ey0c_um: 4.0,
+            },
+            setup: SetupErrors {
+                ball_x_um: 3.0,
+                ball_y_um: -2.0,
+                ball_z_um: 1.5,
+                tool_x_um: -1.5,
+                tool_y_um: 2.5,
+                tool_z_um: 4.0,
+            },
             ..Self::zero_effects()
         }
     }
@@ -784,7 +687,8 @@ impl Scenario {
         toml::to_string(self)
     }
 
-    /// The CapBall effects of `[capball.truth]`: finite, periods > 0, axes A or C.
+    /// The CapBall effects of `[capball.truth]`: finite, periods > 0, harmonics ≥ 1 (serde reads
+    /// the axes, A or C).
     fn validate_capball_effects(&self) -> Result<(), ScenarioError> {
         let bad = |m: String| Err(ScenarioError::Invalid(m));
         let t = &self.capball.truth;
@@ -813,9 +717,9 @@ impl Scenario {
             return bad("capball.truth.pose_noise_um must be ≥ 0".into());
         }
         for (i, h) in t.axis_errors.iter().enumerate() {
-            if !matches!(h.axis.as_str(), "A" | "C") || h.harmonic == 0 {
+            if h.harmonic == 0 {
                 return bad(format!(
-                    "capball.truth.axis_errors[{i}]: axis must be \"A\" or \"C\" and harmonic ≥ 1"
+                    "capball.truth.axis_errors[{i}]: harmonic must be ≥ 1"
                 ));
             }
             if h.cos_um.iter().chain(&h.sin_um).any(|v| !v.is_finite()) {
@@ -1038,17 +942,6 @@ impl Scenario {
         }
         s
     }
-
-    /// The host-side CapBall transform `T` (4×4, `v = T·[d; 1]`) that inverts this scenario's
-    /// sensor geometry exactly: what the cube calibration would find.
-    pub fn capball_transform(&self) -> [[f64; 4]; 4] {
-        crate::physics::capball_host_transform(&self.capball)
-    }
-
-    /// Real seconds from the program start to the program-end frame.
-    pub fn program_duration_s(&self) -> f64 {
-        crate::physics::Schedule::new(&self.program).end_s
-    }
 }
 
 #[cfg(test)]
@@ -1093,6 +986,11 @@ mod tests {
             "sample_noise_nm = 15.0\nnoise = 1.0",
         );
         assert!(Scenario::from_toml(&text).is_err());
+        // The 14 CapBall parameters are read into geometry's types: a misspelt one is an
+        // error too, and one left out is.
+        let text = DEMO_TOML.replace("ey0c_um = 4.0", "ey0c_mu = 4.0");
+        let e = Scenario::from_toml(&text).expect_err("misspelt CapBall parameter");
+        assert!(e.to_string().contains("ey0c"), "{e}");
     }
 
     #[test]
@@ -1111,7 +1009,7 @@ mod tests {
         s.program.poses.clear();
         assert!(s.validate().unwrap_err().to_string().contains("poses"));
         let mut s = Scenario::demo();
-        s.capball.truth.ey0c_um = 4000.0;
+        s.capball.truth.link.ey0c_um = 4000.0;
         assert!(s.validate().unwrap_err().to_string().contains("ey0c_um"));
         let mut s = Scenario::demo();
         s.capball.truth.drift_um_per_h[1] = f64::NAN;

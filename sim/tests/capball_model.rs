@@ -181,13 +181,13 @@ fn demo_capball_diagnosis_finds_the_cooling_cycle() {
     let found = d.report.effects();
     assert_eq!(found, ["cyclic_drift"], "{:#?}", d.report.findings);
     let f = &d.report.findings[0];
-    let want = sc.capball.truth.cyclic_drift.clone().unwrap();
-    let num = |k: &str| f.params[k].as_f64().unwrap();
+    let want = sc.capball.truth.cyclic_drift.unwrap();
+    let num = |k: &str| f.params()[k].as_f64().unwrap();
     let period = num("period_s");
     eprintln!(
         "period {period:.1} s (truth {}), amplitudes {:?} (truth {:?}), validation RMS {:.3} → {:.3} µm",
         want.period_s,
-        f.params["amplitude_um"],
+        f.params()["amplitude_um"],
         want.amplitude_um,
         f.heldout_rms_before_um,
         f.heldout_rms_after_um
@@ -197,7 +197,7 @@ fn demo_capball_diagnosis_finds_the_cooling_cycle() {
         "{period}"
     );
     for (k, axis) in ["x", "y", "z"].iter().enumerate() {
-        let a = f.params["amplitude_um"][axis].as_f64().unwrap();
+        let a = f.params()["amplitude_um"][axis].as_f64().unwrap();
         assert!((a - want.amplitude_um[k]).abs() < 0.3, "amplitude {k}: {a}");
     }
     assert!(f.heldout_rms_after_um < 0.5 * f.heldout_rms_before_um);

@@ -5,10 +5,11 @@
 
 use diagnose::capball::{CapballRun, Options, diagnose};
 use geometry::capball::{CapballSetup, TrajectorySpec};
+use geometry::capball_effects::CyclicDrift;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use sim::CapballTruth;
-use sim::scenario::{CapballCyclicDrift, CapballModel};
+use sim::scenario::CapballModel;
 
 fn simulate(m: &CapballModel, spec: &TrajectorySpec, t0: f64, seed: u64) -> CapballRun {
     let setup = CapballSetup::paper_default();
@@ -46,7 +47,7 @@ fn baseline_rms(id: &CapballRun, val: &CapballRun) -> ([f64; 3], [f64; 3]) {
 #[test]
 fn extended_model_reproduces_the_residual_pattern() {
     let truth = CapballModel {
-        cyclic_drift: Some(CapballCyclicDrift {
+        cyclic_drift: Some(CyclicDrift {
             period_s: 1500.0,
             amplitude_um: [1.0, 1.0, 3.0],
             phase_rad: [0.3, 2.0, 4.0],

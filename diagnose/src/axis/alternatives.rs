@@ -10,14 +10,17 @@
 //! A rival with more parameters must come within [`MARGIN_RICHER`]: one whose better fit only
 //! pays for its extra parameters shows no more than that they are not supported.
 
-use super::Options;
+use positioning::axis_model::EffectKind;
+
 use super::correlation::design_lag1;
 use super::family::Family;
-use super::fit::{FinalFit, Obs, heldout_rms};
+use super::fit::{FinalFit, heldout_rms};
 use super::projector::{Projector, dotw};
+use super::run::Run;
 use super::search::{
     Selected, Step, absorbed_by_baseline, cols_rss, families, search, theta_uncertainty,
 };
+use super::types::Options;
 
 /// BIC difference below which two effects are not told apart: under 6 is at most "positive"
 /// evidence on the Kass–Raftery scale, short of "strong".
@@ -38,7 +41,7 @@ pub(super) struct Rival {
 
 /// The rivals of each selected step (same order as `steps`).
 pub(super) fn rivals(
-    obs: &Obs,
+    obs: &Run,
     opt: &Options,
     use_temp: bool,
     steps: &[Step],
@@ -49,7 +52,7 @@ pub(super) fn rivals(
         .map(|i| {
             families(obs, use_temp)
                 .into_iter()
-                .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+                .filter(|g| steps.iter().all(|s| s.sel.family.kind() != g.kind()))
                 .filter_map(|g| ctx.in_place(steps, i, g))
                 .filter(|r| {
                     let richer =
@@ -72,7 +75,7 @@ const REFINE_MIN: f64 = 2.0;
 /// per cycle are split into two smooth effects where those explain the run better
 /// ([`Context::split_offsets`]).
 pub(super) fn refine(
-    obs: &Obs,
+    obs: &Run,
     opt: &Options,
     use_temp: bool,
     steps: &mut Vec<Step>,
@@ -94,7 +97,7 @@ pub(super) fn refine(
         let fams: Vec<Family> = families(obs, use_temp)
             .into_iter()
             .filter(|g| *g != Family::CycleOffsets)
-            .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+            .filter(|g| steps.iter().all(|s| s.sel.family.kind() != g.kind()))
             .collect();
         if let Some([a, b]) = ctx.split_offsets(steps, i, &fams) {
             steps[i] = a;
@@ -111,7 +114,7 @@ pub(super) fn refine(
                     steps
                         .iter()
                         .enumerate()
-                        .all(|(k, s)| k == i || s.sel.family.slot() != g.slot())
+                        .all(|(k, s)| k == i || s.sel.family.kind() != g.kind())
                 })
                 .filter_map(|g| ctx.in_place(steps, i, g))
                 .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
@@ -156,7 +159,7 @@ struct Joint {
 }
 
 struct Context<'a> {
-    obs: &'a Obs,
+    obs: &'a Run,
     opt: &'a Options,
     fin: &'a FinalFit,
     /// Share of the likelihood ratio counted with correlated noise ((1 − ρ)/(1 + ρ)).
@@ -166,7 +169,7 @@ struct Context<'a> {
 }
 
 impl<'a> Context<'a> {
-    fn new(obs: &'a Obs, opt: &'a Options, fin: &'a FinalFit) -> Self {
+    fn new(obs: &'a Run, opt: &'a Options, fin: &'a FinalFit) -> Self {
         let rho = design_lag1(obs, &fin.w, &fin.cols, &fin.resid).clamp(0.0, 0.95);
         Context {
             obs,
@@ -202,7 +205,7 @@ impl<'a> Context<'a> {
     fn best_joint(&self, steps: &[Step], i: usize, use_temp: bool) -> Option<Joint> {
         families(self.obs, use_temp)
             .into_iter()
-            .filter(|g| steps.iter().all(|s| s.sel.family.slot() != g.slot()))
+            .filter(|g| steps.iter().all(|s| s.sel.family.kind() != g.kind()))
             .filter_map(|g| self.joint_in_place(steps, i, g))
             .filter(|j| j.delta_bic < -REFINE_MIN)
             .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
@@ -348,15 +351,18 @@ pub(super) fn cols_except(steps: &[Step], skip: &[usize]) -> Vec<Vec<f64>> {
 }
 
 /// What would tell two effects over time apart, for the report's sentence.
-pub(super) fn tell_apart(a: &str, b: &str) -> &'static str {
-    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
-    if pair("exponential_warmup", "linear_drift") {
+pub(super) fn tell_apart(a: Option<EffectKind>, b: Option<EffectKind>) -> &'static str {
+    use EffectKind::{CycleOffsets, ExponentialWarmup, LinearDrift, Step};
+    let pair = |x: EffectKind, y: EffectKind| {
+        (a == Some(x) && b == Some(y)) || (a == Some(y) && b == Some(x))
+    };
+    if pair(ExponentialWarmup, LinearDrift) {
         "a warm-up levels off and a linear drift does not: a longer run, or a temperature record \
          of the axis, shows which"
-    } else if pair("step", "cycle_offsets") || pair("linear_drift", "cycle_offsets") {
+    } else if pair(Step, CycleOffsets) || pair(LinearDrift, CycleOffsets) {
         "offsets per cycle change from one cycle to the next at random; more cycles, or the \
          machine's log of re-datums and interruptions, show which"
-    } else if pair("step", "linear_drift") || pair("step", "exponential_warmup") {
+    } else if pair(Step, LinearDrift) || pair(Step, ExponentialWarmup) {
         "a step happens between two readings; the machine's log at that time (a re-datum, a \
          bumped optic) or a repeat of the run shows which"
     } else {

@@ -12,7 +12,7 @@
 
 use nalgebra::DMatrix;
 
-use super::fit::Obs;
+use super::obs::Obs;
 use super::projector::dot;
 
 /// Lag-1 correlation of `resid` in time order (rows with weight > 0) for the fit of the
@@ -399,7 +399,7 @@ mod tests {
                 e = rho * e + (1.0 - rho * rho).sqrt() * z;
             }
             let obs = Obs::new(&data, 5);
-            let cols = Family::CycleOffsets.columns(&obs, 0.0);
+            let cols = Family::CycleOffsets.compute_columns(&obs, 0.0);
             let w = vec![1.0; obs.len()];
             let (_, r) = in_sample_residuals(&obs, &w, &cols);
             let ss: f64 = r.iter().map(|x| x * x).sum();

@@ -1,9 +1,10 @@
-//! The candidate mean effects: their regressors (columns) and the grids their non-linear
-//! parameter is searched on (names and parameters of `docs/datasets.md`).
+//! The forms in which the mean effects of the axis model are searched: their regressors
+//! (columns) and the grids their non-linear parameter is searched on. Each is a form of one
+//! [`EffectKind`] (names and parameters of `docs/datasets.md`).
 
-use std::sync::Arc;
+use positioning::axis_model::EffectKind;
 
-use super::fit::Obs;
+use super::obs::Obs;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Family {
@@ -18,15 +19,17 @@ pub(super) enum Family {
 }
 
 impl Family {
-    pub(super) fn name(self) -> &'static str {
+    /// The model effect this family fits (a scale change fitted to the material temperature
+    /// is a scale change): two families of one kind are never in a model together.
+    pub(super) fn kind(self) -> EffectKind {
         match self {
-            Family::Linear => "linear_drift",
-            Family::Warmup => "exponential_warmup",
-            Family::Cyclic => "cyclic_drift",
-            Family::Thermal | Family::ThermalTemp => "thermal_expansion",
-            Family::Step => "step",
-            Family::ReversalDrift => "reversal_drift",
-            Family::CycleOffsets => "cycle_offsets",
+            Family::Linear => EffectKind::LinearDrift,
+            Family::Warmup => EffectKind::ExponentialWarmup,
+            Family::Cyclic => EffectKind::CyclicDrift,
+            Family::Thermal | Family::ThermalTemp => EffectKind::ThermalExpansion,
+            Family::Step => EffectKind::Step,
+            Family::ReversalDrift => EffectKind::ReversalDrift,
+            Family::CycleOffsets => EffectKind::CycleOffsets,
         }
     }
     /// Parameters counted by the BIC (grid-searched ones included).
@@ -40,41 +43,13 @@ impl Family {
             Family::CycleOffsets => obs.n_cycles.saturating_sub(1).max(1),
         }
     }
-    pub(super) fn slot(self) -> usize {
-        match self {
-            Family::Linear => 0,
-            Family::Warmup => 1,
-            Family::Cyclic => 2,
-            Family::Thermal | Family::ThermalTemp => 3,
-            Family::Step => 4,
-            Family::ReversalDrift => 5,
-            Family::CycleOffsets => 6,
-        }
-    }
-
-    /// A grid-searched family, whose columns are kept for the run ([`super::sums::Cache`]).
+    /// A grid-searched family, whose columns are kept for the run (the search's cache).
     pub(super) fn is_searched_dense(self) -> bool {
         matches!(self, Family::Warmup | Family::Cyclic | Family::Thermal)
     }
 
-    /// The regressors of the effect with its parameter at `theta`.
-    pub(super) fn columns(self, obs: &Obs, theta: f64) -> Vec<Vec<f64>> {
-        if self.is_searched_dense() {
-            obs.cache.columns(obs, self, theta).to_vec()
-        } else {
-            self.compute_columns(obs, theta)
-        }
-    }
-
-    /// [`Family::columns`], shared.
-    pub(super) fn columns_shared(self, obs: &Obs, theta: f64) -> Arc<Vec<Vec<f64>>> {
-        if self.is_searched_dense() {
-            obs.cache.columns(obs, self, theta)
-        } else {
-            Arc::new(self.compute_columns(obs, theta))
-        }
-    }
-
+    /// The regressors of the effect with its parameter at `theta`, computed (the search reads
+    /// them through its cache).
     pub(super) fn compute_columns(self, obs: &Obs, theta: f64) -> Vec<Vec<f64>> {
         let warm = |t: f64| 1.0 - (-t / theta).exp();
         match self {
@@ -150,7 +125,7 @@ impl Family {
                     .collect()
             }
             // Periods tied to the run's structure are searched too: when one of them fits
-            // best, the search gives no cycle ([`super::search::search_many`]).
+            // best, the search gives no cycle.
             Family::Cyclic => match cyclic_frequencies(obs) {
                 Some(f) => (0..=f.n).map(|k| f.period(k)).collect(),
                 None => Vec::new(),
@@ -189,28 +164,6 @@ pub(super) fn cyclic_frequencies(obs: &Obs) -> Option<Frequencies> {
     let df = 1.0 / (3.0 * d);
     let n = (((hi - lo) / df).ceil() as usize).clamp(2, 4000);
     Some(Frequencies { lo, hi, n })
-}
-
-/// Length of one bidirectional cycle, s: the median time between the starts of successive
-/// cycles (None with fewer than two cycles).
-pub(super) fn cycle_length_s(obs: &Obs) -> Option<f64> {
-    let mut start = vec![f64::INFINITY; obs.n_cycles];
-    for j in 0..obs.len() {
-        start[obs.cycle[j]] = start[obs.cycle[j]].min(obs.t[j]);
-    }
-    median_step(&start)
-}
-
-/// The median of the positive, finite differences between successive values of `v` (None
-/// when there are none): the pace of readings, cycles or blocks.
-pub(super) fn median_step(v: &[f64]) -> Option<f64> {
-    let mut d: Vec<f64> = v
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .filter(|d| d.is_finite() && *d > 0.0)
-        .collect();
-    d.sort_by(f64::total_cmp);
-    d.get(d.len() / 2).copied()
 }
 
 /// A period tied to the run's structure rather than to time: within half a beat over the run

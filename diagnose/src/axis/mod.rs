@@ -21,11 +21,7 @@
 //! - Without real times (no `time_s` column) row numbers stand in for seconds: the report says
 //!   so, and rates, periods and time constants are then per reading.
 
-use std::collections::BTreeMap;
-
-use serde::{Deserialize, Serialize};
-
-use positioning::axis_model::{AxisModel, Effect};
+use positioning::axis_model::AxisModel;
 use positioning::positioning_data::PositioningData;
 
 mod alternatives;
@@ -34,156 +30,29 @@ mod correlation;
 mod family;
 mod fit;
 mod model;
+mod obs;
 mod outliers;
 mod projector;
 mod report;
+mod run;
 mod search;
 mod sums;
 mod tails;
+mod types;
 mod verdict;
 
 pub use model::{AxisTable, axis_model_from_toml, baseline_model, reproduction_check};
+pub use types::{
+    Alternative, Baseline, DiagnoseError, Diagnosis, DiagnosisReport, Finding, Found, Options,
+    Reproduction, Stated,
+};
 
-use fit::{FinalFit, Obs, heldout_rms, in_sample_residuals, rms};
+use fit::{FinalFit, heldout_rms, in_sample_residuals, rms};
+use obs::Obs;
 use outliers::{flag_outliers, group_median_residuals, weights};
 use projector::Projector;
+use run::Run;
 use search::all_cols;
-
-/// Tuning of the diagnosis.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Options {
-    /// BIC decrease an effect needs to be reported.
-    pub min_bic_gain: f64,
-    /// Largest number of held-out folds (cycles are dealt into them).
-    pub max_folds: usize,
-    /// Family-wise false-alarm probability of the outlier test.
-    pub outlier_alpha: f64,
-}
-
-impl Default for Options {
-    fn default() -> Self {
-        Options {
-            min_bic_gain: 10.0,
-            max_folds: 5,
-            outlier_alpha: 0.005,
-        }
-    }
-}
-
-/// What the baseline achieves.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Baseline {
-    /// Always `static`.
-    pub model: String,
-    /// RMS residual of the baseline fitted to all readings, µm.
-    pub rms_um: f64,
-    /// RMS prediction error on held-out cycles, µm.
-    pub heldout_rms_um: f64,
-}
-
-/// One effect found in the data.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Finding {
-    /// Effect name (`docs/datasets.md`).
-    pub effect: String,
-    /// Fitted parameters.
-    pub params: BTreeMap<String, f64>,
-    /// Standard uncertainties of the parameters (same keys, where one exists).
-    pub params_u: BTreeMap<String, f64>,
-    /// Evidence: decrease of the BIC when the effect is added.
-    pub significance: f64,
-    pub heldout_rms_before_um: f64,
-    pub heldout_rms_after_um: f64,
-    /// The physical cause a metrologist would check.
-    pub cause: String,
-    /// Other effects that explain the run about as well in this one's place: the data cannot
-    /// tell them apart (BIC within 6; within 2 for one with more parameters).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub alternatives: Vec<Alternative>,
-}
-
-/// An effect the data cannot tell from a finding's (`Finding::alternatives`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Alternative {
-    pub effect: String,
-    /// Its parameters fitted in the finding's place, the rest of the model kept.
-    pub params: BTreeMap<String, f64>,
-    pub params_u: BTreeMap<String, f64>,
-    /// Its BIC minus the finding's (under 6, or 2 with more parameters; negative: it fits
-    /// better but was not selected first).
-    pub delta_bic: f64,
-}
-
-/// How closely a model reproduces the measured per-target statistics when simulated over the
-/// same run (mean of several seeds).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Reproduction {
-    /// RMS over targets and directions of simulated − measured mean deviation x̄, µm.
-    pub mean_rms_um: f64,
-    /// RMS over targets and directions of simulated − measured `s`, µm.
-    pub s_rms_um: f64,
-    /// The same for the baseline model (no effects).
-    pub baseline_mean_rms_um: f64,
-    pub baseline_s_rms_um: f64,
-    /// Seeds averaged.
-    pub seeds: usize,
-}
-
-/// The diagnosis report (`docs/datasets.md`, "Diagnosis report").
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct DiagnosisReport {
-    pub kind: String,
-    pub baseline: Baseline,
-    /// Most significant first; empty when the baseline explains the data.
-    pub findings: Vec<Finding>,
-    /// Path of the extended model when one was written.
-    pub extended_model: Option<String>,
-    /// Simulated vs measured, when checked.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub reproduction: Option<Reproduction>,
-    /// Caveats (missing readings, no real times, ...).
-    pub notes: Vec<String>,
-    /// Which combination of effects explains the run, or that something is unexplained.
-    #[serde(default)]
-    pub conclusion: String,
-}
-
-impl DiagnosisReport {
-    /// The findings' effect names, in report order.
-    pub fn effects(&self) -> Vec<&str> {
-        self.findings.iter().map(|f| f.effect.as_str()).collect()
-    }
-}
-
-/// A diagnosis: the report and the extended model.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Diagnosis {
-    pub report: DiagnosisReport,
-    /// Baseline fitted from the data plus the found effects.
-    pub model: AxisModel,
-    /// Per reading (order of `data.readings`): residual from the baseline, µm.
-    pub baseline_residuals_um: Vec<f64>,
-    /// Per reading: residual from the extended model's mean, µm.
-    pub residuals_um: Vec<f64>,
-    /// Per reading: flagged as an outlier.
-    pub outlier: Vec<bool>,
-}
-
-/// Why a dataset cannot be diagnosed.
-#[derive(Debug, thiserror::Error)]
-pub enum DiagnoseError {
-    /// too few readings to diagnose: need at least 3 cycles of at least 2 targets
-    #[error("too few readings to diagnose: need at least 3 cycles of at least 2 targets")]
-    TooFewReadings,
-    /// A sweep (fewer than 3 cycles) cannot show what the diagnosis looks for.
-    #[error(
-        "only {cycles} cycle(s): a sweep shows the systematic deviation along the travel and the \
-         reversal at each target (see `analyze positioning`), but not the repeatability, a drift \
-         or any other effect over time, which need repeated approaches; diagnosis needs at least \
-         3 cycles of at least 2 targets"
-    )]
-    Sweep { cycles: usize },
-}
 
 /// Diagnoses a positioning run against the static baseline.
 pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
@@ -196,7 +65,7 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     if m < 2 || data.readings.len() < 12 {
         return Err(DiagnoseError::TooFewReadings);
     }
-    let obs = Obs::new(data, opt.max_folds);
+    let obs = Run::new(Obs::new(data, opt.max_folds));
     let n = obs.len();
     let mut notes = input_notes(data);
     let use_temp = obs.temp_c.is_some() && !data.material_compensation;
@@ -229,21 +98,21 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
     let mut col0 = 0;
     for (i, (st, rv)) in steps.iter().zip(&rivals).enumerate() {
         let spread = spread_of(&obs, &fin, &steps, i);
-        let (mut f, e) = report::mean_finding(&obs, data, &fin, st, col0, spread.as_ref());
+        let mut f = report::mean_finding(&obs, data, &fin, st, col0, spread.as_ref());
         for r in rv {
             f.alternatives.push(rival_finding(&obs, data, opt, &fin, r));
         }
         note_alternatives(&mut f);
-        found.push((f, e));
+        found.push(f);
         col0 += st.sel.cols.len();
     }
     let anomaly = report::local_anomaly(&obs, data, &fin, opt);
     if let Some(a) = &anomaly {
-        found.push((a.finding.clone(), a.effect.clone()));
+        found.push(a.finding.clone());
     }
     let res = verdict::residue(&obs, &fin);
     // Parameters fitted in correlated noise are less certain than white noise implies.
-    for (f, _) in found.iter_mut() {
+    for f in found.iter_mut() {
         for u in f.params_u.values_mut() {
             *u *= res.u_factor();
         }
@@ -271,12 +140,9 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         _ => {}
     }
     if unexplained {
-        let demoted = verdict::demoted_next_to_unexplained(
-            &found.iter().map(|f| f.0.clone()).collect::<Vec<_>>(),
-            res.rms_left_um,
-        );
+        let demoted = verdict::demoted_next_to_unexplained(&found, res.rms_left_um);
         for &(i, why) in demoted.iter().rev() {
-            let (f, _) = found.remove(i);
+            let f = found.remove(i);
             notes.push(format!(
                 "{} would lower the held-out error from {:.2} to {:.2} µm: not reported, {why}",
                 f.effect, f.heldout_rms_before_um, f.heldout_rms_after_um
@@ -284,8 +150,12 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         }
     }
     // Most significant first (a stable sort keeps the order of ties).
-    found.sort_by(|a, b| b.0.significance.total_cmp(&a.0.significance));
-    let (mut findings, effects): (Vec<Finding>, Vec<Effect>) = found.into_iter().unzip();
+    found.sort_by(|a, b| b.significance.total_cmp(&a.significance));
+    let effects = found
+        .iter()
+        .filter_map(|f| f.effect.model_effect().copied())
+        .collect();
+    let mut findings = found;
     if unexplained {
         // Not a model effect: the extended model does not simulate it.
         findings.push(verdict::unexplained_finding(&obs, &fin, &res));
@@ -339,7 +209,7 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
 /// a step's moment) are searched again: a period and a τ fitted together trade off, and the
 /// spread of one with the other held fixed is too narrow.
 fn spread_of(
-    obs: &Obs,
+    obs: &Run,
     fin: &FinalFit,
     steps: &[search::Step],
     i: usize,
@@ -399,7 +269,7 @@ fn spread_of(
 
 /// A rival fitted in a finding's place, the rest of the model kept.
 fn rival_finding(
-    obs: &Obs,
+    obs: &Run,
     data: &PositioningData,
     opt: &Options,
     fin: &FinalFit,
@@ -408,10 +278,10 @@ fn rival_finding(
     let mut cols = r.step.before_cols.clone();
     cols.extend(r.step.sel.cols.iter().cloned());
     let fin_r = settle(obs, opt, fin.out.clone(), cols);
-    let (f, _) = report::mean_finding(obs, data, &fin_r, &r.step, r.step.before_cols.len(), None);
+    let f = report::mean_finding(obs, data, &fin_r, &r.step, r.step.before_cols.len(), None);
     Alternative {
         effect: f.effect,
-        params: f.params,
+        stated: f.stated,
         params_u: f.params_u,
         delta_bic: r.delta_bic,
     }
@@ -424,7 +294,7 @@ fn note_alternatives(f: &mut Finding) {
             " The data cannot tell it from {} (BIC {:+.1}): {}.",
             a.effect,
             a.delta_bic,
-            alternatives::tell_apart(&f.effect, &a.effect)
+            alternatives::tell_apart(f.effect.kind(), a.effect.kind())
         ));
     }
 }
@@ -462,7 +332,7 @@ fn input_notes(data: &PositioningData) -> Vec<String> {
 }
 
 /// Settles the outlier flags against the final mean model and fits it.
-fn settle(obs: &Obs, opt: &Options, mut out: Vec<bool>, cols: Vec<Vec<f64>>) -> FinalFit {
+fn settle(obs: &Run, opt: &Options, mut out: Vec<bool>, cols: Vec<Vec<f64>>) -> FinalFit {
     let n = obs.len();
     let var_factor = vec![1.0; obs.n_targets];
     for _ in 0..2 {

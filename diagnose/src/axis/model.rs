@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::Reproduction;
+use super::types::Reproduction;
 use positioning::axis_model::AxisModel;
 use positioning::iso230;
 use positioning::positioning_data::{PositioningData, schedule_of, simulate};

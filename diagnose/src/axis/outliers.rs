@@ -5,7 +5,7 @@
 
 use statrs::distribution::{ContinuousCDF, Normal};
 
-use super::fit::Obs;
+use super::obs::Obs;
 
 pub(super) fn robust_scale(v: &mut [f64]) -> f64 {
     if v.is_empty() {

@@ -15,7 +15,7 @@ use std::sync::OnceLock;
 
 use nalgebra::{DMatrix, DVector};
 
-use super::fit::Obs;
+use super::obs::Obs;
 
 /// Sum of the products of `a` and `b` (four partial sums, so that the loop vectorises).
 pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -443,44 +443,10 @@ impl Projector {
 }
 
 #[cfg(test)]
-pub(super) mod tests {
+mod tests {
     use super::*;
     use crate::axis::family::Family;
-    use positioning::axis_model::Direction;
-    use positioning::positioning_data::{PositioningData, Reading};
-
-    /// A bidirectional run of 4 targets × 6 cycles with deviations that follow no effect.
-    pub(in crate::axis) fn run() -> Obs {
-        let mut readings = Vec::new();
-        for cycle in 1..=6 {
-            for (dir, order) in [
-                (Direction::Up, [1, 2, 3, 4]),
-                (Direction::Down, [4, 3, 2, 1]),
-            ] {
-                for index in order {
-                    let k = readings.len() as f64;
-                    readings.push(Reading {
-                        cycle,
-                        direction: dir,
-                        index,
-                        target_mm: 100.0 * index as f64,
-                        deviation_um: (k * 1.7).sin() + 0.3 * (k * 0.37).cos() + 0.01 * k,
-                        // Jittered: with a regular pace a drift would be a sum of offsets per
-                        // cycle and constants per target.
-                        time_s: 30.0 * k + 7.0 * (k * 2.3).sin(),
-                        air_c: None,
-                        material_c: None,
-                    });
-                }
-            }
-        }
-        let data = PositioningData {
-            has_times: true,
-            readings,
-            ..Default::default()
-        };
-        Obs::new(&data, 5)
-    }
+    use crate::axis::obs::tests::run;
 
     /// The RSS by dense columns, residualized one by one (the definition).
     fn rss_dense(obs: &Obs, w: &[f64], fixed: &[Vec<f64>], cols: &[Vec<f64>]) -> f64 {
@@ -498,8 +464,8 @@ pub(super) mod tests {
         let obs = run();
         let mut w = vec![1.0; obs.len()];
         w[5] = 0.0;
-        let offsets = Family::CycleOffsets.columns(&obs, f64::NAN);
-        let drift = Family::Linear.columns(&obs, f64::NAN);
+        let offsets = Family::CycleOffsets.compute_columns(&obs, f64::NAN);
+        let drift = Family::Linear.compute_columns(&obs, f64::NAN);
         let p = Projector::new(&obs, &w, &drift);
         let y = p.residualize(&obs, &obs.y);
         let (rss, x) = p.fit_cols(&obs, &y, &offsets);
@@ -529,17 +495,17 @@ pub(super) mod tests {
         let w: Vec<f64> = (0..obs.len())
             .map(|j| if j == 9 { 0.0 } else { 1.0 })
             .collect();
-        let mut fixed = Family::Linear.columns(&obs, f64::NAN);
+        let mut fixed = Family::Linear.compute_columns(&obs, f64::NAN);
         for with_offsets in [false, true] {
             if with_offsets {
-                fixed.extend(Family::CycleOffsets.columns(&obs, f64::NAN));
+                fixed.extend(Family::CycleOffsets.compute_columns(&obs, f64::NAN));
             }
             let p = Projector::new(&obs, &w, &fixed);
             let y = p.residualize(&obs, &obs.y);
             let times = Family::Step.grid(&obs);
             let sweep = p.step_rss(&obs, &y, &times);
             for (th, got) in times.iter().zip(&sweep) {
-                let (want, _) = p.fit_cols(&obs, &y, &Family::Step.columns(&obs, *th));
+                let (want, _) = p.fit_cols(&obs, &y, &Family::Step.compute_columns(&obs, *th));
                 assert!(
                     (got - want).abs() < 1e-9 * want.max(1.0),
                     "{th}: {got} vs {want}"
@@ -554,7 +520,7 @@ pub(super) mod tests {
     fn collinear_columns_fit_as_their_span() {
         let obs = run();
         let w = vec![1.0; obs.len()];
-        let a = Family::Linear.columns(&obs, f64::NAN).remove(0);
+        let a = Family::Linear.compute_columns(&obs, f64::NAN).remove(0);
         let b: Vec<f64> = obs.t.iter().map(|t| (t / 700.0).sin()).collect();
         let sum: Vec<f64> = a.iter().zip(&b).map(|(x, y)| 3.0 * x - y).collect();
         let zero = vec![0.0; obs.len()];
@@ -568,33 +534,5 @@ pub(super) mod tests {
         let g = DMatrix::from_row_slice(2, 2, &[4.0, 1.0, 1.0, 3.0]);
         let inv = gram_inverse(g.clone());
         assert!((g * inv - DMatrix::identity(2, 2)).norm() < 1e-12);
-    }
-
-    /// A model with offsets per cycle predicts a cycle held out whole at the mean offset of
-    /// the cycles it was fitted on (here: exactly what the baseline predicts), whichever cycle
-    /// is the reference; on diagonal folds it predicts every reading of such a run exactly.
-    #[test]
-    fn a_cycle_held_out_whole_is_predicted_at_the_mean_offset() {
-        use crate::axis::fit::{heldout_residuals, heldout_rms};
-        let mut obs = run();
-        let offset = [0.0, 3.0, -1.0, 4.0, 2.0, -2.0];
-        obs.y = (0..obs.len())
-            .map(|j| 2.0 * obs.target[j] as f64 + offset[obs.cycle[j]])
-            .collect();
-        let w = vec![1.0; obs.len()];
-        let eval = vec![true; obs.len()];
-        let offsets = Family::CycleOffsets.columns(&obs, f64::NAN);
-        // 6 cycles in 5 folds: fold 0 holds cycles 0 (the reference) and 5.
-        for (r, j) in heldout_residuals(&obs, &w, &offsets, &eval) {
-            let f = obs.fold[j];
-            let trained: Vec<f64> = (0..6).filter(|c| c % 5 != f).map(|c| offset[c]).collect();
-            let mean = trained.iter().sum::<f64>() / trained.len() as f64;
-            let want = offset[obs.cycle[j]] - mean;
-            assert!((r - want).abs() < 1e-9, "fold {f}: {r} vs {want}");
-        }
-        let diag = obs.diagonal();
-        assert_ne!(diag.fold, obs.fold);
-        assert!(heldout_rms(diag, &w, &offsets, &eval) < 1e-9);
-        assert!(heldout_rms(diag, &w, &[], &eval) > 1.0);
     }
 }

@@ -6,12 +6,13 @@
 
 use std::collections::BTreeMap;
 
-use super::family::{Family, cycle_length_s};
-use super::fit::{FinalFit, Obs, fit_mean, heldout_residuals, heldout_rms};
+use super::family::Family;
+use super::fit::{FinalFit, fit_mean, heldout_residuals, heldout_rms};
 use super::outliers::weights;
 use super::projector::Projector;
+use super::run::Run;
 use super::search::{Spread, Step, search};
-use super::{Finding, Options};
+use super::types::{Finding, Found, Options, Stated};
 use positioning::axis_model::Effect;
 use positioning::positioning_data::PositioningData;
 
@@ -36,19 +37,20 @@ struct Coefs {
     u_theta: Option<f64>,
 }
 
-/// Parameters, their uncertainties, a cause and the model effect of one finding.
-type Described = (BTreeMap<String, f64>, BTreeMap<String, f64>, String, Effect);
+/// The model effect of one finding, what the report states beside its parameters, their
+/// uncertainties and a cause.
+type Described = (Effect, Stated, BTreeMap<&'static str, f64>, String);
 
 /// The finding of a mean effect added by the forward selection; `col0` is its first column
 /// in the final fit.
 pub(super) fn mean_finding(
-    obs: &Obs,
+    obs: &Run,
     data: &PositioningData,
     fin: &FinalFit,
     st: &Step,
     col0: usize,
     spread: Option<&Spread>,
-) -> (Finding, Effect) {
+) -> Finding {
     let k = st.sel.cols.len();
     let sigma2 = fin.sigma2;
     let extra = |i: usize| {
@@ -88,7 +90,7 @@ pub(super) fn mean_finding(
     };
     let before = heldout_rms(ho, &fin.w, &st.before_cols, &fin.eval);
     let after = heldout_rms(ho, &fin.w, &after_cols, &fin.eval);
-    let (params, params_u, cause, effect) = match st.sel.family {
+    let (effect, stated, params_u, cause) = match st.sel.family {
         Family::Linear => linear(&c, data.has_times),
         Family::Warmup => warmup(&c, data.has_times),
         Family::Cyclic => cyclic(obs, &c, data.has_times),
@@ -98,17 +100,16 @@ pub(super) fn mean_finding(
         Family::Thermal => thermal(obs, data, fin, st, &c),
         Family::ThermalTemp => thermal_temp(obs, data, fin, st, &c),
     };
-    let finding = Finding {
-        effect: st.sel.family.name().into(),
-        params,
+    Finding {
+        effect: Found::Effect(effect),
+        stated,
         params_u,
         significance: st.significance,
         heldout_rms_before_um: before,
         heldout_rms_after_um: after,
         cause,
         alternatives: Vec::new(),
-    };
-    (finding, effect)
+    }
 }
 
 /// The sentence that says what the file states about α, if anything.
@@ -131,20 +132,20 @@ fn linear(c: &Coefs, has_times: bool) -> Described {
         }
     );
     (
-        BTreeMap::from([("rate_um_per_h".into(), rate)]),
-        BTreeMap::from([("rate_um_per_h".into(), c.ub[0])]),
-        cause,
         Effect::LinearDrift {
             rate_um_per_h: rate,
         },
+        Stated::default(),
+        BTreeMap::from([("rate_um_per_h", c.ub[0])]),
+        cause,
     )
 }
 
 fn warmup(c: &Coefs, has_times: bool) -> Described {
     let (amp, th) = (c.beta[0], c.theta);
-    let mut params_u = BTreeMap::from([("amplitude_um".into(), c.ub[0])]);
+    let mut params_u = BTreeMap::from([("amplitude_um", c.ub[0])]);
     if let Some(u) = c.u_theta {
-        params_u.insert("tau_s".into(), u);
+        params_u.insert("tau_s", u);
     }
     let cause = format!(
         "warm-up: every target settles by {amp:.2} µm with a time constant of {} — the machine \
@@ -154,17 +155,17 @@ fn warmup(c: &Coefs, has_times: bool) -> Described {
         dur(3.0 * th, has_times)
     );
     (
-        BTreeMap::from([("amplitude_um".into(), amp), ("tau_s".into(), th)]),
-        params_u,
-        cause,
         Effect::ExponentialWarmup {
             amplitude_um: amp,
             tau_s: th,
         },
+        Stated::default(),
+        params_u,
+        cause,
     )
 }
 
-fn cyclic(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
+fn cyclic(obs: &Run, c: &Coefs, has_times: bool) -> Described {
     let (a, b, ub) = (c.beta[0], c.beta[1], &c.ub);
     let th = c.theta;
     let amp = a.hypot(b);
@@ -175,13 +176,14 @@ fn cyclic(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
     } else {
         0.0
     };
-    let mut params_u = BTreeMap::from([("amplitude_um".into(), u_amp)]);
+    let mut params_u = BTreeMap::from([("amplitude_um", u_amp)]);
     if let Some(u) = c.u_theta {
-        params_u.insert("period_s".into(), u);
+        params_u.insert("period_s", u);
     }
     // Worded from the evidence: the period is not tied to the run's structure, but without
     // temperatures a coolant cycle is a hypothesis to confirm, not a finding.
-    let cycle = cycle_length_s(obs)
+    let cycle = obs
+        .cycle_length_s()
         .map(|pc| format!(" (one measuring cycle lasts {})", dur(pc, has_times)))
         .unwrap_or_default();
     let temps = if obs.temp_c.is_some() {
@@ -197,26 +199,29 @@ fn cyclic(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
         dur(th, has_times)
     );
     (
-        BTreeMap::from([("period_s".into(), th), ("amplitude_um".into(), amp)]),
-        params_u,
-        cause,
         Effect::CyclicDrift {
             period_s: th,
             amplitude_um: amp,
             phase_rad: b.atan2(a),
         },
+        Stated::default(),
+        params_u,
+        cause,
     )
 }
 
-fn thermal(obs: &Obs, data: &PositioningData, fin: &FinalFit, st: &Step, c: &Coefs) -> Described {
+fn thermal(obs: &Run, data: &PositioningData, fin: &FinalFit, st: &Step, c: &Coefs) -> Described {
     let th = c.theta;
     let t_end = obs.t.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let grown = 1.0 - (-t_end / th).exp();
     let end = c.beta[0] * grown;
-    let mut params = BTreeMap::from([("scale_ppm".into(), end), ("tau_s".into(), th)]);
-    let mut params_u = BTreeMap::from([("scale_ppm".into(), c.ub[0] * grown)]);
+    let mut stated = Stated {
+        scale_end_ppm: Some(end),
+        ..Stated::default()
+    };
+    let mut params_u = BTreeMap::from([("scale_ppm", c.ub[0] * grown)]);
     if let Some(u) = c.u_theta {
-        params_u.insert("tau_s".into(), u);
+        params_u.insert("tau_s", u);
     }
     let mut cause = format!(
         "scale change growing to {end:.1} µm/m by the end of the run (time constant {}): the \
@@ -233,8 +238,8 @@ fn thermal(obs: &Obs, data: &PositioningData, fin: &FinalFit, st: &Step, c: &Coe
         let ua = (fin.sigma2 * f2.cov_unscaled[(cols.len() - 1, cols.len() - 1)])
             .max(0.0)
             .sqrt();
-        params.insert("alpha_um_per_m_k".into(), alpha);
-        params_u.insert("alpha_um_per_m_k".into(), ua);
+        stated.alpha_um_per_m_k = Some(alpha);
+        params_u.insert("alpha_um_per_m_k", ua);
         cause = format!(
             "uncompensated material temperature: the file says material_compensation: off and \
              the measured material temperature explains the scale change ({end:.1} µm/m by the \
@@ -247,10 +252,10 @@ fn thermal(obs: &Obs, data: &PositioningData, fin: &FinalFit, st: &Step, c: &Coe
         scale_ppm: c.beta[0],
         tau_s: th,
     };
-    (params, params_u, cause, effect)
+    (effect, stated, params_u, cause)
 }
 
-fn step(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
+fn step(obs: &Run, c: &Coefs, has_times: bool) -> Described {
     let (size, t_s) = (c.beta[0], c.theta);
     let first = obs
         .time_order
@@ -260,11 +265,8 @@ fn step(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
     // The moment is known to the reading at best (half an interval either way), and to the
     // spread of the plausible moments when neighbouring readings fit nearly as well.
     let params_u = BTreeMap::from([
-        ("size_um".into(), c.ub[0]),
-        (
-            "time_s".into(),
-            (0.5 * obs.dt_s).max(c.u_theta.unwrap_or(0.0)),
-        ),
+        ("size_um", c.ub[0]),
+        ("time_s", (0.5 * obs.dt_s).max(c.u_theta.unwrap_or(0.0))),
     ]);
     let at = if has_times {
         format!("{:.1} min into the run", (t_s - obs.t0) / 60.0)
@@ -278,17 +280,17 @@ fn step(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
          repeat the run"
     );
     (
-        BTreeMap::from([("size_um".into(), size), ("time_s".into(), t_s)]),
-        params_u,
-        cause,
         Effect::Step {
             time_s: t_s,
             size_um: size,
         },
+        Stated::default(),
+        params_u,
+        cause,
     )
 }
 
-fn reversal_drift(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
+fn reversal_drift(obs: &Run, c: &Coefs, has_times: bool) -> Described {
     let change = c.beta[0];
     let cause = format!(
         "the reversal value B = x̄↑ − x̄↓ changes by {change:+.2} µm from the start to the end of \
@@ -297,13 +299,13 @@ fn reversal_drift(obs: &Obs, c: &Coefs, has_times: bool) -> Described {
         dur(obs.duration_s, has_times)
     );
     (
-        BTreeMap::from([("change_um".into(), change)]),
-        BTreeMap::from([("change_um".into(), c.ub[0])]),
-        cause,
         Effect::ReversalDrift {
             change_um: change,
             duration_s: obs.duration_s,
         },
+        Stated::default(),
+        BTreeMap::from([("change_um", c.ub[0])]),
+        cause,
     )
 }
 
@@ -327,17 +329,17 @@ fn cycle_offsets(c: &Coefs) -> Described {
          re-homed; check the set-up's stability and keep the reference untouched during a run"
     );
     (
-        BTreeMap::from([("std_um".into(), sd)]),
-        BTreeMap::from([("std_um".into(), u)]),
-        cause,
         Effect::CycleOffsets { std_um: sd },
+        Stated::default(),
+        BTreeMap::from([("std_um", u)]),
+        cause,
     )
 }
 
 /// The measured material temperature explains the scale change better than a time constant:
 /// α is the coefficient of x·T.
 fn thermal_temp(
-    obs: &Obs,
+    obs: &Run,
     data: &PositioningData,
     fin: &FinalFit,
     st: &Step,
@@ -368,15 +370,12 @@ fn thermal_temp(
         }
         None => (end, obs.duration_s),
     };
-    let params = BTreeMap::from([
-        ("scale_ppm".into(), end),
-        ("alpha_um_per_m_k".into(), alpha),
-        ("tau_s".into(), tau),
-    ]);
-    let params_u = BTreeMap::from([
-        ("scale_ppm".into(), ua * dt_k.abs()),
-        ("alpha_um_per_m_k".into(), ua),
-    ]);
+    let stated = Stated {
+        scale_end_ppm: Some(end),
+        alpha_um_per_m_k: Some(alpha),
+        count: None,
+    };
+    let params_u = BTreeMap::from([("scale_ppm", ua * dt_k.abs()), ("alpha_um_per_m_k", ua)]);
     let cause = format!(
         "uncompensated material temperature: the file says material_compensation: off and the \
          measured material temperature ({dt_k:+.2} K over the run) explains the scale change \
@@ -388,7 +387,7 @@ fn thermal_temp(
         scale_ppm: scale,
         tau_s: tau,
     };
-    (params, params_u, cause, effect)
+    (effect, stated, params_u, cause)
 }
 
 /// A target that scatters more than the others.
@@ -399,7 +398,6 @@ pub(super) struct Anomaly {
     /// Noise of the ordinary targets, µm.
     pub(super) noise_others_um: f64,
     pub(super) finding: Finding,
-    pub(super) effect: Effect,
 }
 
 /// Per-target residual sums of squares and degrees of freedom of the final fit.
@@ -412,7 +410,7 @@ struct TargetScatter {
 }
 
 /// `trim`: each target's largest squared residual left out (and one degree of freedom).
-fn target_scatter(obs: &Obs, fin: &FinalFit, trim: bool) -> TargetScatter {
+fn target_scatter(obs: &Run, fin: &FinalFit, trim: bool) -> TargetScatter {
     let m = obs.n_targets;
     let mut ss_t = vec![0.0; m];
     let mut max_t = vec![0.0_f64; m];
@@ -464,7 +462,7 @@ fn anomaly_evidence(sc: &TargetScatter, t: usize, ln_n: f64) -> Option<(f64, f64
 
 /// Local anomaly: one target with its own variance (module docs).
 pub(super) fn local_anomaly(
-    obs: &Obs,
+    obs: &Run,
     data: &PositioningData,
     fin: &FinalFit,
     opt: &Options,
@@ -501,12 +499,12 @@ pub(super) fn local_anomaly(
     let u_ratio = ratio * ((2.0 * c).exp() - 1.0) / 2.0;
     let x_mm = data.targets_mm()[t];
     let finding = Finding {
-        effect: "local_anomaly".into(),
-        params: BTreeMap::from([
-            ("index".into(), (t + 1) as f64),
-            ("std_ratio".into(), ratio),
-        ]),
-        params_u: BTreeMap::from([("std_ratio".into(), u_ratio)]),
+        effect: Found::Effect(Effect::LocalAnomaly {
+            index: t + 1,
+            std_ratio: ratio,
+        }),
+        stated: Stated::default(),
+        params_u: BTreeMap::from([("std_ratio", u_ratio)]),
         significance: sig,
         heldout_rms_before_um: e_before,
         heldout_rms_after_um: e_after,
@@ -524,16 +522,12 @@ pub(super) fn local_anomaly(
         ratio,
         noise_others_um: ((ss_all - sc.ss_t[t]) / (dof_all - dk).max(1.0)).sqrt(),
         finding,
-        effect: Effect::LocalAnomaly {
-            index: t + 1,
-            std_ratio: ratio,
-        },
     })
 }
 
 /// Gain of a local anomaly at target `t` on held-out cycles: predicted vs observed per-target
 /// RMS residual, with a common scatter (before) and the target's own (after).
-fn anomaly_heldout_gain(obs: &Obs, fin: &FinalFit, t: usize) -> (f64, f64) {
+fn anomaly_heldout_gain(obs: &Run, fin: &FinalFit, t: usize) -> (f64, f64) {
     let m = obs.n_targets;
     let ho = heldout_residuals(obs, &fin.w, &fin.cols, &fin.eval);
     let mut sse = vec![vec![0.0; m]; obs.n_folds];
@@ -578,10 +572,10 @@ fn anomaly_heldout_gain(obs: &Obs, fin: &FinalFit, t: usize) -> (f64, f64) {
 
 /// The outliers finding, if any reading was flagged.
 pub(super) fn outlier_finding(
-    obs: &Obs,
+    obs: &Run,
     fin: &FinalFit,
     anomaly: Option<&Anomaly>,
-) -> Option<(Finding, Effect)> {
+) -> Option<Finding> {
     let n = obs.len();
     let ln_n = (n as f64).ln();
     let out = &fin.out;
@@ -608,9 +602,15 @@ pub(super) fn outlier_finding(
     );
     let after = heldout_rms(obs, &fin.w, &fin.cols, &fin.eval);
     let mean_mag = mags.iter().sum::<f64>() / mags.len() as f64;
-    let finding = Finding {
-        effect: "outliers".into(),
-        params: BTreeMap::from([("count".into(), n_out as f64)]),
+    Some(Finding {
+        effect: Found::Effect(Effect::Outliers {
+            rate: n_out as f64 / n as f64,
+            magnitude_um: mean_mag,
+        }),
+        stated: Stated {
+            count: Some(n_out),
+            ..Stated::default()
+        },
         params_u: BTreeMap::new(),
         significance: sig,
         heldout_rms_before_um: before,
@@ -621,10 +621,5 @@ pub(super) fn outlier_finding(
              repeat those points"
         ),
         alternatives: Vec::new(),
-    };
-    let effect = Effect::Outliers {
-        rate: n_out as f64 / n as f64,
-        magnitude_um: mean_mag,
-    };
-    Some((finding, effect))
+    })
 }

@@ -6,13 +6,14 @@
 use nalgebra::DVector;
 use rayon::prelude::*;
 
-use super::Options;
 use super::correlation::design_lag1;
 use super::family::{Family, aliases_structure};
-use super::fit::{Obs, heldout_rms, in_sample_residuals};
+use super::fit::{heldout_rms, in_sample_residuals};
 use super::outliers::{flag_outliers, weights};
 use super::projector::{Projector, dotw};
+use super::run::Run;
 use super::sums::DenseSearch;
+use super::types::Options;
 
 #[derive(Debug, Clone)]
 pub(super) struct Selected {
@@ -28,28 +29,28 @@ pub(super) struct Candidate {
 
 /// RSS of y on baseline + `base` columns + the family's columns at θ.
 pub(super) fn candidate_rss(
-    obs: &Obs,
+    obs: &Run,
     p: &Projector,
     y_perp: &[f64],
     fam: Family,
     theta: f64,
 ) -> f64 {
     if fam.is_searched_dense() {
-        DenseSearch::new(obs, p, y_perp).rss(fam, theta)
+        DenseSearch::new(obs, &obs.cache, p, y_perp).rss(fam, theta)
     } else {
         cols_rss(obs, p, y_perp, &fam.columns(obs, theta))
     }
 }
 
 /// RSS of y on baseline + `p`'s columns + `cols`.
-pub(super) fn cols_rss(obs: &Obs, p: &Projector, y_perp: &[f64], cols: &[Vec<f64>]) -> f64 {
+pub(super) fn cols_rss(obs: &Run, p: &Projector, y_perp: &[f64], cols: &[Vec<f64>]) -> f64 {
     cols_fit(obs, p, y_perp, cols).0
 }
 
 /// RSS of y on baseline + `p`'s columns + `cols`, and the coefficients of `cols` (None when
 /// they are collinear).
 pub(super) fn cols_fit(
-    obs: &Obs,
+    obs: &Run,
     p: &Projector,
     y_perp: &[f64],
     cols: &[Vec<f64>],
@@ -85,7 +86,7 @@ const SPREAD_BATCH: usize = 64;
 /// the effect's linear coefficients with its parameter at each of `ts` (the rest of the model
 /// refitted as the caller decides).
 pub(super) fn theta_spread(
-    obs: &Obs,
+    obs: &Run,
     fit_all: &FitAll,
     fam: Family,
     theta: f64,
@@ -137,7 +138,7 @@ pub(super) fn theta_spread(
 /// best single candidate by more than `margin`, its better member is tried first (the other
 /// follows at the next step).
 fn prefer_pair(
-    obs: &Obs,
+    obs: &Run,
     p: &Projector,
     y_perp: &[f64],
     rss0: f64,
@@ -153,7 +154,7 @@ fn prefer_pair(
     for a in 0..cands.len() {
         for b in a + 1..cands.len() {
             let (fa, fb) = (cands[a].0, cands[b].0);
-            if fa.slot() == fb.slot() {
+            if fa.kind() == fb.kind() {
                 continue;
             }
             let mut cols = fa.columns(obs, cands[a].1.theta);
@@ -180,7 +181,7 @@ fn prefer_pair(
 
 /// The best value of `fam`'s parameter: the lowest RSS over its grid, refined between the
 /// grid points either side of the best one.
-pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> Option<Candidate> {
+pub(super) fn search(obs: &Run, p: &Projector, y_perp: &[f64], fam: Family) -> Option<Candidate> {
     search_many(obs, &[(p, y_perp)], fam).pop().flatten()
 }
 
@@ -188,7 +189,7 @@ pub(super) fn search(obs: &Obs, p: &Projector, y_perp: &[f64], fam: Family) -> O
 /// visited once for all of them, so that a period's columns are read from memory once, not
 /// once per fit (a parameter's spread searches another effect beside 33 values of it).
 pub(super) fn search_many(
-    obs: &Obs,
+    obs: &Run,
     fits: &[(&Projector, &[f64])],
     fam: Family,
 ) -> Vec<Option<Candidate>> {
@@ -202,7 +203,7 @@ pub(super) fn search_many(
         }
         let ds: Vec<DenseSearch> = fits
             .iter()
-            .map(|(p, y)| DenseSearch::new(obs, p, y))
+            .map(|(p, y)| DenseSearch::new(obs, &obs.cache, p, y))
             .collect();
         let table: Vec<Vec<f64>> = grid
             .par_iter()
@@ -300,7 +301,7 @@ fn golden_min(mut a: f64, mut b: f64, f: &impl Fn(f64) -> f64) -> (f64, f64) {
 /// Uncertainty of a grid-searched parameter from the curvature of the RSS profile:
 /// u² = 2σ² / RSS''(θ).
 pub(super) fn theta_uncertainty(
-    obs: &Obs,
+    obs: &Run,
     p: &Projector,
     y_perp: &[f64],
     fam: Family,
@@ -339,7 +340,7 @@ pub(super) struct Step {
 /// discounted for correlated noise, is not absorbed by the baseline and lowers the held-out
 /// error is added. `out` holds the outlier flags and is refined after each step.
 pub(super) fn forward_select(
-    obs: &Obs,
+    obs: &Run,
     opt: &Options,
     use_temp: bool,
     out: &mut Vec<bool>,
@@ -414,7 +415,7 @@ pub(super) fn forward_select(
                      it (each target is measured over a short part of the run, or the pattern \
                      follows the run's own order of targets): the data cannot tell it from the \
                      baseline, so it is not reported",
-                    fam.name()
+                    fam.kind()
                 );
                 if !notes.contains(&note) {
                     notes.push(note);
@@ -462,7 +463,7 @@ pub(super) fn forward_select(
 /// together with `fam`'s `cols`, gives the lowest BIC (each at the parameter of its own
 /// search).
 fn best_partner(
-    obs: &Obs,
+    obs: &Run,
     p: &Projector,
     y_perp: &[f64],
     rss0: f64,
@@ -477,7 +478,7 @@ fn best_partner(
         // Offsets per cycle (one per cycle) whiten correlated noise as well as they explain a
         // second effect: they are no partner (1000 correlated-noise runs naming an effect:
         // 2.9 → 2.2 %, two-effect classes unchanged).
-        .filter(|(f, _)| f.slot() != fam.slot() && *f != Family::CycleOffsets)
+        .filter(|(f, _)| f.kind() != fam.kind() && *f != Family::CycleOffsets)
         .filter_map(|&(f, th)| {
             let pc = f.columns(obs, th);
             // Only an effect the data can report is credited with the structure it explains:
@@ -502,7 +503,7 @@ fn best_partner(
 /// The partner's columns with its parameter searched again beside the candidate (`cols`):
 /// searched alone, a partner's parameter (a τ, a period) bends to take part of the
 /// candidate's structure, and what the pair leaves then looks correlated.
-fn partner_given(obs: &Obs, w: &[f64], cols: &[Vec<f64>], pf: (Family, f64)) -> Vec<Vec<f64>> {
+fn partner_given(obs: &Run, w: &[f64], cols: &[Vec<f64>], pf: (Family, f64)) -> Vec<Vec<f64>> {
     let (f, th) = pf;
     let p = Projector::new(obs, w, cols);
     let y = p.residualize(obs, &obs.y);
@@ -512,7 +513,7 @@ fn partner_given(obs: &Obs, w: &[f64], cols: &[Vec<f64>], pf: (Family, f64)) -> 
 
 /// Every family not yet selected, searched, with its BIC change.
 fn candidates(
-    obs: &Obs,
+    obs: &Run,
     p: &Projector,
     y_perp: &[f64],
     rss0: f64,
@@ -523,7 +524,7 @@ fn candidates(
     let n_eff = p.w.iter().filter(|w| **w > 0.0).count() as f64;
     families(obs, use_temp)
         .into_iter()
-        .filter(|f| selected.iter().all(|s| s.family.slot() != f.slot()))
+        .filter(|f| selected.iter().all(|s| s.family.kind() != f.kind()))
         .filter_map(|fam| {
             let c = search(obs, p, y_perp, fam)?;
             let dbic = n_eff * (c.rss / rss0).ln() + fam.n_params(obs) as f64 * ln_n;
@@ -534,7 +535,7 @@ fn candidates(
 
 /// The mean effects the run can show: a scale change only when the positions vary, its
 /// temperature form only with material temperatures.
-pub(super) fn families(obs: &Obs, use_temp: bool) -> Vec<Family> {
+pub(super) fn families(obs: &Run, use_temp: bool) -> Vec<Family> {
     let mut fams = vec![
         Family::Linear,
         Family::Warmup,
@@ -556,7 +557,7 @@ pub(super) fn families(obs: &Obs, use_temp: bool) -> Vec<Family> {
 /// noise: with a lag-1 correlation ρ of what is left, consecutive readings carry about
 /// (1 − ρ)/(1 + ρ) of the information of independent ones (air turbulence, `docs/methods.md`).
 fn discounted_gain(
-    obs: &Obs,
+    obs: &Run,
     w: &[f64],
     cols_after: &[Vec<f64>],
     with_partner: Option<&[Vec<f64>]>,
@@ -578,7 +579,7 @@ fn discounted_gain(
 
 /// The BIC gain of a candidate with a lag-1 correlation `rho` of the noise (in [0, 0.95]; the
 /// most it can be is at one end).
-fn gain_at(obs: &Obs, w: &[f64], rss0: f64, cand: &Candidate, fam: Family, rho: f64) -> f64 {
+fn gain_at(obs: &Run, w: &[f64], rss0: f64, cand: &Candidate, fam: Family, rho: f64) -> f64 {
     let n_eff = w.iter().filter(|w| **w > 0.0).count() as f64;
     let lr = n_eff * (rss0 / cand.rss).ln();
     lr * (1.0 - rho) / (1.0 + rho) - fam.n_params(obs) as f64 * (obs.len() as f64).ln()
@@ -588,7 +589,7 @@ fn gain_at(obs: &Obs, w: &[f64], rss0: f64, cand: &Candidate, fam: Family, rho: 
 /// columns' variation within each direction is left once they are centred within their
 /// (target, direction) groups (the reference is per direction, so that an effect that differs
 /// by direction by definition, like `reversal_drift`, is measured on its variation in time).
-pub(super) fn absorbed_by_baseline(obs: &Obs, p: &Projector, cols: &[Vec<f64>]) -> bool {
+pub(super) fn absorbed_by_baseline(obs: &Run, p: &Projector, cols: &[Vec<f64>]) -> bool {
     let (mut kept, mut total) = (0.0, 0.0);
     for c in cols {
         let (mut s, mut n) = ([0.0; 2], [0.0; 2]);

@@ -19,7 +19,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use super::family::{Family, cyclic_frequencies};
-use super::fit::Obs;
+use super::obs::Obs;
 use super::projector::{Counts, Fixed, Projector, dot, dotw};
 
 /// Most bytes of columns [`Cache`] keeps (each column 8·N bytes); beyond, columns are
@@ -107,6 +107,15 @@ impl Cache {
             }
         }
         cols
+    }
+
+    /// `fam`'s columns at `theta`: kept for a grid-searched family, computed otherwise.
+    pub(super) fn columns_shared(&self, obs: &Obs, fam: Family, theta: f64) -> Columns {
+        if fam.is_searched_dense() {
+            self.columns(obs, fam, theta)
+        } else {
+            Arc::new(fam.compute_columns(obs, theta))
+        }
     }
 
     /// The sums kept for the weights `w`.
@@ -203,12 +212,12 @@ impl WeightSums {
         }
     }
 
-    fn get(&self, obs: &Obs, fam: Family, theta: f64) -> Arc<ColSums> {
+    fn get(&self, obs: &Obs, cache: &Cache, fam: Family, theta: f64) -> Arc<ColSums> {
         let key = (fam as u8, theta.to_bits());
         if let Some(s) = self.by_key.lock().ok().and_then(|m| m.get(&key).cloned()) {
             return s;
         }
-        let cols = fam.columns_shared(obs, theta);
+        let cols = cache.columns_shared(obs, fam, theta);
         let s = Arc::new(ColSums::new(obs, &self.w, &self.counts, cols));
         if let Ok(mut m) = self.by_key.lock() {
             m.insert(key, Arc::clone(&s));
@@ -221,6 +230,7 @@ impl WeightSums {
 /// against one projector: y⊥ and the fixed dense columns weighted once.
 pub(super) struct DenseSearch<'a> {
     obs: &'a Obs,
+    cache: &'a Cache,
     p: &'a Projector,
     sums: Arc<WeightSums>,
     /// w·y⊥.
@@ -232,13 +242,14 @@ pub(super) struct DenseSearch<'a> {
 }
 
 impl<'a> DenseSearch<'a> {
-    pub(super) fn new(obs: &'a Obs, p: &'a Projector, y_perp: &[f64]) -> Self {
+    pub(super) fn new(obs: &'a Obs, cache: &'a Cache, p: &'a Projector, y_perp: &[f64]) -> Self {
         let w = &p.w;
         let weigh = |v: &[f64]| -> Vec<f64> { v.iter().zip(w).map(|(v, w)| v * w).collect() };
         DenseSearch {
             obs,
+            cache,
             p,
-            sums: obs.cache.for_weights(obs, w),
+            sums: cache.for_weights(obs, w),
             wy: weigh(y_perp),
             wz: p
                 .fixed()
@@ -255,7 +266,7 @@ impl<'a> DenseSearch<'a> {
     /// RSS with `fam`'s columns at `theta` added (as [`Projector::fit_cols`]).
     pub(super) fn rss(&self, fam: Family, theta: f64) -> f64 {
         let (obs, p) = (self.obs, self.p);
-        let s = self.sums.get(obs, fam, theta);
+        let s = self.sums.get(obs, self.cache, fam, theta);
         let m = s.cols.len();
         let u = DMatrix::from_fn(p.fixed().len(), m, |k, i| {
             match (&p.fixed()[k], &self.wz[k]) {
@@ -274,7 +285,7 @@ impl<'a> DenseSearch<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::axis::projector::tests::run;
+    use crate::axis::obs::tests::run;
 
     /// The cached sums give the RSS of the columns fitted directly, with a drift and offsets
     /// per cycle in the model and a reading left out, for every searched dense family.
@@ -284,11 +295,12 @@ mod tests {
         let w: Vec<f64> = (0..obs.len())
             .map(|j| if j == 4 { 0.0 } else { 1.0 })
             .collect();
-        let mut fixed = Family::Linear.columns(&obs, f64::NAN);
-        fixed.extend(Family::CycleOffsets.columns(&obs, f64::NAN));
+        let mut fixed = Family::Linear.compute_columns(&obs, f64::NAN);
+        fixed.extend(Family::CycleOffsets.compute_columns(&obs, f64::NAN));
         let p = Projector::new(&obs, &w, &fixed);
         let y = p.residualize(&obs, &obs.y);
-        let d = DenseSearch::new(&obs, &p, &y);
+        let cache = Cache::default();
+        let d = DenseSearch::new(&obs, &cache, &p, &y);
         for (fam, theta) in [
             (Family::Cyclic, 700.0),
             (Family::Cyclic, 1234.5),
@@ -297,7 +309,7 @@ mod tests {
         ] {
             for _ in 0..2 {
                 let got = d.rss(fam, theta);
-                let (want, _) = p.fit_cols(&obs, &y, &fam.columns(&obs, theta));
+                let (want, _) = p.fit_cols(&obs, &y, &fam.compute_columns(&obs, theta));
                 assert!(
                     (got - want).abs() < 1e-9 * want,
                     "{fam:?} {theta}: {got} vs {want}"

@@ -7,11 +7,13 @@
 
 use std::collections::BTreeMap;
 
-use super::Finding;
 use super::correlation::design_lag1;
-use super::fit::{FinalFit, Obs, heldout_rms};
+use super::fit::{FinalFit, heldout_rms};
+use super::obs::Obs;
 use super::outliers::robust_scale;
 use super::tails::{EVENTS_BAYES_FACTOR, ln_bayes_factor_events};
+use super::types::{Finding, Found, Stated};
+use positioning::axis_model::EffectKind;
 
 /// Residual RMS above this many times the short-term noise is structure, not noise.
 const UNEXPLAINED_RATIO: f64 = 3.0;
@@ -89,8 +91,10 @@ pub(super) fn unexplained_finding(obs: &Obs, fin: &FinalFit, res: &Residue) -> F
         String::new()
     };
     Finding {
-        effect: "unexplained".into(),
-        params: BTreeMap::from([("rms_um".into(), res.rms_left_um)]),
+        effect: Found::Unexplained {
+            rms_um: res.rms_left_um,
+        },
+        stated: Stated::default(),
         params_u: BTreeMap::new(),
         significance: obs.len() as f64 * (ratio * ratio).max(1.0).ln(),
         heldout_rms_before_um: ho,
@@ -126,8 +130,12 @@ pub(super) fn demoted_next_to_unexplained(
             let (b, a) = (f.heldout_rms_before_um, f.heldout_rms_after_um);
             let gain = 1.0 - a / b.max(1e-300);
             let explained = (b * b - a * a).max(0.0).sqrt();
-            let machine = !matches!(f.effect.as_str(), "step" | "cycle_offsets" | "outliers");
-            if f.effect != "local_anomaly" && gain < MIN_GAIN_WHEN_UNEXPLAINED {
+            let machine = !matches!(
+                f.effect.kind(),
+                Some(EffectKind::Step | EffectKind::CycleOffsets | EffectKind::Outliers)
+            );
+            if f.effect.kind() != Some(EffectKind::LocalAnomaly) && gain < MIN_GAIN_WHEN_UNEXPLAINED
+            {
                 Some((i, "it would stretch over structure it does not explain"))
             } else if machine && explained <= MACHINE_DOMINANCE * rms_left_um {
                 Some((
@@ -144,11 +152,15 @@ pub(super) fn demoted_next_to_unexplained(
 
 /// The sentence that says which combination explains the run.
 pub(super) fn conclusion(findings: &[Finding], baseline_heldout: f64, noise_um: f64) -> String {
-    if let Some(u) = findings.iter().find(|f| f.effect == "unexplained") {
+    let unexplained = findings.iter().find_map(|f| match f.effect {
+        Found::Unexplained { rms_um } => Some(rms_um),
+        Found::Effect(_) => None,
+    });
+    if let Some(rms_um) = unexplained {
         let others: Vec<&str> = findings
             .iter()
-            .filter(|f| f.effect != "unexplained")
-            .map(|f| f.effect.as_str())
+            .filter(|f| f.effect.kind().is_some())
+            .map(|f| f.effect.name())
             .collect();
         let with = if others.is_empty() {
             String::new()
@@ -158,7 +170,7 @@ pub(super) fn conclusion(findings: &[Finding], baseline_heldout: f64, noise_um: 
         return format!(
             "unexplained: {:.2} µm RMS of structure is left{with} that no effect of the \
              vocabulary explains; the measuring system is the first suspect",
-            u.params.get("rms_um").copied().unwrap_or(0.0)
+            rms_um
         );
     }
     if findings.is_empty() {
@@ -171,9 +183,9 @@ pub(super) fn conclusion(findings: &[Finding], baseline_heldout: f64, noise_um: 
         .iter()
         .map(|f| {
             if f.alternatives.is_empty() {
-                f.effect.clone()
+                f.effect.name().to_string()
             } else {
-                let alts: Vec<&str> = f.alternatives.iter().map(|a| a.effect.as_str()).collect();
+                let alts: Vec<&str> = f.alternatives.iter().map(|a| a.effect.name()).collect();
                 format!(
                     "{} (or {}: the data cannot tell)",
                     f.effect,

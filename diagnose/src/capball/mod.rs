@@ -30,52 +30,22 @@ mod model;
 mod report;
 mod select;
 
+mod types;
+
 pub use checks::{Profile, ResidualSummary};
-pub use model::{Candidate, CapballRun, RotaryAxis, axis_harmonic_um};
+pub use model::{Candidate, CapballRun};
 pub use report::{
     Absorption, CapballBaseline, CapballDiagnosis, CapballDiagnosisReport, CapballFinding,
-    ParameterShift,
+    CapballFound, ParameterShift,
 };
 
 use nalgebra::DVector;
 
 use geometry::capball::{CapballError, CapballRecord, CapballSetup};
+use model::log_grid;
 use select::{ModelFit, candidate_list, fit_terms, model_basis, screen, validate};
-
-/// Tuning of the CapBall diagnosis.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Options {
-    /// BIC decrease an effect needs on the identification run.
-    pub min_bic_gain: f64,
-    /// Decrease of the validation RSS, in noise variances beyond the refit penalty.
-    pub min_validation_gain: f64,
-    /// Family-wise false-alarm probability of the outlier test.
-    pub outlier_alpha: f64,
-    /// Highest harmonic of the A and C angles tried.
-    pub max_harmonic: u32,
-    /// Most effects accepted.
-    pub max_effects: usize,
-}
-
-impl Default for Options {
-    fn default() -> Self {
-        Options {
-            min_bic_gain: 10.0,
-            min_validation_gain: 10.0,
-            // Family-wise over ~2 400 residuals per run: a 4.8 σ departure.
-            outlier_alpha: 0.001,
-            max_harmonic: 4,
-            max_effects: 3,
-        }
-    }
-}
-
-/// A drift record at one fixed pose (`docs/datasets.md`: `time_s,ex_um,ey_um,ez_um`).
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct DriftRecord {
-    pub time_s: Vec<f64>,
-    pub e_um: Vec<[f64; 3]>,
-}
+pub use types::{DriftRecord, Options};
+use types::{Periods, Step};
 
 /// The runs of a parsed dataset: run 1 identifies, the others validate. Without a `time_s`
 /// column the pose number stands in for the time (the caller notes it).
@@ -321,14 +291,6 @@ fn select_with_outliers(
     Ok((d, fin))
 }
 
-/// The periods tried for a cyclic drift: from a drift record when one is given (its best
-/// period only), otherwise a log grid from 60 s to four times the span of all runs.
-pub(crate) struct Periods {
-    pub grid: Vec<f64>,
-    /// Period and its standard uncertainty found in the drift record.
-    pub from_record: Option<(f64, f64)>,
-}
-
 fn drift_periods(joint: &CapballRun, drift: Option<&DriftRecord>) -> Periods {
     if let Some(rec) = drift
         && let Some(p) = report::record_period(rec)
@@ -348,12 +310,6 @@ fn drift_periods(joint: &CapballRun, drift: Option<&DriftRecord>) -> Periods {
         grid: log_grid(60.0, (4.0 * (t1 - t0)).max(120.0), 48),
         from_record: None,
     }
-}
-
-pub(crate) fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
-    (0..n)
-        .map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64))
-        .collect()
 }
 
 /// Whether the final model's cyclic drift (if any, and no linear one) can be replaced by a
@@ -405,23 +361,6 @@ fn steadier_drift_fits(ctx: &report::Context, steps: &[Step]) -> bool {
     bic(&with_lin) <= bic(&last.joint_after) + n.ln()
 }
 
-/// One accepted step of the forward selection.
-#[derive(Debug, Clone)]
-pub(crate) struct Step {
-    /// Fits on the identification run (the 14 parameters' shift, the validation check).
-    pub before: ModelFit,
-    pub after: ModelFit,
-    /// Fits on all runs (the evidence and the effect's parameters).
-    pub joint_before: ModelFit,
-    pub joint_after: ModelFit,
-    pub bic_drop: f64,
-    pub val_before: (f64, usize, usize),
-    pub val_after: (f64, usize, usize),
-    /// Other effects whose evidence came within [`Options::min_bic_gain`] of this one's: the
-    /// data cannot tell them apart.
-    pub rivals: Vec<Candidate>,
-}
-
 /// A candidate fitted in full: evidence on the identification run (BIC decrease) and on the
 /// validation runs (RSS decrease in noise variances, less the refit penalty).
 struct Tried {
@@ -459,13 +398,14 @@ fn shortlist(ctx: &report::Context, cur: &ModelFit, periods: &Periods) -> Vec<se
             .collect();
         scored.sort_by(|a, b| b.0.total_cmp(&a.0));
         // Grid neighbours of the best (nearby periods) are the same effect: keep one per kind.
-        let mut kinds: Vec<String> = Vec::new();
+        let same = |a: &Candidate, b: &Candidate| match (a, b) {
+            (Candidate::CyclicDrift { .. }, Candidate::CyclicDrift { .. }) => true,
+            _ => a == b,
+        };
+        let mut kinds: Vec<Candidate> = Vec::new();
         for (_, s) in scored {
-            let kind = match s.term.cand {
-                Candidate::CyclicDrift { .. } => "cyclic".to_string(),
-                c => format!("{c:?}"),
-            };
-            if kinds.contains(&kind) {
+            let kind = s.term.cand;
+            if kinds.iter().any(|k| same(k, &kind)) {
                 continue;
             }
             kinds.push(kind);
@@ -531,7 +471,7 @@ fn forward_select(
             .iter()
             .filter(|t| top - (t.bic + t.stat) < opt.min_bic_gain)
             .filter_map(|t| t.next.terms.last().map(|x| x.cand))
-            .filter(|c| Some(c.effect()) != best.next.terms.last().map(|x| x.cand.effect()))
+            .filter(|c| Some(c.kind()) != best.next.terms.last().map(|x| x.cand.kind()))
             .collect();
         steps.push(Step {
             before: cur.clone(),
@@ -611,7 +551,3 @@ fn refine(
 fn ctx_has_record(ctx: &report::Context) -> bool {
     ctx.record_period.is_some()
 }
-
-/// Parameters of the 14 that shift by more than this many baseline standard uncertainties are
-/// named in a finding's cause.
-pub(crate) const SHIFT_NAMED_SIGMA: f64 = 2.0;

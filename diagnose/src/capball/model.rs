@@ -4,9 +4,12 @@
 //! Rows are laid out as in [`CapballSetup::stacked_jacobian`]: pose `i`, channel `k` (x, y, z
 //! in the machine frame) is row `3 i + k`.
 
-use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
+use nalgebra::{DMatrix, DVector, Vector3};
 
 use geometry::capball::{CapballSetup, N_PARAMS};
+use geometry::capball_effects::{
+    AxisHarmonic, CapballEffect, CapballEffectKind, Channel, CyclicDrift, RotaryAxis, housing,
+};
 use geometry::kinematics::Pose;
 
 /// One CapBall run: poses in measuring order, their times and the measured volumetric errors.
@@ -53,23 +56,8 @@ impl CapballRun {
     }
 }
 
-/// A rotary axis of the CapBall machine.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RotaryAxis {
-    A,
-    C,
-}
-
-impl RotaryAxis {
-    pub fn name(self) -> &'static str {
-        match self {
-            RotaryAxis::A => "A",
-            RotaryAxis::C => "C",
-        }
-    }
-}
-
-/// A candidate effect with its non-linear parameter fixed.
+/// A candidate effect of the search: a [`CapballEffect`] with its non-linear parameter fixed
+/// and its linear ones (the columns' coefficients) still to fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Candidate {
     /// `rate_um_per_h` {x, y, z}: three columns `t·e_k` (t in hours).
@@ -77,19 +65,49 @@ pub enum Candidate {
     /// Sine and cosine of time at one period, per machine direction: six columns.
     CyclicDrift { period_s: f64 },
     /// One channel's reading scaled by `1 + g`: one column, the model's own value on that channel.
-    SensorGain { channel: usize },
+    SensorGain { channel: Channel },
     /// Harmonic `k` of a rotary axis angle, a displacement in the axis's housing frame (for C
     /// the A cradle, for A the machine frame): six columns (cos, sin) × (three directions).
     AxisError { axis: RotaryAxis, harmonic: u32 },
 }
 
 impl Candidate {
-    pub fn effect(&self) -> &'static str {
+    /// The effect this candidate is a form of.
+    pub fn kind(&self) -> CapballEffectKind {
         match self {
-            Candidate::LinearDrift => "linear_drift",
-            Candidate::CyclicDrift { .. } => "cyclic_drift",
-            Candidate::SensorGain { .. } => "sensor_gain",
-            Candidate::AxisError { .. } => "axis_error",
+            Candidate::LinearDrift => CapballEffectKind::LinearDrift,
+            Candidate::CyclicDrift { .. } => CapballEffectKind::CyclicDrift,
+            Candidate::SensorGain { .. } => CapballEffectKind::SensorGain,
+            Candidate::AxisError { .. } => CapballEffectKind::AxisError,
+        }
+    }
+
+    /// The effect with the columns' coefficients `b` (as [`Candidate::columns`] orders them).
+    pub fn effect(&self, b: &DVector<f64>) -> CapballEffect {
+        let at = |i: usize| b.get(i).copied().unwrap_or(0.0);
+        match *self {
+            Candidate::LinearDrift => CapballEffect::LinearDrift {
+                rate_um_per_h: std::array::from_fn(at),
+            },
+            // b_sin·sin(ωt) + b_cos·cos(ωt) = a·sin(ωt + φ), φ = atan2(b_cos, b_sin).
+            Candidate::CyclicDrift { period_s } => CapballEffect::CyclicDrift(CyclicDrift {
+                period_s,
+                amplitude_um: std::array::from_fn(|k| {
+                    let (s, c) = (at(2 * k), at(2 * k + 1));
+                    (s * s + c * c).sqrt()
+                }),
+                phase_rad: std::array::from_fn(|k| at(2 * k + 1).atan2(at(2 * k))),
+            }),
+            Candidate::SensorGain { channel } => CapballEffect::SensorGain {
+                channel,
+                gain_pct: 100.0 * at(0),
+            },
+            Candidate::AxisError { axis, harmonic } => CapballEffect::AxisError(AxisHarmonic {
+                axis,
+                harmonic,
+                cos_um: std::array::from_fn(|d| at(2 * d)),
+                sin_um: std::array::from_fn(|d| at(2 * d + 1)),
+            }),
         }
     }
     pub fn n_cols(&self) -> usize {
@@ -127,7 +145,8 @@ impl Candidate {
                     }
                 }
                 Candidate::SensorGain { channel } => {
-                    x[(3 * i + channel, 0)] = model_um[3 * i + channel];
+                    let k = channel.index();
+                    x[(3 * i + k, 0)] = model_um[3 * i + k];
                 }
                 Candidate::AxisError { axis, harmonic } => {
                     let pose = &run.poses[i];
@@ -144,34 +163,6 @@ impl Candidate {
             }
         }
         x
-    }
-}
-
-/// The change of the volumetric error (µm, machine frame) of an axis harmonic given by its
-/// cosine and sine coefficients in the axis's housing frame: the forward form of
-/// [`Candidate::AxisError`] (what a simulator adds, `docs/datasets.md`, `axis_error`).
-pub fn axis_harmonic_um(
-    axis: RotaryAxis,
-    harmonic: u32,
-    cos_um: [f64; 3],
-    sin_um: [f64; 3],
-    pose: &Pose,
-) -> [f64; 3] {
-    let (theta, frame) = housing(axis, pose);
-    let arg = harmonic as f64 * theta;
-    let v = frame * (Vector3::from(cos_um) * arg.cos() + Vector3::from(sin_um) * arg.sin());
-    [v.x, v.y, v.z]
-}
-
-/// Angle (rad) of a rotary axis and the rotation of its housing frame into the machine frame.
-/// The A cradle turns by −A about x (a workpiece-side axis, `geometry::kinematics` conventions).
-pub(crate) fn housing(axis: RotaryAxis, pose: &Pose) -> (f64, nalgebra::Matrix3<f64>) {
-    match axis {
-        RotaryAxis::A => (pose.a_deg.to_radians(), nalgebra::Matrix3::identity()),
-        RotaryAxis::C => (
-            pose.c_deg.to_radians(),
-            *Rotation3::from_axis_angle(&Vector3::x_axis(), -pose.a_deg.to_radians()).matrix(),
-        ),
     }
 }
 
@@ -274,4 +265,11 @@ pub(crate) fn absorbed_fraction(j: &DMatrix<f64>, v: &DVector<f64>, keep: &[bool
         Some(f) => (1.0 - f.rss / total).clamp(0.0, 1.0),
         None => 0.0,
     }
+}
+
+/// `n` values from `lo` to `hi`, evenly spaced in the logarithm.
+pub(crate) fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64))
+        .collect()
 }

@@ -9,10 +9,13 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::checks::{self, ResidualSummary};
-use super::model::{Candidate, CapballRun, RotaryAxis, absorbed_fraction, lstsq};
+use super::model::{Candidate, CapballRun, absorbed_fraction, log_grid, lstsq};
 use super::select::{ModelFit, identifiable_basis, model_basis, screen, validate, zero_rows};
-use super::{DriftRecord, Options, Periods, SHIFT_NAMED_SIGMA, Step, log_grid};
+use super::types::{DriftRecord, Options, Periods, SHIFT_NAMED_SIGMA, Step};
 use geometry::capball::{CapballSetup, Identification, N_PARAMS, PARAM_NAMES};
+use geometry::capball_effects::{
+    AxisHarmonic, CapballEffect, CapballEffectKind, Channel, CyclicDrift, RotaryAxis,
+};
 
 /// What the baseline achieves.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -25,15 +28,75 @@ pub struct CapballBaseline {
     pub heldout_rms_um: f64,
 }
 
-/// One effect found in the data.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// What a CapBall finding names, with its fitted parameters as typed fields.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CapballFound {
+    /// An effect of the CapBall table, as fitted: what the extended model holds.
+    Effect(CapballEffect),
+    /// Poses far off their neighbours, left out of every fit: how many (all runs), and which
+    /// of the identification run (1-based).
+    Outliers {
+        count: usize,
+        identification_poses: Vec<usize>,
+    },
+    /// Structure left beyond the white sensor noise that no effect explains: its RMS, µm.
+    Unexplained { rms_um: f64 },
+}
+
+impl CapballFound {
+    /// The name of the report (`docs/datasets.md`, CapBall effects).
+    pub fn name(&self) -> &'static str {
+        match self {
+            CapballFound::Effect(e) => e.kind().name(),
+            CapballFound::Outliers { .. } => "outliers",
+            CapballFound::Unexplained { .. } => "unexplained",
+        }
+    }
+
+    /// The effect of the CapBall table, if this is one.
+    pub fn effect(&self) -> Option<&CapballEffect> {
+        match self {
+            CapballFound::Effect(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for CapballFound {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// An axis error as the report states it: the direction that carries more (`radial` or
+/// `axial`), its amplitude, and the radial and axial amplitudes, µm.
+fn radial_axial(h: &AxisHarmonic) -> (&'static str, f64, f64, f64) {
+    let ax = if h.axis == RotaryAxis::C { 2 } else { 0 };
+    let comp: [f64; 3] = std::array::from_fn(|d| {
+        let (c, s) = (h.cos_um[d], h.sin_um[d]);
+        (c * c + s * s).sqrt()
+    });
+    let axial = comp[ax];
+    let radial = (0..3)
+        .filter(|&d| d != ax)
+        .map(|d| comp[d] * comp[d])
+        .sum::<f64>()
+        .sqrt();
+    if axial > radial {
+        ("axial", axial, radial, axial)
+    } else {
+        ("radial", radial, radial, axial)
+    }
+}
+
+/// One effect found in the data. Serialised with the report's fields (`effect` its name,
+/// `params` the parameters it states).
+#[derive(Debug, Clone, PartialEq)]
 pub struct CapballFinding {
-    /// Effect name (`docs/datasets.md`, CapBall effects).
-    pub effect: String,
-    /// Fitted parameters (numbers, or names such as `channel`, `axis`, `direction`).
-    pub params: BTreeMap<String, Value>,
-    /// Standard uncertainties (same keys, where one exists).
-    pub params_u: BTreeMap<String, Value>,
+    /// What was found, with its fitted parameters.
+    pub effect: CapballFound,
+    /// Standard uncertainties of the stated parameters (by their names, where one exists).
+    pub params_u: BTreeMap<&'static str, Value>,
     /// Evidence: decrease of the BIC on the identification run.
     pub significance: f64,
     pub heldout_rms_before_um: f64,
@@ -47,10 +110,99 @@ pub struct CapballFinding {
     pub param_shift_sigma: BTreeMap<String, f64>,
 }
 
+impl CapballFinding {
+    /// The parameters the report states, by name (numbers, or names such as `channel`,
+    /// `axis`, `direction`; `docs/datasets.md`).
+    pub fn params(&self) -> BTreeMap<&'static str, Value> {
+        self.stated(true)
+    }
+
+    /// [`CapballFinding::params`] without the long ones a reader skims past: an axis error's
+    /// coefficients in the housing frame and the outlying poses' numbers.
+    pub fn summary_params(&self) -> BTreeMap<&'static str, Value> {
+        self.stated(false)
+    }
+
+    fn stated(&self, full: bool) -> BTreeMap<&'static str, Value> {
+        let mut p = BTreeMap::new();
+        match &self.effect {
+            CapballFound::Effect(CapballEffect::LinearDrift { rate_um_per_h }) => {
+                p.insert("rate_um_per_h", xyz(*rate_um_per_h));
+            }
+            CapballFound::Effect(CapballEffect::CyclicDrift(c)) => {
+                p.insert("period_s", json!(c.period_s));
+                p.insert("amplitude_um", xyz(c.amplitude_um));
+                p.insert("phase_rad", xyz(c.phase_rad));
+            }
+            CapballFound::Effect(CapballEffect::SensorGain { channel, gain_pct }) => {
+                p.insert("channel", json!(channel.name()));
+                p.insert("gain_pct", json!(gain_pct));
+            }
+            CapballFound::Effect(CapballEffect::AxisError(h)) => {
+                let (dir, a, radial, axial) = radial_axial(h);
+                p.insert("axis", json!(h.axis.name()));
+                p.insert("harmonic", json!(h.harmonic));
+                p.insert("direction", json!(dir));
+                p.insert("amplitude_um", json!(a));
+                p.insert("radial_um", json!(radial));
+                p.insert("axial_um", json!(axial));
+                if full {
+                    // The coefficients in the housing frame, as the simulator's scenario takes
+                    // them.
+                    p.insert("cos_um", xyz(h.cos_um));
+                    p.insert("sin_um", xyz(h.sin_um));
+                }
+            }
+            CapballFound::Outliers {
+                count,
+                identification_poses,
+            } => {
+                p.insert("count", json!(count));
+                if full {
+                    p.insert("identification_poses", json!(identification_poses));
+                }
+            }
+            CapballFound::Unexplained { rms_um } => {
+                p.insert("rms_um", json!(rms_um));
+            }
+        }
+        p
+    }
+}
+
+impl Serialize for CapballFinding {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        #[derive(Serialize)]
+        struct Repr<'a> {
+            effect: &'static str,
+            params: BTreeMap<&'static str, Value>,
+            params_u: &'a BTreeMap<&'static str, Value>,
+            significance: f64,
+            heldout_rms_before_um: f64,
+            heldout_rms_after_um: f64,
+            cause: &'a str,
+            absorbed_fraction: f64,
+            param_shift_sigma: &'a BTreeMap<String, f64>,
+        }
+        Repr {
+            effect: self.effect.name(),
+            params: self.params(),
+            params_u: &self.params_u,
+            significance: self.significance,
+            heldout_rms_before_um: self.heldout_rms_before_um,
+            heldout_rms_after_um: self.heldout_rms_after_um,
+            cause: &self.cause,
+            absorbed_fraction: self.absorbed_fraction,
+            param_shift_sigma: &self.param_shift_sigma,
+        }
+        .serialize(s)
+    }
+}
+
 /// An effect the 14 parameters take up wholly or partly on this trajectory.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Absorption {
-    pub effect: String,
+    pub effect: CapballEffectKind,
     /// Which form (e.g. `C harmonic 1`, `channel x`).
     pub detail: String,
     /// Column combinations of the effect the parameters reproduce exactly (invisible).
@@ -73,7 +225,7 @@ pub struct ParameterShift {
 }
 
 /// The CapBall diagnosis report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CapballDiagnosisReport {
     /// Always `capball`.
     pub kind: String,
@@ -93,7 +245,7 @@ pub struct CapballDiagnosisReport {
 impl CapballDiagnosisReport {
     /// The findings' effect names, in report order.
     pub fn effects(&self) -> Vec<&str> {
-        self.findings.iter().map(|f| f.effect.as_str()).collect()
+        self.findings.iter().map(|f| f.effect.name()).collect()
     }
 }
 
@@ -128,7 +280,7 @@ pub(crate) struct Context<'a> {
 
 impl Context<'_> {
     /// White-noise variance on the validation runs (pooled over channels), from the baseline.
-    pub fn val_noise_var(&self) -> f64 {
+    pub(super) fn val_noise_var(&self) -> f64 {
         let p = DVector::from_column_slice(&self.ident_params());
         let mut acc = 0.0;
         for (run, keep) in self.validation.iter().zip(self.val_keep) {
@@ -236,7 +388,7 @@ pub(crate) fn assemble(
         findings.push(f);
     }
     for s in steps {
-        findings.push(effect_finding(ctx, base, s, periods));
+        findings.extend(effect_finding(ctx, base, s, periods));
     }
     let (vrss, vn, _, vres) = validate(ctx.setup, ctx.validation, ctx.val_keep, fin);
     if let Some(f) = unexplained(ctx, fin, (vrss, vn), &vres) {
@@ -319,21 +471,20 @@ fn outlier_finding(
         return None;
     }
     let (vrss, vn, _, _) = validate(ctx.setup, ctx.validation, ctx.val_keep, start);
-    let poses: Vec<Value> = ctx
+    let identification_poses: Vec<usize> = ctx
         .out_id
         .iter()
         .enumerate()
         .filter(|(_, o)| **o)
-        .map(|(i, _)| json!(i + 1))
+        .map(|(i, _)| i + 1)
         .collect();
     let s2 = start.fit.rss / (ctx.keep.iter().filter(|k| **k).count().max(1) as f64);
     let excess: f64 = baseline.fit.rss - start.fit.rss;
-    let mut params = BTreeMap::new();
-    params.insert("count".into(), json!(n_id + n_val));
-    params.insert("identification_poses".into(), Value::Array(poses));
     Some(CapballFinding {
-        effect: "outliers".into(),
-        params,
+        effect: CapballFound::Outliers {
+            count: n_id + n_val,
+            identification_poses,
+        },
         params_u: BTreeMap::new(),
         significance: excess / s2.max(1e-12) - (n_id as f64) * (3.0 * ctx.ident.len() as f64).ln(),
         heldout_rms_before_um: rms(val0.0, val0.1),
@@ -366,8 +517,8 @@ fn effect_finding(
     base: &Identification,
     s: &Step,
     periods: &Periods,
-) -> CapballFinding {
-    let term = s.after.terms.last().map(|t| t.cand);
+) -> Option<CapballFinding> {
+    let c = s.after.terms.last().map(|t| t.cand)?;
     // The effect's parameters come from all runs (one clock), the 14 parameters' shift from
     // the identification run.
     let (b, cov) = s.joint_after.coefs.last().cloned().unwrap_or_default();
@@ -375,16 +526,12 @@ fn effect_finding(
     let s2 = s.joint_after.fit.rss / (n_eq.saturating_sub(s.joint_after.n_params())).max(1) as f64;
     let cov = cov * s2;
     let model = ctx.ident.jac(ctx.setup) * &s.after.p;
-    let signal = term
-        .map(|c| c.columns(ctx.ident, &model) * &b)
-        .unwrap_or_else(|| DVector::zeros(0));
+    let signal = c.columns(ctx.ident, &model) * &b;
     let j = ctx.ident.jac(ctx.setup);
     let absorbed = absorbed_fraction(j, &signal, ctx.keep);
     let shift = shift_sigma(base, &s.before.p, &s.after.p);
-    let (params, params_u, what) = match term {
-        Some(c) => describe(ctx, c, &b, &cov, s, periods),
-        None => (BTreeMap::new(), BTreeMap::new(), String::new()),
-    };
+    let effect = c.effect(&b);
+    let (params_u, what) = describe(ctx, &effect, &b, &cov, s, periods);
     let mut named: Vec<(&String, &f64)> = shift
         .iter()
         .filter(|(_, v)| v.abs() >= SHIFT_NAMED_SIGMA)
@@ -409,9 +556,8 @@ fn effect_finding(
             r.join(" or ")
         )
     };
-    CapballFinding {
-        effect: term.map(|c| c.effect()).unwrap_or("?").into(),
-        params,
+    Some(CapballFinding {
+        effect: CapballFound::Effect(effect),
         params_u,
         significance: s.bic_drop,
         heldout_rms_before_um: rms(s.val_before.0, s.val_before.1),
@@ -422,14 +568,14 @@ fn effect_finding(
         ),
         absorbed_fraction: absorbed,
         param_shift_sigma: shift,
-    }
+    })
 }
-
-const CH: [&str; 3] = ["x", "y", "z"];
 
 fn short_name(c: &Candidate) -> String {
     match c {
-        Candidate::SensorGain { channel } => format!("a gain error of channel {}", CH[*channel]),
+        Candidate::SensorGain { channel } => {
+            format!("a gain error of channel {}", channel.name())
+        }
         Candidate::AxisError { axis, harmonic } => {
             format!(
                 "an error motion of {} at {harmonic} per revolution",
@@ -459,45 +605,43 @@ fn xyz(v: [f64; 3]) -> Value {
     json!({"x": v[0], "y": v[1], "z": v[2]})
 }
 
-type Described = (BTreeMap<String, Value>, BTreeMap<String, Value>, String);
+/// The uncertainties of a found effect's stated parameters and the sentence on its cause.
+type Described = (BTreeMap<&'static str, Value>, String);
 
+/// `effect` fitted with the columns' coefficients `b` (covariance `cov`).
 fn describe(
     ctx: &Context,
-    c: Candidate,
+    effect: &CapballEffect,
     b: &DVector<f64>,
     cov: &DMatrix<f64>,
     s: &Step,
     periods: &Periods,
 ) -> Described {
-    let mut p = BTreeMap::new();
     let mut u = BTreeMap::new();
-    let text = match c {
-        Candidate::LinearDrift => {
-            p.insert("rate_um_per_h".into(), xyz([b[0], b[1], b[2]]));
+    let text = match effect {
+        CapballEffect::LinearDrift { rate_um_per_h: r } => {
             u.insert(
-                "rate_um_per_h".into(),
+                "rate_um_per_h",
                 xyz(std::array::from_fn(|k| cov[(k, k)].max(0.0).sqrt())),
             );
             format!(
                 "steady drift of the measuring loop, {:+.2}/{:+.2}/{:+.2} µm/h in x/y/z, the same at every pose: the spindle or the structure warming; a drift record at one fixed pose confirms it",
-                b[0], b[1], b[2]
+                r[0], r[1], r[2]
             )
         }
-        Candidate::CyclicDrift { period_s } => {
-            let a: [(f64, f64); 3] = std::array::from_fn(|k| amp(b, cov, 2 * k));
+        CapballEffect::CyclicDrift(CyclicDrift {
+            period_s,
+            amplitude_um: a,
+            ..
+        }) => {
+            let period_s = *period_s;
+            let ua: [f64; 3] = std::array::from_fn(|k| amp(b, cov, 2 * k).1);
             let up = periods
                 .from_record
                 .map(|r| r.1)
                 .unwrap_or_else(|| period_u(ctx, s, period_s));
-            p.insert("period_s".into(), json!(period_s));
-            u.insert("period_s".into(), json!(up));
-            p.insert("amplitude_um".into(), xyz(a.map(|v| v.0)));
-            // b_sin·sin(ωt) + b_cos·cos(ωt) = a·sin(ωt + φ), φ = atan2(b_cos, b_sin).
-            p.insert(
-                "phase_rad".into(),
-                xyz(std::array::from_fn(|k| b[2 * k + 1].atan2(b[2 * k]))),
-            );
-            u.insert("amplitude_um".into(), xyz(a.map(|v| v.1)));
+            u.insert("period_s", json!(up));
+            u.insert("amplitude_um", xyz(ua));
             let span = span_s(ctx.joint);
             let caveat = if period_s > 1.5 * span && periods.from_record.is_none() {
                 format!(
@@ -510,57 +654,32 @@ fn describe(
             format!(
                 "periodic drift of the measuring loop, period {:.1} min{caveat}, amplitude {:.2}/{:.2}/{:.2} µm in x/y/z (half peak to valley), the same at every pose: the spindle's cooling cycle (paper 001); a drift record at one fixed pose confirms it",
                 period_s / 60.0,
-                a[0].0,
-                a[1].0,
-                a[2].0
+                a[0],
+                a[1],
+                a[2]
             )
         }
-        Candidate::SensorGain { channel } => {
-            p.insert("channel".into(), json!(CH[channel]));
-            p.insert("gain_pct".into(), json!(100.0 * b[0]));
-            u.insert(
-                "gain_pct".into(),
-                json!(100.0 * cov[(0, 0)].max(0.0).sqrt()),
-            );
+        CapballEffect::SensorGain { channel, gain_pct } => {
+            u.insert("gain_pct", json!(100.0 * cov[(0, 0)].max(0.0).sqrt()));
             format!(
                 "the {} capacitive channel reads {:+.2} % off: its gain in the sensor-frame transform is wrong; a new 125-point cube calibration (paper 001, eq. 8) confirms it",
-                CH[channel],
-                100.0 * b[0]
+                channel.name(),
+                gain_pct
             )
         }
-        Candidate::AxisError { axis, harmonic } => {
-            let ax = if axis == RotaryAxis::C { 2 } else { 0 };
-            let comp: [f64; 3] = std::array::from_fn(|d| amp(b, cov, 2 * d).0);
-            let axial = comp[ax];
-            let radial = (0..3)
-                .filter(|&d| d != ax)
-                .map(|d| comp[d] * comp[d])
-                .sum::<f64>()
-                .sqrt();
+        CapballEffect::AxisError(h) => {
+            let (dir, a, _, _) = radial_axial(h);
             let uu = (0..6).map(|i| cov[(i, i)]).sum::<f64>().max(0.0).sqrt() / 6f64.sqrt();
-            let (dir, a) = if axial > radial {
-                ("axial", axial)
-            } else {
-                ("radial", radial)
-            };
-            p.insert("axis".into(), json!(axis.name()));
-            p.insert("harmonic".into(), json!(harmonic));
-            p.insert("direction".into(), json!(dir));
-            p.insert("amplitude_um".into(), json!(a));
-            p.insert("radial_um".into(), json!(radial));
-            p.insert("axial_um".into(), json!(axial));
-            // The coefficients in the housing frame, as the simulator's scenario takes them.
-            p.insert("cos_um".into(), xyz(std::array::from_fn(|d| b[2 * d])));
-            p.insert("sin_um".into(), xyz(std::array::from_fn(|d| b[2 * d + 1])));
-            u.insert("amplitude_um".into(), json!(uu));
+            u.insert("amplitude_um", json!(uu));
             format!(
-                "{dir} error motion of the {} axis at {harmonic} per revolution, {a:.2} µm, which the link-error model lacks (bearing runout or wobble); a runout test of the {} axis (ISO 230-7) confirms it",
-                axis.name(),
-                axis.name()
+                "{dir} error motion of the {} axis at {} per revolution, {a:.2} µm, which the link-error model lacks (bearing runout or wobble); a runout test of the {} axis (ISO 230-7) confirms it",
+                h.axis.name(),
+                h.harmonic,
+                h.axis.name()
             )
         }
     };
-    (p, u, text)
+    (u, text)
 }
 
 fn span_s(run: &CapballRun) -> f64 {
@@ -626,11 +745,8 @@ fn unexplained(
         return None;
     }
     let left = (var_id - s2).max(var_v - s2v).max(0.0).sqrt();
-    let mut params = BTreeMap::new();
-    params.insert("rms_um".into(), json!(left));
     Some(CapballFinding {
-        effect: "unexplained".into(),
-        params,
+        effect: CapballFound::Unexplained { rms_um: left },
         params_u: BTreeMap::new(),
         significance: z,
         heldout_rms_before_um: rms(val.0, val.1),
@@ -660,8 +776,11 @@ fn absorption_probes(ctx: &Context, start: &ModelFit, periods: &Periods) -> Vec<
             "longest period tried".into(),
         ),
     ];
-    for (channel, name) in CH.iter().enumerate() {
-        probes.push((Candidate::SensorGain { channel }, format!("channel {name}")));
+    for channel in Channel::ALL {
+        probes.push((
+            Candidate::SensorGain { channel },
+            format!("channel {}", channel.name()),
+        ));
     }
     for axis in [RotaryAxis::A, RotaryAxis::C] {
         for harmonic in 1..=ctx.opt.max_harmonic {
@@ -688,7 +807,7 @@ fn absorption_probes(ctx: &Context, start: &ModelFit, periods: &Periods) -> Vec<
             Vec::new()
         };
         out.push(Absorption {
-            effect: c.effect().into(),
+            effect: c.kind(),
             detail,
             invisible,
             of: x.ncols(),

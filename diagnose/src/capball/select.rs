@@ -3,8 +3,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::model::{Candidate, CapballRun, Fit, RotaryAxis, design, lstsq};
+use super::model::{Candidate, CapballRun, Fit, design, lstsq};
 use geometry::capball::{CapballSetup, N_PARAMS};
+use geometry::capball_effects::{Channel, RotaryAxis};
 
 /// An accepted effect with the combinations of its columns the data can determine
 /// (`basis`: n_cols × r; the other combinations are taken up by the model already there).
@@ -15,11 +16,11 @@ pub(crate) struct Term {
 }
 
 impl Term {
-    pub fn rank(&self) -> usize {
+    pub(super) fn rank(&self) -> usize {
         self.basis.ncols()
     }
     /// The term's reduced columns for a run, given the current 14 parameters.
-    pub fn columns(
+    pub(super) fn columns(
         &self,
         setup: &CapballSetup,
         run: &CapballRun,
@@ -43,7 +44,7 @@ pub(crate) struct ModelFit {
 }
 
 impl ModelFit {
-    pub fn n_params(&self) -> usize {
+    pub(super) fn n_params(&self) -> usize {
         N_PARAMS + self.terms.iter().map(Term::rank).sum::<usize>()
     }
 }
@@ -248,9 +249,9 @@ pub(crate) fn candidate_list(
     }
     if !has(&|c| matches!(c, Candidate::SensorGain { .. })) {
         families.push(
-            (0..3)
+            Channel::ALL
                 .map(|channel| Candidate::SensorGain { channel })
-                .collect(),
+                .into(),
         );
     }
     let mut axis = Vec::new();

@@ -7,12 +7,12 @@ use protocol::cb3::{Answer, Command, Frame, SampleFrame};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
-use super::POWER_UP_RATE_HZ;
-use crate::device::{Cadence, Ctx, Fault, FaultDice, Model, count_fate};
+use crate::device::{Cadence, Ctx, Fault, FaultDice, Model, POWER_UP_RATE_HZ, count_fate};
+use crate::instrument::Device;
 use crate::physics::volts_for_um;
 use crate::record::{Fate, SentSample, SentValues};
 use crate::scenario::Capball;
-use crate::{Device, Shared};
+use crate::shared::Shared;
 
 const RATE_RANGE_HZ: std::ops::RangeInclusive<u32> = 100..=20_000;
 /// Codes per volt: 2^23 codes for 10 V full scale.

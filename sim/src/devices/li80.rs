@@ -7,11 +7,13 @@ use protocol::li80::{Answer, Command, EnvFrame, ErrFrame, PosFlags, PosFrame};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
-use super::POWER_UP_RATE_HZ;
-use crate::device::{Cadence, Ctx, Fault, FaultDice, Model, count_fate, garbage_text};
+use crate::device::{
+    Cadence, Ctx, Fault, FaultDice, Model, POWER_UP_RATE_HZ, count_fate, garbage_text,
+};
+use crate::instrument::Device;
 use crate::record::{Fate, SentEnv, SentSample, SentValues};
 use crate::scenario::{Interferometer, Timed};
-use crate::{Device, Shared};
+use crate::shared::Shared;
 
 /// CO2 content assumed by the device's environment model and the host's compensation, ppm.
 const CO2_PPM: f64 = protocol::edlen::LI80_CO2_PPM;

@@ -11,11 +11,10 @@ use std::sync::Arc;
 use rand_chacha::ChaCha8Rng;
 use tokio::sync::mpsc;
 
-use crate::device::{Control, Model, Runner};
-use crate::{Device, Shared, SimError};
-
-/// Default rate of every streaming device after power-up (instruments.md, common rules).
-pub(crate) const POWER_UP_RATE_HZ: f64 = 10.0;
+use crate::device::{Model, Runner};
+use crate::error::SimError;
+use crate::instrument::Device;
+use crate::shared::{Control, Shared};
 
 #[allow(clippy::too_many_arguments)] // one call site per device, all arguments distinct
 fn start<M: Model>(

@@ -8,11 +8,13 @@ use protocol::psd::{Command, DataLine, Line, SystErr};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
-use super::POWER_UP_RATE_HZ;
-use crate::device::{Cadence, Ctx, Fault, FaultDice, Model, count_fate, garbage_text};
+use crate::device::{
+    Cadence, Ctx, Fault, FaultDice, Model, POWER_UP_RATE_HZ, count_fate, garbage_text,
+};
+use crate::instrument::Device;
 use crate::record::{Fate, SentSample, SentValues};
 use crate::scenario::Psd;
-use crate::{Device, Shared};
+use crate::shared::Shared;
 
 /// Half the diode's side, µm (10 mm × 10 mm duolateral PSD).
 const HALF_SIDE_UM: f64 = 5_000.0;

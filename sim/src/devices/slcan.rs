@@ -8,9 +8,10 @@ use protocol::can::{TriggerEvent, TriggerFrame};
 use protocol::slcan::{CanFrame, Command, Message};
 
 use crate::device::{Ctx, Model};
+use crate::instrument::Device;
 use crate::record::{SentTrigger, TriggerFate};
 use crate::scenario::{MissingTrigger, ProgramStart, TriggerAdapter};
-use crate::{Device, Shared};
+use crate::shared::Shared;
 
 pub(crate) struct Slcan {
     cfg: TriggerAdapter,

@@ -24,8 +24,8 @@
 use std::collections::VecDeque;
 
 use types::{
-    DetectorSettings, Instrument, NC_SETTLE_US, PoseMsg, PoseValue, Sample, SampleValues,
-    SteadyError, Trigger, TriggerEvent, TriggerTime,
+    DATUM_FLAGS, DetectorSettings, Instrument, NC_SETTLE_US, PoseMsg, PoseStatus, PoseValue,
+    Sample, SampleValues, SteadyError, Trigger, TriggerEvent, TriggerTime,
 };
 
 use crate::clock::{NcClock, NcPoint};
@@ -46,6 +46,9 @@ struct Slot {
     /// Samples past the time of a trigger still waiting to be placed, in order: fed once it
     /// is (a dwell must not take samples past its end before the end is known).
     queued: VecDeque<QueuedSample>,
+    /// Time of the first sample whose zero is not the run's ([`types::DATUM_FLAGS`]): every
+    /// pose after it that has no value is `datum_lost`, not a beam or device fault.
+    datum_lost_from: Option<u64>,
 }
 
 /// A sample waiting in [`Slot::queued`]: time, values, channels used, valid.
@@ -53,11 +56,13 @@ type QueuedSample = (u64, [f64; 3], usize, bool);
 
 impl Slot {
     fn out(&self, values: Vec<PoseValue>, out: &mut Vec<PoseMsg>) {
-        out.extend(
-            values
-                .iter()
-                .map(|v| PoseMsg::from_value(self.instrument, v)),
-        );
+        out.extend(values.into_iter().map(|mut v| {
+            if v.status != PoseStatus::Ok && self.datum_lost_from.is_some_and(|t| v.t_last_ns >= t)
+            {
+                v.status = PoseStatus::DatumLost;
+            }
+            PoseMsg::from_value(self.instrument, &v)
+        }));
     }
 
     /// Feeds the queued samples up to `horizon` (all with `None`), after the held triggers
@@ -113,6 +118,7 @@ impl PoseEngine {
                     held: VecDeque::new(),
                     newest_ns: 0,
                     queued: VecDeque::new(),
+                    datum_lost_from: None,
                 });
             }
         }
@@ -157,6 +163,12 @@ impl PoseEngine {
         let Some(slot) = self.detectors.iter_mut().find(|d| d.instrument == inst) else {
             return Vec::new();
         };
+        if let SampleValues::Position { flags, .. } = &s.values
+            && flags & DATUM_FLAGS != 0
+            && slot.datum_lost_from.is_none()
+        {
+            slot.datum_lost_from = Some(s.fitted_ns);
+        }
         let mut out = Vec::new();
         slot.queued.push_back((s.fitted_ns, values, n, s.valid));
         slot.drain(horizon, &mut out);
@@ -490,5 +502,46 @@ mod tests {
             serde_json::from_str(r#"{"instruments":["capball"],"trigger_time":"nc_clock"}"#)
                 .unwrap();
         assert_eq!(v01.trigger_time, TriggerTime::NcClock);
+    }
+
+    /// From the first reading whose zero is not the run's (the LI-80 reconnected, or lost its
+    /// datum), no pose of the interferometer is ok: each is `datum_lost` (issue: a reconnect
+    /// re-zeroed the interferometer and every later value was marked ok).
+    #[test]
+    fn after_the_datum_is_lost_no_pose_is_ok() {
+        let lost_from_s = pose_start_s(10);
+        let ns = |t: f64| T0_NS + (t * 1e9).round() as u64;
+        let settings = DetectorSettings {
+            instruments: vec![Instrument::Interferometer],
+            ..DetectorSettings::default()
+        };
+        let mut engine = PoseEngine::new(&settings).unwrap();
+        let mut out = Vec::new();
+        for ev in run_events(false) {
+            out.extend(match ev {
+                Ev::Sample(mut s) => {
+                    if s.fitted_ns >= ns(lost_from_s)
+                        && let SampleValues::Position { flags, .. } = &mut s.values
+                    {
+                        *flags |= types::DATUM_NOT_RUNS;
+                        s.valid = false;
+                    }
+                    engine.on_sample(&s)
+                }
+                Ev::Trigger(t) => engine.on_trigger(&t),
+            });
+        }
+        out.extend(engine.finish(u64::MAX));
+        let before: Vec<_> = out.iter().filter(|p| p.pose < 10).collect();
+        let after: Vec<_> = out.iter().filter(|p| p.pose >= 10).collect();
+        assert!(
+            before.iter().all(|p| p.status == PoseStatus::Ok),
+            "{before:?}"
+        );
+        assert_eq!(after.len(), usize::from(POSES) - 9, "{after:?}");
+        assert!(
+            after.iter().all(|p| p.status == PoseStatus::DatumLost),
+            "{after:?}"
+        );
     }
 }

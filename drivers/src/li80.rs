@@ -37,6 +37,12 @@ struct Li80Frames {
     env_seq: Unwrap,
     /// An `$ENV` line came since the last `setup`.
     env_seen: bool,
+    /// The datum was taken on this driver's first connection and the device has been
+    /// connected ever since; `false` after a reconnect (a power-cycled LI-80 counts from
+    /// wherever it stood), so its readings are flagged [`types::DATUM_NOT_RUNS`] and invalid.
+    datum_is_runs: bool,
+    /// `DATUM` was sent once (on the first connection of the run).
+    datum_taken: bool,
 }
 
 impl FrameConverter for Li80Frames {
@@ -57,12 +63,17 @@ impl FrameConverter for Li80Frames {
                 out(Reading::Data {
                     raw_seq: p.seq as u64,
                     raw_t_us: p.t_us,
-                    valid: p.valid() && comp_ok,
+                    valid: p.valid() && comp_ok && self.datum_is_runs,
                     values: SampleValues::Position {
                         raw_nm: p.raw_nm,
                         position_um,
                         sig: p.sig,
-                        flags: p.flags.0,
+                        flags: p.flags.0
+                            | if self.datum_is_runs {
+                                0
+                            } else {
+                                types::DATUM_NOT_RUNS
+                            },
                     },
                 });
             }
@@ -143,7 +154,7 @@ impl SerialDriver for Li80Driver {
         s.reset_decoder();
         let idn = s.expect("*IDN?\n", |a| a.starts_with("LI-80,")).await?;
         s.expect(&format!("RATE {}\n", self.rate_hz), is_ok).await?;
-        s.expect("DATUM\n", is_ok).await?;
+        take_datum_once(s).await?;
         s.path.converter.env_seen = false;
         s.path.converter.env_seq.reset();
         s.send("ENV?\n").await?;
@@ -153,6 +164,29 @@ impl SerialDriver for Li80Driver {
         s.expect("STREAM ON\n", is_ok).await?;
         Ok(idn.trim().to_string())
     }
+}
+
+/// `DATUM` on the run's first connection only: a later one would silently move the zero of
+/// every later length (a reconnect re-zeroed the interferometer wherever the axis stood). After
+/// a reconnect the readings are flagged instead, and the operator told.
+async fn take_datum_once<P: Port>(
+    s: &mut SerialSession<'_, Li80Frames, P>,
+) -> Result<(), DriverError> {
+    if s.path.converter.datum_taken {
+        if s.path.converter.datum_is_runs {
+            tracing::error!(
+                port = %s.path.converter.port,
+                "interferometer reconnected: its zero is no longer the run's datum; every later \
+                 length is marked datum_lost (re-reference and start a new run)"
+            );
+        }
+        s.path.converter.datum_is_runs = false;
+        return Ok(());
+    }
+    s.expect("DATUM\n", is_ok).await?;
+    s.path.converter.datum_taken = true;
+    s.path.converter.datum_is_runs = true;
+    Ok(())
 }
 
 /// Start the LI-80 driver task. It runs until `cancel` fires, reconnecting with backoff.
@@ -178,6 +212,8 @@ fn li80(
         comp: None,
         env_seq: Unwrap::new(32),
         env_seen: false,
+        datum_is_runs: false,
+        datum_taken: false,
     };
     let path = SamplePath::new(
         frames,

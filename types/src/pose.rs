@@ -20,6 +20,10 @@ pub enum PoseStatus {
     DeviceAway,
     /// An exact-stop trigger was expected but missing (detected from motion/dwell triggers).
     TriggerMissing,
+    /// The instrument's zero is no longer the run's: the interferometer lost its datum (beam
+    /// interrupted) or came back from a reconnect (power-cycled or re-zeroed), so its lengths
+    /// are not comparable with the run's earlier ones; re-reference before using them.
+    DatumLost,
 }
 
 impl PoseStatus {
@@ -30,6 +34,7 @@ impl PoseStatus {
             PoseStatus::BeamInvalid => "beam_invalid",
             PoseStatus::DeviceAway => "device_away",
             PoseStatus::TriggerMissing => "trigger_missing",
+            PoseStatus::DatumLost => "datum_lost",
         }
     }
     pub fn from_name(name: &str) -> Option<PoseStatus> {
@@ -39,6 +44,7 @@ impl PoseStatus {
             PoseStatus::BeamInvalid,
             PoseStatus::DeviceAway,
             PoseStatus::TriggerMissing,
+            PoseStatus::DatumLost,
         ]
         .into_iter()
         .find(|s| s.name() == name)

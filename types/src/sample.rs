@@ -55,6 +55,16 @@ pub enum SampleValues {
     },
 }
 
+/// A flag of [`SampleValues::Position`] set by the host, not the device (whose flags use the
+/// low bits, instruments.md §1): the reading's zero is not the run's datum. The LI-80 driver
+/// takes the datum once per run; after a reconnect the device may have been power-cycled or
+/// re-zeroed, so every later reading carries this flag and is invalid.
+pub const DATUM_NOT_RUNS: u32 = 1 << 31;
+
+/// The flags of [`SampleValues::Position`] that say the reading's zero is not the run's: the
+/// device's own "datum lost" (the beam was interrupted) and the host's [`DATUM_NOT_RUNS`].
+pub const DATUM_FLAGS: u32 = protocol::li80::PosFlags::DATUM_LOST | DATUM_NOT_RUNS;
+
 /// A CNC trigger, from SocketCAN or SLCAN alike.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Trigger {

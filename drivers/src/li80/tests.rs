@@ -25,8 +25,9 @@ fn config() -> Li80Config {
 }
 
 /// The device's side of the driver's setup (instruments.md §1), the `$ENV` record answering
-/// `ENV?` being `env`. `stale` is what a device still streaming sends before its `OK`.
-async fn answer_setup(dev: &mut Device, stale: &str, env: &str) {
+/// `ENV?` being `env`. `stale` is what a device still streaming sends before its `OK`. The
+/// datum is taken on the run's first connection only (`first`).
+async fn answer_setup(dev: &mut Device, stale: &str, env: &str, first: bool) {
     dev.expect("STREAM OFF\n").await;
     dev.send(stale).await;
     dev.send("OK\r\n").await;
@@ -34,8 +35,10 @@ async fn answer_setup(dev: &mut Device, stale: &str, env: &str) {
     dev.send("LI-80,A1234,2.1.0\r\n").await;
     dev.expect("RATE 1000\n").await;
     dev.send("OK\r\n").await;
-    dev.expect("DATUM\n").await;
-    dev.send("OK\r\n").await;
+    if first {
+        dev.expect("DATUM\n").await;
+        dev.send("OK\r\n").await;
+    }
     dev.expect("ENV?\n").await;
     dev.send(&nmea(env)).await;
     dev.expect("STREAM ON\n").await;
@@ -126,7 +129,7 @@ async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
 
     // A device left streaming by an earlier run: its lines before `OK` are no samples.
     let stale = nmea("POS,900,900000,12345,80,0") + &nmea("POS,901,901000,12346,80,0");
-    answer_setup(&mut dev, &stale, "ENV,0,500,20.00,101325,50.0,20.00").await;
+    answer_setup(&mut dev, &stale, "ENV,0,500,20.00,101325,50.0,20.00", true).await;
     let n_air = expect_environment(&mut rx, 0).await;
     expect_connected(&mut rx).await;
 
@@ -170,13 +173,19 @@ async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
         }
         ev => panic!("expected Disconnected, got {ev:?}"),
     }
-    answer_setup(&mut dev2, "", "ENV,0,500,20.00,101325,50.0,20.00").await;
+    // No `DATUM` this time: it would move the run's zero to wherever the axis stands.
+    answer_setup(&mut dev2, "", "ENV,0,500,20.00,101325,50.0,20.00", false).await;
     // The `$ENV` sequence starts afresh with the new session.
     expect_environment(&mut rx, 0).await;
     expect_connected(&mut rx).await;
-    // The device restarted its count: no gap, no resync.
+    // The device restarted its count: no gap, no resync. Its zero is not the run's datum any
+    // more: every reading is flagged and invalid (a pose of it is `datum_lost`, never ok).
     dev2.send(&nmea("POS,1,1000,100,90,0")).await;
-    check_position(&next_sample(&mut rx).await, n_air, (1, 100, 90, 0, true));
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (1, 100, 90, types::DATUM_NOT_RUNS, false),
+    );
 
     // Cancelled: the driver stops the stream, and what the device sent before its `OK` still
     // arrives.
@@ -195,14 +204,23 @@ async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
         }
     }
     assert_eq!(samples.len(), 2);
-    check_position(&samples[0], n_air, (2, 200, 90, 0, true));
-    check_position(&samples[1], n_air, (3, 300, 90, 0, true));
+    check_position(
+        &samples[0],
+        n_air,
+        (2, 200, 90, types::DATUM_NOT_RUNS, false),
+    );
+    check_position(
+        &samples[1],
+        n_air,
+        (3, 300, 90, types::DATUM_NOT_RUNS, false),
+    );
 
     let c = last_counters.expect("a last counters snapshot");
     let want = Counters {
         // 2 `$ENV`, 3 + 1 + 2 `$POS`
         samples: 8,
-        invalid: 1,
+        // The low-signal sample, and the three after the reconnect (not the run's datum).
+        invalid: 1 + 3,
         dropped: 0,
         gaps: 1,
         gap_samples: 1,
@@ -210,8 +228,9 @@ async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
         device_errors: 1,
         disconnects: 1,
         reconnects: 1,
-        // The answer lines of both setups (`ENV?` is answered by a record) and of the stop.
-        answers: 5 + 5 + 1,
+        // The answer lines of both setups (`ENV?` is answered by a record; no `DATUM` on the
+        // reconnect) and of the stop.
+        answers: 5 + 4 + 1,
         rejections: [(RejectKind::BadChecksum, 1)].into_iter().collect(),
         clock_drift_ppm: c.clock_drift_ppm,
     };

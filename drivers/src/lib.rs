@@ -9,7 +9,8 @@
 //! - [`DriverError`] — why a port or device failed (in `DriverEvent::{Error, Disconnected}`);
 //! - [`Counters`] — per-instrument counters;
 //! - [`Instrument`], with the pose-valued instruments and their detector channels;
-//! - [`spawn_li80`], [`spawn_cb3`], [`spawn_psd`], [`spawn_slcan`], [`spawn_socketcan`] with
+//! - [`spawn_li80`], [`spawn_cb3`], [`spawn_psd`], [`spawn_slcan`], [`spawn_socketcan`],
+//!   [`spawn_modbus_temperature`] with
 //!   their configurations — start a driver task;
 //! - [`trigger_from_frame`] and [`from_socketcan`] — the one decoding path of SLCAN and
 //!   SocketCAN frames (the CAN trigger event is the one enum `protocol::can::TriggerEvent`,
@@ -41,6 +42,7 @@ mod cb3;
 mod error;
 mod event;
 mod li80;
+mod modbus;
 mod psd;
 mod reporter;
 mod sample_path;
@@ -55,6 +57,9 @@ pub use cb3::{Cb3Config, spawn_cb3};
 pub use error::DriverError;
 pub use event::{DriverEvent, EventSender};
 pub use li80::{Li80Config, spawn_li80};
+pub use modbus::{
+    ModbusConfigError, ModbusTempConfig, Parity, RegisterKind, TempSensor, spawn_modbus_temperature,
+};
 pub use psd::{HeadCorrection, PsdAxis, PsdConfig, spawn_psd};
 pub use trigger::{
     SlcanConfig, SocketCanConfig, from_socketcan, spawn_slcan, spawn_socketcan, trigger_from_frame,

@@ -75,6 +75,7 @@
 
 mod device;
 mod devices;
+pub mod modbus;
 pub mod physics;
 mod pty;
 pub mod record;

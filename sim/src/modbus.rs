@@ -65,6 +65,8 @@ pub type Temperatures = Arc<dyn Fn(f64) -> Vec<Option<f64>> + Send + Sync>;
 /// What to do to the next request addressed to the module.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ModbusFault {
+    /// No fault: answer as the data sheet says (a placeholder in a fault sequence).
+    Answer,
     /// Say nothing.
     NoAnswer,
     /// Answer with this exception code.
@@ -280,7 +282,7 @@ impl Slave {
                 *b.last_mut().expect("a frame has a CRC") ^= 0x5A;
                 (Reply::BadCrc(r), Some(b))
             }
-            (None, None) => {
+            (None | Some(ModbusFault::Answer), None) => {
                 let r = regs();
                 let b = encode_read_response(c.unit, req.function, &r);
                 (Reply::Registers(r), Some(b))

@@ -109,6 +109,8 @@ fn python_reads_the_log_and_every_message_matches_its_schema() {
                 drivers::SampleValues::Environment { .. } => "/interferometer/environment",
                 drivers::SampleValues::Capball { .. } => "/capball/sample",
                 drivers::SampleValues::Psd { .. } => "/psd/sample",
+                // Not logged yet (no raw topic).
+                drivers::SampleValues::Temperature { .. } => continue,
             },
             drivers::DriverEvent::Trigger(_) => "/cnc/trigger",
             drivers::DriverEvent::Connected { .. } => "/event",

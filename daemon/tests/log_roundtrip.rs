@@ -144,7 +144,9 @@ fn every_topic_round_trips() {
                 let e = SyntheticRun::psd_error_um(k);
                 vec![("x_um", e[0]), ("y_um", e[1])]
             }
-            Instrument::Trigger => panic!("a pose value of the trigger"),
+            Instrument::Trigger | Instrument::Thermometer => {
+                panic!("a pose value of {:?}", p.instrument)
+            }
         };
         assert_eq!(p.mean.len(), want.len());
         for (name, v) in want {

@@ -157,7 +157,9 @@ impl PoseEngine {
             }
             SampleValues::Capball { e_um, .. } => (Instrument::Capball, *e_um, 3),
             SampleValues::Psd { x_um, y_um, .. } => (Instrument::Psd, [*x_um, *y_um, 0.0], 2),
-            SampleValues::Environment { .. } => return Vec::new(),
+            SampleValues::Environment { .. } | SampleValues::Temperature { .. } => {
+                return Vec::new();
+            }
         };
         let horizon = self.horizon();
         let Some(slot) = self.detectors.iter_mut().find(|d| d.instrument == inst) else {

@@ -5,7 +5,8 @@
 //!
 //! What others use, all re-exported here (the modules are private):
 //! - [`spawn_li80`], [`spawn_cb3`], [`spawn_psd`], [`spawn_slcan`] and, with the cargo feature
-//!   `socketcan` (default), `spawn_socketcan`, with their configurations;
+//!   `socketcan` (default), `spawn_socketcan`, and [`spawn_modbus_temperature`] (Modbus RTU temperature modules),
+//!   with their configurations;
 //! - what they yield: [`DriverEvent`] through an [`EventSender`], [`DriverError`], and the
 //!   shared vocabulary of `metrolog-types` ([`Sample`], [`Trigger`], [`Counters`], ...);
 //! - [`trigger_from_frame`] (and `from_socketcan`): the one decoding path of CAN triggers.
@@ -23,6 +24,7 @@ mod cb3;
 mod error;
 mod event;
 mod li80;
+mod modbus;
 mod psd;
 mod reporter;
 mod sample_path;
@@ -41,6 +43,9 @@ pub use cb3::{Cb3Config, spawn_cb3};
 pub use error::DriverError;
 pub use event::{DriverEvent, EventSender};
 pub use li80::{Li80Config, spawn_li80};
+pub use modbus::{
+    ModbusConfigError, ModbusTempConfig, Parity, RegisterKind, TempSensor, spawn_modbus_temperature,
+};
 pub use psd::{HeadCorrection, PsdAxis, PsdConfig, spawn_psd};
 pub use trigger::{SlcanConfig, SocketCanConfig, spawn_slcan, trigger_from_frame};
 /// The shared vocabulary the drivers' events are made of (`metrolog-types`).

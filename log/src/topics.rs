@@ -342,6 +342,7 @@ impl Decoded {
                 head_c: *head_c,
                 valid,
             }),
+            SampleValues::Temperature { .. } => Decoded::Unlogged(s.instrument),
         }
     }
 
@@ -440,6 +441,9 @@ pub enum Decoded {
     Pose(PoseMsg),
     Status(StatusMsg),
     Event(EventMsg),
+    /// A sample of an instrument that has no log topic yet (the Modbus temperature module,
+    /// until the daemon's `[temperature]` step adds `/temperature`); never decoded from a log.
+    Unlogged(Instrument),
 }
 
 /// Decodes a message of one of metrolog's topics; `Ok(None)` for a topic it does not know.

@@ -411,10 +411,10 @@ impl LogWriter {
     /// and on every flush. Its log time is the host arrival time of its first sample.
     pub fn write_sample(&mut self, s: &Sample) -> Result<(), LogError> {
         let topic = raw::topic_of(s);
-        let i = raw::RAW_TOPICS
-            .iter()
-            .position(|(t, _)| *t == topic)
-            .unwrap_or(0);
+        let Some(i) = raw::RAW_TOPICS.iter().position(|(t, _)| *t == topic) else {
+            // A sample kind without a raw topic yet (temperature): not logged.
+            return Ok(());
+        };
         let batch = &mut self.pending[i];
         batch.push(s);
         self.samples += 1;

@@ -44,6 +44,7 @@ pub mod edlen;
 #[doc(hidden)]
 pub mod fuzzcheck;
 pub mod li80;
+pub mod modbus;
 pub mod psd;
 pub mod reject;
 pub mod slcan;

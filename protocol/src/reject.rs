@@ -22,10 +22,14 @@ pub enum RejectKind {
     Cobs,
     /// A binary frame of the wrong length for its type.
     BadLength,
+    /// A polled device did not answer a request in time (Modbus RTU, instruments.md §5).
+    Timeout,
+    /// A polled device answered a request with an exception response (Modbus RTU).
+    Exception,
 }
 
 impl RejectKind {
-    pub const ALL: [RejectKind; 8] = [
+    pub const ALL: [RejectKind; 10] = [
         RejectKind::BadChecksum,
         RejectKind::BadCrc,
         RejectKind::Malformed,
@@ -34,6 +38,8 @@ impl RejectKind {
         RejectKind::OverlongLine,
         RejectKind::Cobs,
         RejectKind::BadLength,
+        RejectKind::Timeout,
+        RejectKind::Exception,
     ];
     pub fn name(self) -> &'static str {
         match self {
@@ -45,6 +51,8 @@ impl RejectKind {
             RejectKind::OverlongLine => "overlong_line",
             RejectKind::Cobs => "cobs",
             RejectKind::BadLength => "bad_length",
+            RejectKind::Timeout => "timeout",
+            RejectKind::Exception => "exception",
         }
     }
 }

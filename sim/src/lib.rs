@@ -77,6 +77,7 @@ mod device;
 mod devices;
 mod error;
 mod instrument;
+pub mod modbus;
 pub mod physics;
 mod pty;
 pub mod record;

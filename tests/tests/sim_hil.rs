@@ -115,6 +115,8 @@ impl Rig {
                     tx.clone(),
                     cancel.clone(),
                 ),
+                // Not one of the simulation's devices (its module is `sim::modbus`).
+                Instrument::Thermometer => panic!("the rig has no temperature module"),
             };
             tasks.push(t);
         }

@@ -11,15 +11,19 @@ pub enum Instrument {
     Capball,
     Psd,
     Trigger,
+    /// A Modbus RTU temperature module (instruments.md §5): environment, not pose-valued.
+    #[serde(rename = "temperature")]
+    Thermometer,
 }
 
 impl Instrument {
     /// Every instrument, in the order of their `Ord`.
-    pub const ALL: [Instrument; 4] = [
+    pub const ALL: [Instrument; 5] = [
         Instrument::Interferometer,
         Instrument::Capball,
         Instrument::Psd,
         Instrument::Trigger,
+        Instrument::Thermometer,
     ];
 
     /// The instruments whose samples give pose values (the CNC trigger delimits poses but
@@ -37,6 +41,7 @@ impl Instrument {
             Instrument::Capball => "capball",
             Instrument::Psd => "psd",
             Instrument::Trigger => "trigger",
+            Instrument::Thermometer => "temperature",
         }
     }
 
@@ -48,13 +53,13 @@ impl Instrument {
     /// Names of the pose detector's channels of this instrument, in the order the detector
     /// takes them (the fields of its sample that make a pose value): the interferometer's
     /// compensated length, the CapBall's machine-frame errors, the PSD's spot position. Empty
-    /// for the trigger.
+    /// for the trigger and the temperature module.
     pub fn detector_channels(self) -> &'static [&'static str] {
         match self {
             Instrument::Interferometer => &["position_um"],
             Instrument::Capball => &["ex_um", "ey_um", "ez_um"],
             Instrument::Psd => &["x_um", "y_um"],
-            Instrument::Trigger => &[],
+            Instrument::Trigger | Instrument::Thermometer => &[],
         }
     }
 }

@@ -53,6 +53,10 @@ pub enum SampleValues {
         sum_pa: f64,
         head_c: f64,
     },
+    /// Temperature module (Modbus RTU, instruments.md §5): one value per configured channel,
+    /// °C, in the configured channel order; NaN for a channel reporting a sensor fault (the
+    /// sample is then invalid).
+    Temperature { values_c: Vec<f64> },
 }
 
 /// A flag of [`SampleValues::Position`] set by the host, not the device (whose flags use the
@@ -85,7 +89,8 @@ pub struct Counters {
     pub gaps: u64,
     /// Lines or frames discarded by the decoder (and trigger frames with a bad payload), by
     /// kind, once streaming. What a device sends before we start its stream is discarded
-    /// uncounted.
+    /// uncounted. A polled device (the Modbus temperature module) counts its failed
+    /// transactions here too: `timeout`, `exception`, `bad_crc`.
     pub rejections: std::collections::BTreeMap<protocol::RejectKind, u64>,
     /// Sequence number or device clock stepped back within one connection (the device
     /// restarted under us): counting and the clock fit start afresh; not a gap.

@@ -22,7 +22,7 @@ pub fn detector_settings(cfg: &Config) -> DetectorSettings {
         drivers::Instrument::Interferometer => cfg.interferometer.is_some(),
         drivers::Instrument::Capball => cfg.capball.is_some(),
         drivers::Instrument::Psd => cfg.psd.is_some(),
-        drivers::Instrument::Trigger => false,
+        drivers::Instrument::Trigger | drivers::Instrument::Thermometer => false,
     });
     if cfg.trigger.is_none() {
         for c in [&mut s.interferometer, &mut s.capball, &mut s.psd] {

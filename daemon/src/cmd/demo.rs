@@ -259,7 +259,7 @@ fn error_um(v: &PoseMsg, t: &PoseTruth, home_x_mm: f64) -> Option<f64> {
         Instrument::Psd => {
             ((m("x_um")? - t.psd_x_um).powi(2) + (m("y_um")? - t.psd_y_um).powi(2)).sqrt()
         }
-        Instrument::Trigger => return None,
+        Instrument::Trigger | Instrument::Thermometer => return None,
     })
 }
 

@@ -69,22 +69,31 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     print_out(&text)
 }
 
-/// The model as JSON, refused when any number is not finite (serde_json writes those as
+/// The model as JSON, refused when any of its numbers is not finite (serde_json would write
 /// `null`, which no reader could take back as a number).
 fn model_json(model: &thermal::ThermalModel) -> anyhow::Result<String> {
-    let v = serde_json::to_value(model)?;
-    fn has_null(v: &serde_json::Value) -> bool {
-        match v {
-            serde_json::Value::Null => true,
-            serde_json::Value::Array(a) => a.iter().any(has_null),
-            serde_json::Value::Object(o) => o.values().any(has_null),
-            _ => false,
+    for c in &model.channels {
+        let mut all = vec![
+            c.intercept_um,
+            c.fit_rms_um,
+            c.heldout_rms_um,
+            c.static_heldout_rms_um,
+            c.interval.level,
+            c.interval.half_width_um,
+            c.interval.heldout_coverage,
+        ];
+        for t in &c.terms {
+            all.extend([t.coefficient, t.tau_heat_s, t.tau_cool_s]);
+            if let thermal::Input::Sensor { reference_c, .. } = &t.input {
+                all.push(*reference_c);
+            }
         }
+        anyhow::ensure!(
+            all.iter().all(|v| v.is_finite()),
+            "the fitted model of `{}` holds a non-finite number; not written (the data are \
+             probably degenerate: a constant or duplicated column)",
+            c.channel
+        );
     }
-    anyhow::ensure!(
-        !has_null(&v),
-        "the fitted model holds a non-finite number; not written (the data are probably \
-         degenerate: a constant or duplicated column)"
-    );
-    Ok(serde_json::to_string_pretty(&v)? + "\n")
+    Ok(serde_json::to_string_pretty(model)? + "\n")
 }

@@ -103,6 +103,7 @@ impl Table {
 }
 
 /// Least squares by Householder QR: the coefficients minimising |A x − y| (A: rows × cols).
+#[allow(clippy::needless_range_loop)] // matrix indices read as the algebra
 fn least_squares(mut a: Vec<Vec<f64>>, mut y: Vec<f64>) -> Vec<f64> {
     let (m, n) = (a.len(), a[0].len());
     for k in 0..n {

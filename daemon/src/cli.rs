@@ -49,6 +49,9 @@ pub enum Command {
     /// Write a controller's compensation table from a measurement.
     #[command(subcommand)]
     Compensate(cmd::compensate::Command),
+    /// Thermal model of a machine tool from a thermal test: fit, predict, diagnose.
+    #[command(subcommand)]
+    Thermal(cmd::thermal::Command),
     /// The positioning report a customer signs (self-contained HTML, or PDF printed by Chromium).
     Report(cmd::report::Args),
 }
@@ -88,6 +91,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Plan(c) => cmd::plan::run(c),
         Command::Compensate(c) => cmd::compensate::run(c),
         Command::Report(a) => cmd::report::run(a),
+        Command::Thermal(c) => cmd::thermal::run(c),
     }
 }
 

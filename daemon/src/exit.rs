@@ -53,6 +53,12 @@ pub struct LogCreateFailed(pub String);
 #[error("the log could not be written, the run stopped: {0}")]
 pub struct LogWriteFailed(pub String);
 
+/// A command's output file could not be written (no such directory, no permission, disk
+/// full): exits [`IO_ERROR`].
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct OutputWriteFailed(pub String);
+
 /// The pipeline thread panicked: exits [`SOFTWARE`].
 #[derive(Debug, thiserror::Error)]
 #[error("the pipeline thread panicked; the log may be incomplete")]
@@ -64,7 +70,7 @@ pub fn code_for(e: &anyhow::Error) -> u8 {
         if cause.is::<ConfigError>() {
             return CONFIG;
         }
-        if cause.is::<LogWriteFailed>() {
+        if cause.is::<LogWriteFailed>() || cause.is::<OutputWriteFailed>() {
             return IO_ERROR;
         }
         if cause.is::<LogCreateFailed>() {
@@ -98,6 +104,10 @@ mod tests {
             CANT_CREATE
         );
         assert_eq!(code_for(&anyhow::Error::new(PipelinePanicked)), SOFTWARE);
+        assert_eq!(
+            code_for(&anyhow::Error::new(OutputWriteFailed("x".into()))),
+            IO_ERROR
+        );
         assert_eq!(code_for(&anyhow::anyhow!("something else")), FAILURE);
     }
 

@@ -1,5 +1,6 @@
 //! `metrolog analyze`: evaluate a measurement. `analyze positioning` runs ISO 230-2 with the
-//! thermal-drift elimination of Stejskal et al. (2017) on a positioning dataset.
+//! thermal-drift elimination of Stejskal et al. (2017) on a positioning dataset; `analyze
+//! thermal` evaluates an ISO 230-3 thermal test (`cmd::thermal::iso230_3`).
 
 use std::path::PathBuf;
 
@@ -14,6 +15,9 @@ pub enum Command {
     /// ISO 230-2 positioning accuracy and repeatability of one axis, with thermal-drift
     /// elimination (adjacent-target differences).
     Positioning(PositioningArgs),
+    /// ISO 230-3 thermal test: ETVE of every displacement channel and, with `--probes`, the
+    /// spindle's thermal distortion (X, Y, Z drift, A and B tilt).
+    Thermal(crate::cmd::thermal::iso230_3::Args),
 }
 
 #[derive(Debug, clap::Args)]
@@ -55,6 +59,7 @@ pub struct PositioningArgs {
 pub fn run(c: Command) -> anyhow::Result<()> {
     match c {
         Command::Positioning(a) => positioning(a),
+        Command::Thermal(a) => crate::cmd::thermal::iso230_3::run(a),
     }
 }
 

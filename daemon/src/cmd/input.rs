@@ -193,3 +193,53 @@ pub fn print_out(text: &str) -> anyhow::Result<()> {
         _ => Ok(()),
     }
 }
+
+/// A thermal test (`time_s`, temperatures `_c`, optional `spindle_rpm` and displacements `_um`,
+/// see [`thermal::ThermalDataset`]). Only CSV: a run's log carries no thermal topic.
+pub fn load_thermal(path: &Path) -> anyhow::Result<thermal::ThermalDataset> {
+    anyhow::ensure!(
+        !metrolog_analysis::is_mcap(path),
+        "{}: a thermal test must be a CSV file (`time_s`, temperatures ending `_c`, optionally \
+         `spindle_rpm` and displacements ending `_um`); a run's MCAP log holds no thermal test",
+        path.display()
+    );
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    thermal::ThermalDataset::from_csv(&text).with_context(|| {
+        format!(
+            "{} is not a valid thermal test; fix the file at the place named",
+            path.display()
+        )
+    })
+}
+
+/// Writes an output file whole or not at all: the text goes to a temporary file beside `path`,
+/// which is synced and then renamed over `path`, so a reader never sees half a file and a
+/// failed write leaves any earlier file as it was. A failure exits with the I/O error code.
+pub fn write_output(path: &Path, text: &str) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let fail = |what: &str, e: std::io::Error| {
+        crate::exit::OutputWriteFailed(format!("cannot write {}: {what}: {e}", path.display()))
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".metrolog-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(|e| fail("creating a temporary file in its directory", e))?;
+    // tempfile creates the file 0600; an output is an ordinary file others may read.
+    use std::os::unix::fs::PermissionsExt as _;
+    tmp.write_all(text.as_bytes())
+        .and_then(|_| {
+            tmp.as_file()
+                .set_permissions(std::fs::Permissions::from_mode(0o644))
+        })
+        .and_then(|_| tmp.as_file().sync_all())
+        .map_err(|e| fail("writing", e))?;
+    tmp.persist(path)
+        .map_err(|e| fail("renaming the finished temporary file", e.error))?;
+    Ok(())
+}

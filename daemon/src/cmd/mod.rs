@@ -6,7 +6,8 @@
 //! - logs: [`info`], [`replay`], [`recover`];
 //! - analyses: [`analyze`], [`diagnose`] (positioning or CapBall), [`identify`] (CapBall, PSD,
 //!   trajectories, sensor frame), [`volumetric`], [`parts`], [`uncertainty`], [`plan`],
-//!   [`compensate`], [`report`] (with [`pdf`]);
+//!   [`compensate`], [`report`] (with [`pdf`]), [`thermal`] (thermal model: fit, predict,
+//!   diagnose; `analyze thermal` for ISO 230-3);
 //! - shared by the commands, importing none of them: [`input`] (the one place that decides
 //!   how an input is read: CSV or log), [`plots`] (the one place commands draw from),
 //!   [`progress`] (progress bars).
@@ -30,5 +31,6 @@ pub mod report;
 pub mod run;
 #[cfg(feature = "sim")]
 pub mod sim;
+pub mod thermal;
 pub mod uncertainty;
 pub mod volumetric;

@@ -14,7 +14,9 @@ use positioning::standards::StandardResult;
 use positioning::units::Units;
 
 use crate::export::num;
-use crate::positioning_report::PositioningAnalysis;
+use crate::positioning_report::{
+    DECISION_RULE, PositioningAnalysis, lower_bound_note, origin_text, sensor_text,
+};
 
 /// What the header says; `None` prints "not stated".
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -472,26 +474,90 @@ fn readings_table(data: &PositioningData) -> String {
     s
 }
 
+/// The budget of the results: one row per contributor (its u, status and source), then U of
+/// each result, the lower-bound sentence when terms are missing, and the decisions.
 fn uncertainty_section(an: &PositioningAnalysis) -> String {
-    let Some(mu) = an
-        .measurement_uncertainty
-        .as_ref()
-        .filter(|m| !m.u_k2_um.is_empty())
-    else {
-        return "<p>No measurement uncertainty could be computed for this run (the budget is that of a laser interferometer measuring lengths; a run in other units, such as a rotary axis, has none).</p>".into();
-    };
+    let u = &an.uncertainty;
     let mut s = format!(
-        "<p>Uncertainty of one interferometer reading (ISO/TR 230-9 style length budget; α {} µm/(m·K), material {} °C), expanded with k = 2:</p><table class=\"res\"><tr><th>target (mm)</th><th>u (µm)</th><th>U, k = 2 (µm)</th></tr>",
-        num(mu.budget.alpha_per_k * 1e6, 1),
-        num(mu.budget.material_temp_c, 2)
+        "<p>Uncertainty of the results by the contributors of ISO 230-2:2014 Annex A / ISO/TR \
+         230-9 (GUM combination, docs/methods.md); sensor: <b>{}</b>; measured length L = {} \
+         mm. Each term is <i>recorded</i> by the run, <i>assumed</i> (value and source given) or \
+         <i>missing</i>.</p><table class=\"res budget\"><tr><th>term</th><th>what</th>\
+         <th>u (µm)</th><th>status</th><th>source</th></tr>",
+        esc(&sensor_text(&u.sensor)),
+        num(u.length_mm, 3)
     );
-    for ((t, u), uk) in an.targets.iter().zip(&mu.u_um).zip(&mu.u_k2_um) {
+    for c in &u.contributors {
+        let (status, note) = origin_text(&c.origin);
         let _ = write!(
             s,
-            "<tr><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
-            num(t.target_mm, 3),
-            num(*u, 2),
-            num(*uk, 2)
+            "<tr class=\"{}\"><td>{}</td><td>{}</td><td class=\"n\">{}</td><td>{status}</td><td>{}</td></tr>",
+            status.replace(' ', "-").to_lowercase(),
+            esc(&c.symbol),
+            esc(&c.description),
+            c.u_um.map(|v| num(v, 3)).unwrap_or_else(|| "—".into()),
+            esc(note)
+        );
+    }
+    s.push_str("</table><table class=\"res\"><tr><th>result</th><th>value (µm)</th><th>u (µm)</th><th>U, k = 2 (µm)</th><th>terms in U</th><th>missing</th></tr>");
+    for r in &u.results {
+        let terms: Vec<String> = r
+            .contributions
+            .iter()
+            .map(|(k, v)| format!("{k} {}", num(*v, 3)))
+            .collect();
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\" data-u=\"{}\">{}{}</td><td class=\"small\">{}</td><td>{}</td></tr>",
+            esc(&r.parameter),
+            r.value_um.map(|v| num(v, 2)).unwrap_or_else(|| "—".into()),
+            num(r.u_um, 3),
+            esc(&r.parameter),
+            if r.missing.is_empty() { "" } else { "≥ " },
+            num(r.expanded_um, 3),
+            esc(&terms.join(", ")),
+            if r.missing.is_empty() {
+                "none".into()
+            } else {
+                esc(&r.missing.join(", "))
+            }
+        );
+    }
+    s.push_str("</table>");
+    if let Some(n) = lower_bound_note(u) {
+        let _ = write!(s, "<p class=\"lower\"><b>{}</b></p>", esc(&n));
+    }
+    s
+}
+
+/// The ISO 14253-1 decisions under the tolerances given, with the rule.
+fn conformance_section(an: &PositioningAnalysis) -> String {
+    if an.conformance.is_empty() {
+        return "<p>No tolerance given (<code>--tolerance E=…</code>): no conformance decision.</p>"
+            .into();
+    }
+    let mut s = format!(
+        "<p>Decision rule: {}.</p><table class=\"res\"><tr><th>result</th><th>value (µm)</th><th>tolerance (µm)</th><th>U, k = 2 (µm)</th><th>decision</th><th>why</th></tr>",
+        esc(DECISION_RULE)
+    );
+    for c in &an.conformance {
+        let (v, u, label) = match &c.decision {
+            Some(d) => (
+                num(d.value, 2),
+                num(d.expanded_uncertainty, 3),
+                d.decision.label(),
+            ),
+            None => ("—".into(), "—".into(), "no decision"),
+        };
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td class=\"n\">{v}</td><td class=\"n\">{}</td><td class=\"n\">{u}</td><td class=\"decision {}\" data-decision=\"{}\"><b>{}</b></td><td>{}</td></tr>",
+            esc(&c.parameter),
+            num(c.tolerance_um, 3),
+            label.replace(' ', "-"),
+            esc(&c.parameter),
+            label.to_uppercase(),
+            esc(&c.reason)
         );
     }
     s.push_str("</table>");
@@ -509,10 +575,12 @@ fn header_table(
         .alpha_um_per_m_k
         .map(|a| format!("{} µm/(m·K)", num(a, 2)))
         .unwrap_or_else(|| "<i>not stated</i>".into());
-    let norm = if data.material_compensation {
-        "readings normalised to 20 °C"
-    } else {
-        "readings NOT normalised to 20 °C"
+    // Normalised to 20 °C only means something with a material temperature to normalise from.
+    let has_material = data.readings.iter().any(|r| r.material_c.is_some());
+    let norm = match (data.material_compensation, has_material) {
+        (true, true) => "readings normalised to 20 °C from the material temperature",
+        (true, false) => "no material temperature recorded: normalisation to 20 °C not shown",
+        (false, _) => "readings NOT normalised to 20 °C",
     };
     let rows = [
         ("Machine", stated(&h.machine)),
@@ -588,6 +656,8 @@ pub fn positioning_html(
     // One block: its heading is not left alone at the foot of a printed page.
     s.push_str("<section class=\"keep\"><h2>Measurement uncertainty</h2>");
     s.push_str(&uncertainty_section(an));
+    s.push_str("</section><section class=\"keep\"><h2>Conformance (ISO 14253-1)</h2>");
+    s.push_str(&conformance_section(an));
     s.push_str("</section>");
     for n in an.notes.iter().chain(&an.drift_elimination.notes) {
         let _ = write!(s, "<p class=\"note\">{}</p>", esc(n));

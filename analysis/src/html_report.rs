@@ -28,23 +28,90 @@ pub struct ReportHeader {
     pub instruments: Vec<String>,
     /// "applied: …" or "none" — whether a compensation was active during the run.
     pub compensation: Option<String>,
+    /// Air pressure and humidity, "min / mean / max" with units (a log's environment records).
+    pub air_pressure: Option<String>,
+    pub humidity: Option<String>,
+    /// Identifies the report with its input: a hash of the input's bytes ([`report_id`]).
+    pub report_id: Option<String>,
+}
+
+/// An `*IDN?` answer "maker,model,serial,firmware" in words; anything else as it is.
+pub fn idn_text(idn: &str) -> String {
+    let p: Vec<&str> = idn.split(',').map(str::trim).collect();
+    match p.as_slice() {
+        [maker, model, serial, fw, ..] if !serial.is_empty() => {
+            format!("{maker} {model}, s/n {serial}, firmware {fw}")
+        }
+        _ => idn.to_string(),
+    }
+}
+
+/// The report ID of an input: FNV-1a (64 bit, offset 0xcbf29ce484222325, prime 0x100000001b3)
+/// of its bytes, 16 hex digits; fed in blocks (a log can be gigabytes). Not a cryptographic
+/// hash: it names the input a report was made from (the same file gives the same ID, a changed
+/// one another); it does not protect the file against a deliberate change.
+#[derive(Debug, Clone, Copy)]
+pub struct ReportId(u64);
+
+impl Default for ReportId {
+    fn default() -> Self {
+        ReportId(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl ReportId {
+    pub fn update(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    pub fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
 }
 
 impl ReportHeader {
-    /// The header from the dataset's metadata (`machine`, `operator`, `date`,
-    /// `instrument*` / `serial*`, `compensation`).
+    /// The header from the dataset's metadata: `machine`, `operator`, `date` (else a log's
+    /// `start_time`, the run's start), the instruments (a log's `instrument.<name>` `*IDN?`
+    /// identities; a CSV's keys starting with `instrument` or `serial`), `compensation`,
+    /// `air_pressure_kpa` and `humidity_pct`.
     pub fn from_metadata(d: &PositioningData) -> ReportHeader {
         let m = &d.metadata;
+        let mut instruments: Vec<String> = m
+            .iter()
+            .filter(|(k, _)| k.starts_with("instrument.") && !k.ends_with('.'))
+            .map(|(k, v)| format!("{}: {}", &k["instrument.".len()..], idn_text(v)))
+            .collect();
+        instruments.extend(
+            m.iter()
+                .filter(|(k, _)| {
+                    (k.starts_with("instrument") || k.starts_with("serial"))
+                        && !k.starts_with("instrument.")
+                        && k.as_str() != "instruments_configured"
+                })
+                .map(|(k, v)| format!("{}: {v}", k.replace('_', " "))),
+        );
+        if instruments.is_empty()
+            && let Some(c) = m.get("instruments_configured")
+        {
+            instruments.push(format!(
+                "{} (configured; no identity or serial recorded)",
+                c.replace(',', ", ")
+            ));
+        }
         ReportHeader {
-            machine: m.get("machine").cloned(),
+            machine: m.get("machine").cloned().filter(|v| !v.is_empty()),
             operator: m.get("operator").cloned(),
-            date: m.get("date").cloned(),
-            instruments: m
-                .iter()
-                .filter(|(k, _)| k.starts_with("instrument") || k.starts_with("serial"))
-                .map(|(k, v)| format!("{k}: {v}"))
-                .collect(),
+            date: m.get("date").cloned().or_else(|| {
+                m.get("start_time")
+                    .map(|t| format!("{t} (run start, from the log)"))
+            }),
+            instruments,
             compensation: m.get("compensation").cloned(),
+            air_pressure: m.get("air_pressure_kpa").cloned(),
+            humidity: m.get("humidity_pct").cloned(),
+            report_id: None,
         }
     }
 }
@@ -60,6 +127,12 @@ fn stated(v: &Option<String>) -> String {
     v.as_deref()
         .map(esc)
         .unwrap_or_else(|| "<i>not stated</i>".into())
+}
+
+fn recorded(v: &Option<String>) -> String {
+    v.as_deref()
+        .map(esc)
+        .unwrap_or_else(|| "<i>not recorded</i>".into())
 }
 
 /// min / mean / max of some readings' values, °C.
@@ -451,6 +524,33 @@ fn standards_tables(standards: &[StandardResult]) -> String {
     s
 }
 
+/// The ISO 230-2 statistics per target: x̄↑, x̄↓, s↑, s↓, B_i, R_i, x̄_i.
+fn target_table(an: &PositioningAnalysis) -> String {
+    let mut s = String::from(
+        "<table class=\"res targets\"><tr><th>i</th><th>target (mm)</th><th>n↑</th><th>n↓</th><th>x̄↑ (µm)</th><th>x̄↓ (µm)</th><th>s↑ (µm)</th><th>s↓ (µm)</th><th>B_i (µm)</th><th>R_i (µm)</th><th>x̄_i (µm)</th></tr>",
+    );
+    let o = |v: Option<f64>| v.map(|v| num(v, 2)).unwrap_or_else(|| "—".into());
+    for t in &an.targets {
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
+            t.index,
+            num(t.target_mm, 3),
+            t.n_up,
+            t.n_down,
+            o(t.mean_up_um),
+            o(t.mean_down_um),
+            o(t.s_up_um),
+            o(t.s_down_um),
+            o(t.b_um),
+            o(t.r_um),
+            o(t.mean_um)
+        );
+    }
+    s.push_str("</table>");
+    s
+}
+
 /// The readings as data runs: one row per target, one column per (cycle, direction).
 fn readings_table(data: &PositioningData) -> String {
     let g = data.grid();
@@ -583,6 +683,7 @@ fn header_table(
         (false, _) => "readings NOT normalised to 20 °C",
     };
     let rows = [
+        ("Report ID", stated(&h.report_id)),
         ("Machine", stated(&h.machine)),
         ("Axis", stated(&an.axis)),
         (
@@ -593,6 +694,7 @@ fn header_table(
                 esc(&h.instruments.join("; "))
             },
         ),
+        ("Sensor", esc(&sensor_text(&an.uncertainty.sensor))),
         ("Operator", stated(&h.operator)),
         ("Date", stated(&h.date)),
         ("Standard", esc(&designations.join(", "))),
@@ -607,6 +709,8 @@ fn header_table(
             "Air temperature",
             temps(data.readings.iter().map(|r| r.air_c)),
         ),
+        ("Air pressure", recorded(&h.air_pressure)),
+        ("Air humidity", recorded(&h.humidity)),
         (
             "Material temperature",
             temps(data.readings.iter().map(|r| r.material_c)),
@@ -628,7 +732,7 @@ fn header_table(
     s
 }
 
-const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:300px}svg{max-width:100%;height:auto}@page{size:A4;margin:14mm 12mm}@page runs{size:A4 landscape}@media print{body{margin:0;max-width:none}h2,h3{break-after:avoid}svg,table.head,table.res,tr,section.keep{break-inside:avoid}section.runs{page:runs}table.runs td,table.runs th{font-size:9px;padding:1px 3px}}";
+const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:200px}.sign td.sig{width:300px}tr.missing td{color:#a00}.lower{color:#a00}td.decision.pass{background:#d8f0d8}td.decision.fail{background:#f5d0d0}td.decision.not-decidable{background:#f7ecc8}td.small{font-size:11px}svg{max-width:100%;height:auto}@page{size:A4;margin:14mm 12mm}@page runs{size:A4 landscape}@media print{body{margin:0;max-width:none}h2,h3{break-after:avoid}svg,table.head,table.res,tr,section.keep{break-inside:avoid}section.runs{page:runs}table.runs td,table.runs th{font-size:9px;padding:1px 3px}}";
 
 /// The whole report.
 pub fn positioning_html(
@@ -637,8 +741,14 @@ pub fn positioning_html(
     standards: &[StandardResult],
     h: &ReportHeader,
 ) -> String {
+    // Page margin boxes: the report ID and "page n of N" on every printed page.
+    let id = h
+        .report_id
+        .as_deref()
+        .unwrap_or("")
+        .replace(['"', '\\'], "");
     let mut s = format!(
-        "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>Positioning test, axis {}</title><style>{STYLE}</style></head><body>",
+        "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>Positioning test, axis {}</title><style>{STYLE}@page{{@bottom-left{{content:\"report {id}\";font-size:9px;color:#555}}@bottom-right{{content:\"page \" counter(page) \" of \" counter(pages);font-size:9px;color:#555}}}}</style></head><body>",
         esc(an.axis.as_deref().unwrap_or("?"))
     );
     let _ = write!(
@@ -649,6 +759,8 @@ pub fn positioning_html(
     s.push_str(&header_table(data, an, standards, h));
     s.push_str("<h2>Results</h2>");
     s.push_str(&standards_tables(standards));
+    s.push_str("<h2>Statistics per target</h2>");
+    s.push_str(&target_table(an));
     s.push_str("<h2>Deviation chart</h2>");
     s.push_str(&deviation_chart(data, an));
     s.push_str("<h2>Drift-free chart</h2><p class=\"note\">Thermal drift between cycles removed with adjacent-target differences (docs/methods.md, paper 000).</p>");
@@ -665,8 +777,27 @@ pub fn positioning_html(
     // Its own section: printed on landscape pages (the runs table is wide), see STYLE.
     s.push_str("<section class=\"runs\"><h2>Readings</h2>");
     s.push_str(&readings_table(data));
-    s.push_str("<h2>Signatures</h2><table class=\"sign\"><tr><th>Measured by</th><td></td></tr><tr><th>Accepted by</th><td></td></tr></table>");
-    s.push_str("<p class=\"note\">Written by metrolog report.</p></section></body></html>\n");
+    s.push_str("<h2>Signatures</h2><table class=\"sign\"><tr><th></th><th>name</th><th>date</th><th>signature</th></tr>");
+    for role in ["Measured by", "Accepted by"] {
+        let name = if role == "Measured by" {
+            h.operator.as_deref().map(esc).unwrap_or_default()
+        } else {
+            String::new()
+        };
+        let _ = write!(
+            s,
+            "<tr><th>{role}</th><td class=\"name\">{name}</td><td class=\"date\"></td><td class=\"sig\"></td></tr>"
+        );
+    }
+    s.push_str("</table>");
+    let _ = write!(
+        s,
+        "<p class=\"note\">Written by metrolog report{}.</p></section></body></html>\n",
+        h.report_id
+            .as_deref()
+            .map(|id| format!(", report ID {}", esc(id)))
+            .unwrap_or_default()
+    );
     relabel_body(&s, &data.units())
 }
 

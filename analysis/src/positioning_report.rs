@@ -35,7 +35,7 @@ pub struct PositioningAnalysis {
 
 /// What measured the positions, from the dataset's metadata: `sensor` (a log's positions are
 /// the interferometer's: its reader sets it), else an `instrument*` / `reference` value that
-/// names an interferometer. Anything else is another sensor, by the name it is given: nothing
+/// names an interferometer, else the `reference` (the measuring device). Anything else is another sensor, by the name it is given: nothing
 /// of an interferometer's budget (air compensation, dead path) is applied to it.
 pub fn sensor_of(data: &PositioningData) -> Sensor {
     let m = &data.metadata;
@@ -46,6 +46,7 @@ pub fn sensor_of(data: &PositioningData) -> Sensor {
                     && v.to_lowercase().contains("interferometer")
             })
             .map(|(_, v)| v.clone())
+            .or_else(|| m.get("reference").cloned())
     });
     match named {
         Some(n) if n.to_lowercase().contains("interferometer") => Sensor::LaserInterferometer,

@@ -790,9 +790,9 @@ pub fn positioning_html(
         );
     }
     s.push_str("</table>");
-    let _ = write!(
+    let _ = writeln!(
         s,
-        "<p class=\"note\">Written by metrolog report{}.</p></section></body></html>\n",
+        "<p class=\"note\">Written by metrolog report{}.</p></section></body></html>",
         h.report_id
             .as_deref()
             .map(|id| format!(", report ID {}", esc(id)))

@@ -68,6 +68,9 @@ pub struct LogContents {
     pub attachments: BTreeMap<String, Vec<u8>>,
     /// The `metrolog.run` metadata record.
     pub run_metadata: BTreeMap<String, String>,
+    /// The `metrolog.instrument` records (`instrument`, `port`, `identity` = the `*IDN?`
+    /// answer, `time_ns`), one per connection, in file order.
+    pub instrument_records: Vec<BTreeMap<String, String>>,
     pub summary: ReadSummary,
     /// Messages that did not decode (counted, skipped).
     pub undecodable: u64,
@@ -131,6 +134,8 @@ impl LogContents {
             metrolog_log::LogItem::Metadata { name, map } => {
                 if name == RUN_METADATA {
                     c.run_metadata = map.clone();
+                } else if name == metrolog_log::INSTRUMENT_METADATA {
+                    c.instrument_records.push(map.clone());
                 }
             }
         }

@@ -14,7 +14,9 @@ use positioning::standards::StandardResult;
 use positioning::units::Units;
 
 use crate::export::num;
-use crate::positioning_report::PositioningAnalysis;
+use crate::positioning_report::{
+    DECISION_RULE, PositioningAnalysis, lower_bound_note, origin_text, sensor_text,
+};
 
 /// What the header says; `None` prints "not stated".
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -26,23 +28,90 @@ pub struct ReportHeader {
     pub instruments: Vec<String>,
     /// "applied: …" or "none" — whether a compensation was active during the run.
     pub compensation: Option<String>,
+    /// Air pressure and humidity, "min / mean / max" with units (a log's environment records).
+    pub air_pressure: Option<String>,
+    pub humidity: Option<String>,
+    /// Identifies the report with its input: a hash of the input's bytes ([`report_id`]).
+    pub report_id: Option<String>,
+}
+
+/// An `*IDN?` answer "maker,model,serial,firmware" in words; anything else as it is.
+pub fn idn_text(idn: &str) -> String {
+    let p: Vec<&str> = idn.split(',').map(str::trim).collect();
+    match p.as_slice() {
+        [maker, model, serial, fw, ..] if !serial.is_empty() => {
+            format!("{maker} {model}, s/n {serial}, firmware {fw}")
+        }
+        _ => idn.to_string(),
+    }
+}
+
+/// The report ID of an input: FNV-1a (64 bit, offset 0xcbf29ce484222325, prime 0x100000001b3)
+/// of its bytes, 16 hex digits; fed in blocks (a log can be gigabytes). Not a cryptographic
+/// hash: it names the input a report was made from (the same file gives the same ID, a changed
+/// one another); it does not protect the file against a deliberate change.
+#[derive(Debug, Clone, Copy)]
+pub struct ReportId(u64);
+
+impl Default for ReportId {
+    fn default() -> Self {
+        ReportId(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl ReportId {
+    pub fn update(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    pub fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
 }
 
 impl ReportHeader {
-    /// The header from the dataset's metadata (`machine`, `operator`, `date`,
-    /// `instrument*` / `serial*`, `compensation`).
+    /// The header from the dataset's metadata: `machine`, `operator`, `date` (else a log's
+    /// `start_time`, the run's start), the instruments (a log's `instrument.<name>` `*IDN?`
+    /// identities; a CSV's keys starting with `instrument` or `serial`), `compensation`,
+    /// `air_pressure_kpa` and `humidity_pct`.
     pub fn from_metadata(d: &PositioningData) -> ReportHeader {
         let m = &d.metadata;
+        let mut instruments: Vec<String> = m
+            .iter()
+            .filter(|(k, _)| k.starts_with("instrument.") && !k.ends_with('.'))
+            .map(|(k, v)| format!("{}: {}", &k["instrument.".len()..], idn_text(v)))
+            .collect();
+        instruments.extend(
+            m.iter()
+                .filter(|(k, _)| {
+                    (k.starts_with("instrument") || k.starts_with("serial"))
+                        && !k.starts_with("instrument.")
+                        && k.as_str() != "instruments_configured"
+                })
+                .map(|(k, v)| format!("{}: {v}", k.replace('_', " "))),
+        );
+        if instruments.is_empty()
+            && let Some(c) = m.get("instruments_configured")
+        {
+            instruments.push(format!(
+                "{} (configured; no identity or serial recorded)",
+                c.replace(',', ", ")
+            ));
+        }
         ReportHeader {
-            machine: m.get("machine").cloned(),
+            machine: m.get("machine").cloned().filter(|v| !v.is_empty()),
             operator: m.get("operator").cloned(),
-            date: m.get("date").cloned(),
-            instruments: m
-                .iter()
-                .filter(|(k, _)| k.starts_with("instrument") || k.starts_with("serial"))
-                .map(|(k, v)| format!("{k}: {v}"))
-                .collect(),
+            date: m.get("date").cloned().or_else(|| {
+                m.get("start_time")
+                    .map(|t| format!("{t} (run start, from the log)"))
+            }),
+            instruments,
             compensation: m.get("compensation").cloned(),
+            air_pressure: m.get("air_pressure_kpa").cloned(),
+            humidity: m.get("humidity_pct").cloned(),
+            report_id: None,
         }
     }
 }
@@ -58,6 +127,12 @@ fn stated(v: &Option<String>) -> String {
     v.as_deref()
         .map(esc)
         .unwrap_or_else(|| "<i>not stated</i>".into())
+}
+
+fn recorded(v: &Option<String>) -> String {
+    v.as_deref()
+        .map(esc)
+        .unwrap_or_else(|| "<i>not recorded</i>".into())
 }
 
 /// min / mean / max of some readings' values, °C.
@@ -449,6 +524,33 @@ fn standards_tables(standards: &[StandardResult]) -> String {
     s
 }
 
+/// The ISO 230-2 statistics per target: x̄↑, x̄↓, s↑, s↓, B_i, R_i, x̄_i.
+fn target_table(an: &PositioningAnalysis) -> String {
+    let mut s = String::from(
+        "<table class=\"res targets\"><tr><th>i</th><th>target (mm)</th><th>n↑</th><th>n↓</th><th>x̄↑ (µm)</th><th>x̄↓ (µm)</th><th>s↑ (µm)</th><th>s↓ (µm)</th><th>B_i (µm)</th><th>R_i (µm)</th><th>x̄_i (µm)</th></tr>",
+    );
+    let o = |v: Option<f64>| v.map(|v| num(v, 2)).unwrap_or_else(|| "—".into());
+    for t in &an.targets {
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
+            t.index,
+            num(t.target_mm, 3),
+            t.n_up,
+            t.n_down,
+            o(t.mean_up_um),
+            o(t.mean_down_um),
+            o(t.s_up_um),
+            o(t.s_down_um),
+            o(t.b_um),
+            o(t.r_um),
+            o(t.mean_um)
+        );
+    }
+    s.push_str("</table>");
+    s
+}
+
 /// The readings as data runs: one row per target, one column per (cycle, direction).
 fn readings_table(data: &PositioningData) -> String {
     let g = data.grid();
@@ -472,26 +574,90 @@ fn readings_table(data: &PositioningData) -> String {
     s
 }
 
+/// The budget of the results: one row per contributor (its u, status and source), then U of
+/// each result, the lower-bound sentence when terms are missing, and the decisions.
 fn uncertainty_section(an: &PositioningAnalysis) -> String {
-    let Some(mu) = an
-        .measurement_uncertainty
-        .as_ref()
-        .filter(|m| !m.u_k2_um.is_empty())
-    else {
-        return "<p>No measurement uncertainty could be computed for this run (the budget is that of a laser interferometer measuring lengths; a run in other units, such as a rotary axis, has none).</p>".into();
-    };
+    let u = &an.uncertainty;
     let mut s = format!(
-        "<p>Uncertainty of one interferometer reading (ISO/TR 230-9 style length budget; α {} µm/(m·K), material {} °C), expanded with k = 2:</p><table class=\"res\"><tr><th>target (mm)</th><th>u (µm)</th><th>U, k = 2 (µm)</th></tr>",
-        num(mu.budget.alpha_per_k * 1e6, 1),
-        num(mu.budget.material_temp_c, 2)
+        "<p>Uncertainty of the results by the contributors of ISO 230-2:2014 Annex A / ISO/TR \
+         230-9 (GUM combination, docs/methods.md); sensor: <b>{}</b>; measured length L = {} \
+         mm. Each term is <i>recorded</i> by the run, <i>assumed</i> (value and source given) or \
+         <i>missing</i>.</p><table class=\"res budget\"><tr><th>term</th><th>what</th>\
+         <th>u (µm)</th><th>status</th><th>source</th></tr>",
+        esc(&sensor_text(&u.sensor)),
+        num(u.length_mm, 3)
     );
-    for ((t, u), uk) in an.targets.iter().zip(&mu.u_um).zip(&mu.u_k2_um) {
+    for c in &u.contributors {
+        let (status, note) = origin_text(&c.origin);
         let _ = write!(
             s,
-            "<tr><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
-            num(t.target_mm, 3),
-            num(*u, 2),
-            num(*uk, 2)
+            "<tr class=\"{}\"><td>{}</td><td>{}</td><td class=\"n\">{}</td><td>{status}</td><td>{}</td></tr>",
+            status.replace(' ', "-").to_lowercase(),
+            esc(&c.symbol),
+            esc(&c.description),
+            c.u_um.map(|v| num(v, 3)).unwrap_or_else(|| "—".into()),
+            esc(note)
+        );
+    }
+    s.push_str("</table><table class=\"res\"><tr><th>result</th><th>value (µm)</th><th>u (µm)</th><th>U, k = 2 (µm)</th><th>terms in U</th><th>missing</th></tr>");
+    for r in &u.results {
+        let terms: Vec<String> = r
+            .contributions
+            .iter()
+            .map(|(k, v)| format!("{k} {}", num(*v, 3)))
+            .collect();
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\" data-u=\"{}\">{}{}</td><td class=\"small\">{}</td><td>{}</td></tr>",
+            esc(&r.parameter),
+            r.value_um.map(|v| num(v, 2)).unwrap_or_else(|| "—".into()),
+            num(r.u_um, 3),
+            esc(&r.parameter),
+            if r.missing.is_empty() { "" } else { "≥ " },
+            num(r.expanded_um, 3),
+            esc(&terms.join(", ")),
+            if r.missing.is_empty() {
+                "none".into()
+            } else {
+                esc(&r.missing.join(", "))
+            }
+        );
+    }
+    s.push_str("</table>");
+    if let Some(n) = lower_bound_note(u) {
+        let _ = write!(s, "<p class=\"lower\"><b>{}</b></p>", esc(&n));
+    }
+    s
+}
+
+/// The ISO 14253-1 decisions under the tolerances given, with the rule.
+fn conformance_section(an: &PositioningAnalysis) -> String {
+    if an.conformance.is_empty() {
+        return "<p>No tolerance given (<code>--tolerance E=…</code>): no conformance decision.</p>"
+            .into();
+    }
+    let mut s = format!(
+        "<p>Decision rule: {}.</p><table class=\"res\"><tr><th>result</th><th>value (µm)</th><th>tolerance (µm)</th><th>U, k = 2 (µm)</th><th>decision</th><th>why</th></tr>",
+        esc(DECISION_RULE)
+    );
+    for c in &an.conformance {
+        let (v, u, label) = match &c.decision {
+            Some(d) => (
+                num(d.value, 2),
+                num(d.expanded_uncertainty, 3),
+                d.decision.label(),
+            ),
+            None => ("—".into(), "—".into(), "no decision"),
+        };
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td class=\"n\">{v}</td><td class=\"n\">{}</td><td class=\"n\">{u}</td><td class=\"decision {}\" data-decision=\"{}\"><b>{}</b></td><td>{}</td></tr>",
+            esc(&c.parameter),
+            num(c.tolerance_um, 3),
+            label.replace(' ', "-"),
+            esc(&c.parameter),
+            label.to_uppercase(),
+            esc(&c.reason)
         );
     }
     s.push_str("</table>");
@@ -509,12 +675,15 @@ fn header_table(
         .alpha_um_per_m_k
         .map(|a| format!("{} µm/(m·K)", num(a, 2)))
         .unwrap_or_else(|| "<i>not stated</i>".into());
-    let norm = if data.material_compensation {
-        "readings normalised to 20 °C"
-    } else {
-        "readings NOT normalised to 20 °C"
+    // Normalised to 20 °C only means something with a material temperature to normalise from.
+    let has_material = data.readings.iter().any(|r| r.material_c.is_some());
+    let norm = match (data.material_compensation, has_material) {
+        (true, true) => "readings normalised to 20 °C from the material temperature",
+        (true, false) => "no material temperature recorded: normalisation to 20 °C not shown",
+        (false, _) => "readings NOT normalised to 20 °C",
     };
     let rows = [
+        ("Report ID", stated(&h.report_id)),
         ("Machine", stated(&h.machine)),
         ("Axis", stated(&an.axis)),
         (
@@ -525,6 +694,7 @@ fn header_table(
                 esc(&h.instruments.join("; "))
             },
         ),
+        ("Sensor", esc(&sensor_text(&an.uncertainty.sensor))),
         ("Operator", stated(&h.operator)),
         ("Date", stated(&h.date)),
         ("Standard", esc(&designations.join(", "))),
@@ -539,6 +709,8 @@ fn header_table(
             "Air temperature",
             temps(data.readings.iter().map(|r| r.air_c)),
         ),
+        ("Air pressure", recorded(&h.air_pressure)),
+        ("Air humidity", recorded(&h.humidity)),
         (
             "Material temperature",
             temps(data.readings.iter().map(|r| r.material_c)),
@@ -560,7 +732,7 @@ fn header_table(
     s
 }
 
-const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:300px}svg{max-width:100%;height:auto}@page{size:A4;margin:14mm 12mm}@page runs{size:A4 landscape}@media print{body{margin:0;max-width:none}h2,h3{break-after:avoid}svg,table.head,table.res,tr,section.keep{break-inside:avoid}section.runs{page:runs}table.runs td,table.runs th{font-size:9px;padding:1px 3px}}";
+const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1000px}h1{font-size:22px}h2{font-size:18px;border-bottom:1px solid #aaa;margin-top:28px}h3{font-size:15px}table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}th{background:#eee;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums}.note{font-size:12px;color:#555}table.runs td,table.runs th{font-size:11px;padding:2px 4px}.sign td{height:40px;width:200px}.sign td.sig{width:300px}tr.missing td{color:#a00}.lower{color:#a00}td.decision.pass{background:#d8f0d8}td.decision.fail{background:#f5d0d0}td.decision.not-decidable{background:#f7ecc8}td.small{font-size:11px}svg{max-width:100%;height:auto}@page{size:A4;margin:14mm 12mm}@page runs{size:A4 landscape}@media print{body{margin:0;max-width:none}h2,h3{break-after:avoid}svg,table.head,table.res,tr,section.keep{break-inside:avoid}section.runs{page:runs}table.runs td,table.runs th{font-size:9px;padding:1px 3px}}";
 
 /// The whole report.
 pub fn positioning_html(
@@ -569,8 +741,14 @@ pub fn positioning_html(
     standards: &[StandardResult],
     h: &ReportHeader,
 ) -> String {
+    // Page margin boxes: the report ID and "page n of N" on every printed page.
+    let id = h
+        .report_id
+        .as_deref()
+        .unwrap_or("")
+        .replace(['"', '\\'], "");
     let mut s = format!(
-        "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>Positioning test, axis {}</title><style>{STYLE}</style></head><body>",
+        "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>Positioning test, axis {}</title><style>{STYLE}@page{{@bottom-left{{content:\"report {id}\";font-size:9px;color:#555}}@bottom-right{{content:\"page \" counter(page) \" of \" counter(pages);font-size:9px;color:#555}}}}</style></head><body>",
         esc(an.axis.as_deref().unwrap_or("?"))
     );
     let _ = write!(
@@ -581,6 +759,8 @@ pub fn positioning_html(
     s.push_str(&header_table(data, an, standards, h));
     s.push_str("<h2>Results</h2>");
     s.push_str(&standards_tables(standards));
+    s.push_str("<h2>Statistics per target</h2>");
+    s.push_str(&target_table(an));
     s.push_str("<h2>Deviation chart</h2>");
     s.push_str(&deviation_chart(data, an));
     s.push_str("<h2>Drift-free chart</h2><p class=\"note\">Thermal drift between cycles removed with adjacent-target differences (docs/methods.md, paper 000).</p>");
@@ -588,6 +768,8 @@ pub fn positioning_html(
     // One block: its heading is not left alone at the foot of a printed page.
     s.push_str("<section class=\"keep\"><h2>Measurement uncertainty</h2>");
     s.push_str(&uncertainty_section(an));
+    s.push_str("</section><section class=\"keep\"><h2>Conformance (ISO 14253-1)</h2>");
+    s.push_str(&conformance_section(an));
     s.push_str("</section>");
     for n in an.notes.iter().chain(&an.drift_elimination.notes) {
         let _ = write!(s, "<p class=\"note\">{}</p>", esc(n));
@@ -595,8 +777,27 @@ pub fn positioning_html(
     // Its own section: printed on landscape pages (the runs table is wide), see STYLE.
     s.push_str("<section class=\"runs\"><h2>Readings</h2>");
     s.push_str(&readings_table(data));
-    s.push_str("<h2>Signatures</h2><table class=\"sign\"><tr><th>Measured by</th><td></td></tr><tr><th>Accepted by</th><td></td></tr></table>");
-    s.push_str("<p class=\"note\">Written by metrolog report.</p></section></body></html>\n");
+    s.push_str("<h2>Signatures</h2><table class=\"sign\"><tr><th></th><th>name</th><th>date</th><th>signature</th></tr>");
+    for role in ["Measured by", "Accepted by"] {
+        let name = if role == "Measured by" {
+            h.operator.as_deref().map(esc).unwrap_or_default()
+        } else {
+            String::new()
+        };
+        let _ = write!(
+            s,
+            "<tr><th>{role}</th><td class=\"name\">{name}</td><td class=\"date\"></td><td class=\"sig\"></td></tr>"
+        );
+    }
+    s.push_str("</table>");
+    let _ = writeln!(
+        s,
+        "<p class=\"note\">Written by metrolog report{}.</p></section></body></html>",
+        h.report_id
+            .as_deref()
+            .map(|id| format!(", report ID {}", esc(id)))
+            .unwrap_or_default()
+    );
     relabel_body(&s, &data.units())
 }
 

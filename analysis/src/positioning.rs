@@ -178,6 +178,7 @@ pub fn positioning_from_contents(
     if let Some(a) = alpha {
         metadata.insert("alpha_um_per_m_k".into(), a.to_string());
     }
+    header_metadata(log, &mut metadata);
     let data = PositioningData {
         axis: Some("X".into()),
         alpha_um_per_m_k: alpha,
@@ -188,6 +189,37 @@ pub fn positioning_from_contents(
     };
     data.validate()?;
     Ok(data)
+}
+
+/// What the report's header reads from a log: the sensor (the positions are the
+/// interferometer's), each instrument's `*IDN?` identity (`instrument.<name>`, the last
+/// connection of each), and the ranges of the air pressure and humidity
+/// (`air_pressure_kpa`, `humidity_pct`: "min / mean / max") of the environment records.
+fn header_metadata(log: &LogContents, m: &mut std::collections::BTreeMap<String, String>) {
+    m.entry("sensor".into())
+        .or_insert_with(|| "laser interferometer (the log's /interferometer positions)".into());
+    for r in &log.instrument_records {
+        if let (Some(name), Some(id)) = (r.get("instrument"), r.get("identity")) {
+            let port = r.get("port").map_or(String::new(), |p| format!(" on {p}"));
+            m.insert(format!("instrument.{name}"), format!("{id}{port}"));
+        }
+    }
+    let stats = |v: Vec<f64>, digits: usize, unit: &str| {
+        let v: Vec<f64> = v.into_iter().filter(|x| x.is_finite()).collect();
+        (!v.is_empty()).then(|| {
+            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            format!("{lo:.digits$} / {mean:.digits$} / {hi:.digits$} {unit} (min / mean / max)")
+        })
+    };
+    let env = log.environment.iter().filter(|e| e.valid);
+    if let Some(p) = stats(env.clone().map(|e| e.air_pa / 1000.0).collect(), 3, "kPa") {
+        m.insert("air_pressure_kpa".into(), p);
+    }
+    if let Some(h) = stats(env.map(|e| e.rh_pct).collect(), 1, "%RH") {
+        m.insert("humidity_pct".into(), h);
+    }
 }
 
 fn no_data(log: &LogContents, what: String, hint: &str) -> AnalysisError {

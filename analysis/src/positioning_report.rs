@@ -4,8 +4,10 @@
 
 use std::fmt::Write as _;
 
+use positioning::conformance::{self, Conformance, Decision, Tolerance};
 use positioning::drift::{self, DriftReport};
 use positioning::iso230::{self, Iso230Report};
+use positioning::iso230_uncertainty::{self, Iso230Uncertainty, Origin, Sensor, Setup};
 use positioning::positioning_data::{PositioningData, dir_sign};
 
 /// Everything `analyze positioning` computes.
@@ -21,55 +23,100 @@ pub struct PositioningAnalysis {
     /// ISO 230-2 per-target results, µm.
     pub targets: Vec<iso230::TargetStats>,
     pub drift_elimination: DriftReport,
-    /// Uncertainty of one LI-80 reading at each target (ISO/TR 230-9 style length budget).
-    pub measurement_uncertainty: Option<MeasurementUncertainty>,
+    /// Uncertainty (k = 2) of the results E, M, A, B, R from the contributors ISO 230-2
+    /// Annex A / ISO/TR 230-9 name, each recorded, assumed (with its source) or missing
+    /// (`positioning::iso230_uncertainty`).
+    pub uncertainty: Iso230Uncertainty,
+    /// ISO 14253-1 decisions of the results a tolerance was given for ([`decide_tolerances`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub conformance: Vec<ResultConformance>,
     pub notes: Vec<String>,
 }
 
-/// The LI-80 length budget attached to the ISO 230-2 results: the uncertainty of a single
-/// compensated reading at each target from the environment sensors, the expansion coefficient,
-/// the dead path and the cosine error (`uncertainty::length`). The budget's sensor
-/// accuracies are the defaults documented there; the material temperature and α are the run's.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct MeasurementUncertainty {
-    pub budget: uncertainty::length::LengthBudget,
-    /// Per target (in target order): standard uncertainty u and expanded U (k = 2), µm.
-    pub u_um: Vec<f64>,
-    #[serde(rename = "U_k2_um")]
-    pub u_k2_um: Vec<f64>,
+/// What measured the positions, from the dataset's metadata: `sensor` (a log's positions are
+/// the interferometer's: its reader sets it), else an `instrument*` / `reference` value that
+/// names an interferometer, else the `reference` (the measuring device). Anything else is another sensor, by the name it is given: nothing
+/// of an interferometer's budget (air compensation, dead path) is applied to it.
+pub fn sensor_of(data: &PositioningData) -> Sensor {
+    let m = &data.metadata;
+    let named = m.get("sensor").cloned().or_else(|| {
+        m.iter()
+            .find(|(k, v)| {
+                (k.starts_with("instrument") || k.as_str() == "reference")
+                    && v.to_lowercase().contains("interferometer")
+            })
+            .map(|(_, v)| v.clone())
+            .or_else(|| m.get("reference").cloned())
+    });
+    match named {
+        Some(n) if n.to_lowercase().contains("interferometer") => Sensor::LaserInterferometer,
+        Some(n) => Sensor::Other(n),
+        None => Sensor::Other("not stated (no `sensor` metadata)".into()),
+    }
 }
 
-fn measurement_uncertainty(data: &PositioningData) -> Option<MeasurementUncertainty> {
-    // A length budget of a laser interferometer: nothing to say for other units (a rotary
-    // axis in degrees).
-    if !data.units().is_default() {
-        return None;
-    }
-    let mut budget = uncertainty::length::LengthBudget::default();
-    if let Some(a) = data.alpha_um_per_m_k {
-        budget.alpha_per_k = a * 1e-6;
-    }
-    let temps: Vec<f64> = data.readings.iter().filter_map(|r| r.material_c).collect();
-    if !temps.is_empty() {
-        budget.material_temp_c = temps.iter().sum::<f64>() / temps.len() as f64;
-    }
-    let mut targets: Vec<(usize, f64)> = data
-        .readings
+/// The budget of the run's results with what the dataset records ([`Setup::from_data`]) and
+/// the values the operator gives (`assumed`, applied over the recorded ones).
+pub fn uncertainty_of(
+    data: &PositioningData,
+    iso: &Iso230Report,
+    assumed: impl FnOnce(&mut Setup),
+) -> Iso230Uncertainty {
+    let mut setup = Setup::from_data(sensor_of(data), data);
+    assumed(&mut setup);
+    iso230_uncertainty::evaluate(data, iso, &setup)
+}
+
+/// The ISO 14253-1 decision of one result against its tolerance (upper limit, µm).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ResultConformance {
+    pub parameter: String,
+    pub tolerance_um: f64,
+    /// `None` when the run does not define the result (e.g. R from one cycle).
+    pub decision: Option<Conformance>,
+    /// Contributors missing from U: a pass is then not proven by a complete budget.
+    pub missing: Vec<String>,
+    pub reason: String,
+}
+
+/// The rule the decisions follow, for the report.
+pub const DECISION_RULE: &str = "ISO 14253-1:2017 default rule: conformance (pass) is proven \
+    when the result lies below its tolerance by at least its expanded uncertainty U (k = 2), \
+    non-conformance (fail) when it exceeds the tolerance by more than U; within U of the limit \
+    the result is not decidable";
+
+/// Decide each `(symbol, tolerance)` (E, M, A, B or R; an upper limit in the deviation unit).
+pub fn decide_tolerances(
+    an: &PositioningAnalysis,
+    tolerances: &[(String, f64)],
+) -> Vec<ResultConformance> {
+    tolerances
         .iter()
-        .map(|r| (r.index, r.target_mm))
-        .collect();
-    targets.sort_by_key(|t| t.0);
-    targets.dedup_by_key(|t| t.0);
-    let u_um: Vec<f64> = targets
-        .iter()
-        .map(|t| budget.standard_uncertainty_um(t.1.abs()).ok())
-        .collect::<Option<Vec<f64>>>()?;
-    let u_k2_um = u_um.iter().map(|u| 2.0 * u).collect();
-    Some(MeasurementUncertainty {
-        budget,
-        u_um,
-        u_k2_um,
-    })
+        .map(|(p, t)| {
+            let r = an.uncertainty.results.iter().find(|r| &r.parameter == p);
+            let decision = r.and_then(|r| {
+                conformance::decide(r.value_um?, Tolerance::upper(*t), r.expanded_um).ok()
+            });
+            let missing = r.map(|r| r.missing.clone()).unwrap_or_default();
+            let mut reason = match &decision {
+                Some(d) => d.reason.clone(),
+                None => format!("{p} is not defined for this run: no decision"),
+            };
+            if decision.as_ref().is_some_and(|d| d.decision == Decision::Pass) && !missing.is_empty() {
+                reason.push_str(&format!(
+                    "; U is a lower bound ({} missing): the pass holds for the known contributors only",
+                    missing.join(", ")
+                ));
+            }
+            ResultConformance {
+                parameter: p.clone(),
+                tolerance_um: *t,
+                decision,
+                missing,
+                reason,
+            }
+        })
+        .collect()
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -161,6 +208,7 @@ pub fn analyze_positioning(
             data.n_cycles()
         ));
     }
+    let uncertainty = uncertainty_of(data, &iso, |_| {});
     PositioningAnalysis {
         axis: data.axis.clone(),
         n_cycles: data.n_cycles(),
@@ -169,7 +217,8 @@ pub fn analyze_positioning(
         iso230_2: iso.axis,
         targets: iso.targets,
         drift_elimination: drift,
-        measurement_uncertainty: measurement_uncertainty(data),
+        uncertainty,
+        conformance: Vec::new(),
         notes,
     }
 }
@@ -270,27 +319,101 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
     for (sym, name, v) in rows {
         let _ = writeln!(s, "  {sym:<3} {name:<40} {} µm", f(v, 8));
     }
-    if let Some(mu) = an
-        .measurement_uncertainty
-        .as_ref()
-        .filter(|m| !m.u_k2_um.is_empty())
-    {
-        let max = mu.u_k2_um.iter().copied().fold(0.0, f64::max);
-        let min = mu.u_k2_um.iter().copied().fold(f64::INFINITY, f64::min);
-        let _ = writeln!(
-            s,
-            "\nUncertainty of one LI-80 reading (ISO/TR 230-9 style budget, α {:.1} µm/(m·K), \
-             material {:.2} °C): U (k = 2) from {min:.2} to {max:.2} µm over the targets \
-             (per target in --json: measurement_uncertainty)",
-            mu.budget.alpha_per_k * 1e6,
-            mu.budget.material_temp_c
-        );
-    }
+    render_uncertainty(&mut s, an);
     render_drift(&mut s, an);
     for n in an.drift_elimination.notes.iter().chain(&an.notes) {
         let _ = writeln!(s, "Note: {n}");
     }
     s
+}
+
+/// How a contributor's origin reads in a report: its status and its note.
+pub fn origin_text(o: &Origin) -> (&'static str, &str) {
+    match o {
+        Origin::Recorded(n) => ("recorded", n),
+        Origin::Assumed(n) => ("assumed", n),
+        Origin::Missing(n) => ("MISSING", n),
+        Origin::NotApplicable(n) => ("not applicable", n),
+    }
+}
+
+/// The sentence under a budget with missing contributors, `None` when complete.
+pub fn lower_bound_note(u: &Iso230Uncertainty) -> Option<String> {
+    let missing: Vec<&str> = u
+        .contributors
+        .iter()
+        .filter(|c| matches!(c.origin, Origin::Missing(_)))
+        .map(|c| c.symbol.as_str())
+        .collect();
+    (!missing.is_empty()).then(|| {
+        format!(
+            "{} not recorded and not given: U is a lower bound (the uncertainty of the known \
+             contributors only)",
+            missing.join(", ")
+        )
+    })
+}
+
+/// The sensor's name for a report.
+pub fn sensor_text(s: &Sensor) -> String {
+    match s {
+        Sensor::LaserInterferometer => "laser interferometer".into(),
+        Sensor::Other(n) => n.clone(),
+    }
+}
+
+/// The uncertainty budget of the results and the decisions, as text.
+fn render_uncertainty(s: &mut String, an: &PositioningAnalysis) {
+    let u = &an.uncertainty;
+    let _ = writeln!(
+        s,
+        "\nUncertainty of the results (ISO 230-2 Annex A / ISO/TR 230-9), sensor: {}, measured \
+         length L = {:.3} mm:",
+        sensor_text(&u.sensor),
+        u.length_mm
+    );
+    for c in &u.contributors {
+        let (status, note) = origin_text(&c.origin);
+        let _ = writeln!(
+            s,
+            "  {:<15} {} µm  {status}: {note}",
+            c.symbol,
+            f(c.u_um, 8)
+        );
+    }
+    for r in &u.results {
+        let _ = writeln!(
+            s,
+            "  {} = {} µm, U (k = {}) = {} µm{}",
+            r.parameter,
+            f(r.value_um, 0).trim(),
+            r.k,
+            f(Some(r.expanded_um), 0).trim(),
+            if r.missing.is_empty() {
+                String::new()
+            } else {
+                format!(" (lower bound: {} missing)", r.missing.join(", "))
+            }
+        );
+    }
+    if let Some(n) = lower_bound_note(u) {
+        let _ = writeln!(s, "  {n}");
+    }
+    if !an.conformance.is_empty() {
+        let _ = writeln!(s, "\nConformance ({DECISION_RULE}):");
+        for c in &an.conformance {
+            let _ = writeln!(
+                s,
+                "  {} ≤ {} µm: {} — {}",
+                c.parameter,
+                crate::export::num(c.tolerance_um, 3),
+                c.decision
+                    .as_ref()
+                    .map_or("no decision", |d| d.decision.label()),
+                c.reason
+            );
+        }
+    }
 }
 
 /// The thermal-drift elimination part of the text report.

@@ -176,6 +176,8 @@ fn report_renders_in_chromium_with_the_key_numbers() {
         "A. Tester",
         "--instrument",
         "LI-80 s/n 0042",
+        "--tolerance",
+        "E=0.01,R=5",
     ]);
     let text = std::fs::read_to_string(&html).unwrap();
     // Self-contained: no scripts, no external resources.
@@ -213,6 +215,21 @@ fn report_renders_in_chromium_with_the_key_numbers() {
         assert!(dom.contains(w.as_str()), "{w} not in the rendered DOM");
     }
     assert!(dom.matches("<svg").count() >= 2, "both charts rendered");
+    // The budget of the results: a run without a `sensor` names its missing terms, U is a
+    // lower bound; no interferometer figures; the decisions under the tolerances.
+    for w in [
+        "u_DEVICE",
+        "MISSING",
+        "U is a lower bound",
+        "Report ID",
+        "Statistics per target",
+        "ISO 14253-1",
+        "data-decision=\"E\"><b>FAIL</b>",
+        "data-decision=\"R\"><b>PASS</b>",
+    ] {
+        assert!(dom.contains(w), "{w} not in the rendered DOM");
+    }
+    assert!(!dom.contains("interferometer reading") && !dom.contains("normalised to 20 °C from"));
     let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("report_chromium.png");
     let _ = std::fs::remove_file(&shot);
     let profile2 = tempfile::tempdir().unwrap();

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use metrolog_analysis::positioning_report::{analyze_positioning, render_text};
+use metrolog_analysis::positioning_report::{analyze_positioning, decide_tolerances, render_text};
 use positioning::iso230;
 
 use crate::cmd::input::load_positioning_with;
@@ -26,6 +26,8 @@ pub struct PositioningArgs {
     pub input: PathBuf,
     #[command(flatten)]
     pub units: crate::cmd::input::UnitArgs,
+    #[command(flatten)]
+    pub tolerances: crate::cmd::input::ToleranceArgs,
     /// Print a JSON report instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -82,7 +84,8 @@ fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
             data.n_cycles()
         );
     }
-    let an = analyze_positioning(&data, a.reference_cycle);
+    let mut an = analyze_positioning(&data, a.reference_cycle);
+    an.conformance = decide_tolerances(&an, &a.tolerances.tolerance);
     if let Some(p) = &a.plot {
         let target = match a.plot_target {
             Some(t) => {

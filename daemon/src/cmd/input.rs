@@ -243,3 +243,34 @@ pub fn write_output(path: &Path, text: &str) -> anyhow::Result<()> {
         .map_err(|e| fail("renaming the finished temporary file", e.error))?;
     Ok(())
 }
+
+/// `--tolerance E=10`: the ISO 14253-1 decision of ISO 230-2 results against tolerances.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ToleranceArgs {
+    /// Tolerance of an ISO 230-2 result, `SYMBOL=VALUE` with SYMBOL one of E, M, A, B, R and
+    /// VALUE its upper limit in the deviation unit (µm; mdeg for a rotary axis). Repeat or
+    /// comma-separate, e.g. `--tolerance E=10,R=4`. Each is decided by ISO 14253-1 (pass,
+    /// fail or not decidable) with the result's expanded uncertainty U (k = 2).
+    #[arg(long, value_delimiter = ',', value_name = "SYMBOL=VALUE", value_parser = parse_tolerance)]
+    pub tolerance: Vec<(String, f64)>,
+}
+
+fn parse_tolerance(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}`: expected SYMBOL=VALUE, e.g. E=10"))?;
+    let k = k.trim().to_uppercase();
+    if !["E", "M", "A", "B", "R"].contains(&k.as_str()) {
+        return Err(format!(
+            "`{k}`: a tolerance is for one of the ISO 230-2 results E, M, A, B, R"
+        ));
+    }
+    let v: f64 = v
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{v}` is not a number"))?;
+    if !(v.is_finite() && v > 0.0) {
+        return Err(format!("tolerance {k} = {v}: must be a positive number"));
+    }
+    Ok((k, v))
+}

@@ -5,8 +5,8 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use metrolog_analysis::html_report::{ReportHeader, positioning_html};
-use metrolog_analysis::positioning_report::analyze_positioning;
+use metrolog_analysis::html_report::{ReportHeader, ReportId, positioning_html};
+use metrolog_analysis::positioning_report::{analyze_positioning, decide_tolerances};
 use positioning::standards::{Standard, evaluate};
 
 use crate::cmd::input::{load_positioning, print_out};
@@ -17,6 +17,8 @@ pub struct Args {
     pub input: PathBuf,
     #[command(flatten)]
     pub units: crate::cmd::input::UnitArgs,
+    #[command(flatten)]
+    pub tolerances: crate::cmd::input::ToleranceArgs,
     /// The report to write: `.html` (one self-contained page) or `.pdf` (that page printed by
     /// a headless Chromium: `apt-get install chromium`, or METROLOG_BROWSER=/path/to/browser).
     #[arg(long, short = 'o')]
@@ -48,10 +50,28 @@ pub struct Args {
     pub csv: Option<PathBuf>,
 }
 
+/// The report ID of the input file: [`ReportId`] (FNV-1a 64) of its bytes, read in blocks.
+fn input_id(p: &std::path::Path) -> anyhow::Result<String> {
+    use std::io::Read as _;
+    let mut f = std::fs::File::open(p).with_context(|| format!("reading {}", p.display()))?;
+    let mut id = ReportId::default();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = f
+            .read(&mut buf)
+            .with_context(|| format!("reading {}", p.display()))?;
+        if n == 0 {
+            return Ok(id.hex());
+        }
+        id.update(&buf[..n]);
+    }
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     let mut data = load_positioning(&a.input)?;
     a.units.apply(&mut data)?;
-    let an = analyze_positioning(&data, None);
+    let mut an = analyze_positioning(&data, None);
+    an.conformance = decide_tolerances(&an, &a.tolerances.tolerance);
     let standards: Vec<_> = a.standard.iter().map(|s| evaluate(&data, *s)).collect();
     let mut h = ReportHeader::from_metadata(&data);
     h.machine = a.machine.clone().or(h.machine);
@@ -59,6 +79,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     h.date = a.date.clone().or(h.date);
     h.compensation = a.compensation.clone().or(h.compensation);
     h.instruments.extend(a.instrument.iter().cloned());
+    h.report_id = Some(input_id(&a.input)?);
     let html = positioning_html(&data, &an, &standards, &h);
     let is_pdf = |p: &std::path::Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("pdf"));
     let pdfs: Vec<&PathBuf> = std::iter::once(&a.out)

@@ -28,7 +28,14 @@ pub fn load_positioning_with(
             .and_then(|log| metrolog_analysis::positioning::positioning_from_contents(&log, opts))
             .with_context(|| format!("reading the positioning run of {}", path.display()));
     }
-    PositioningData::from_csv_path(path).with_context(|| format!("reading {}", path.display()))
+    let (data, notes) = PositioningData::from_csv_path_noted(path)
+        .with_context(|| format!("reading {}", path.display()))?;
+    // What a metrologist must know about the file's shape (renumbered cycles or targets,
+    // passes against their direction): on stderr, so the results on stdout stay as they are.
+    for n in notes {
+        eprintln!("note: {}: {n}", path.display());
+    }
+    Ok(data)
 }
 
 /// Whether `path` holds CapBall data: a CSV whose header names `ex_um` (an MCAP log is

@@ -52,3 +52,31 @@ fn a_closed_pipe_is_an_io_error_not_a_panic() {
         out.status
     );
 }
+
+/// A trial count past what memory can hold is a usage error naming the limit, not an abort on
+/// allocation (issue: `--trials 18446744073709551615` aborted with an exabyte allocation).
+#[test]
+fn a_trial_count_past_the_limit_is_a_usage_error() {
+    for args in [
+        vec![
+            "uncertainty".to_string(),
+            budget(),
+            "--trials".into(),
+            u64::MAX.to_string(),
+        ],
+        vec![
+            "uncertainty".to_string(),
+            budget(),
+            "--trials".into(),
+            "0".into(),
+        ],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(&args)
+            .output()
+            .expect("metrolog runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("20000000"), "{args:?}: {err}");
+    }
+}

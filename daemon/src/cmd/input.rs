@@ -281,3 +281,19 @@ fn parse_tolerance(s: &str) -> Result<(String, f64), String> {
     }
     Ok((k, v))
 }
+
+/// The most Monte Carlo trials a command accepts: every trial's outputs are kept for the
+/// coverage intervals, so the count bounds the memory (10⁷ trials: about 240 MB per output).
+pub const MAX_TRIALS: usize = 20_000_000;
+
+/// `--trials N`: a whole number from 1 to [`MAX_TRIALS`] (2⁶⁴ − 1 trials aborted on an
+/// allocation of exabytes).
+pub fn trials_arg(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if (1..=MAX_TRIALS).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "`{s}`: the number of trials is a whole number from 1 to {MAX_TRIALS} (each trial's \
+             outputs are kept in memory)"
+        )),
+    }
+}

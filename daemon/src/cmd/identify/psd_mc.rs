@@ -28,8 +28,8 @@ pub struct PsdMcArgs {
     /// docs/methods.md; example: examples/budgets/psd_frame_readings.toml).
     #[arg(long)]
     pub budget: Option<PathBuf>,
-    /// Monte Carlo trials (paper 003 ran 30 000).
-    #[arg(long, default_value_t = 30_000)]
+    /// Monte Carlo trials (paper 003 ran 30 000), 1 to 20 000 000.
+    #[arg(long, default_value_t = 30_000, value_parser = crate::cmd::input::trials_arg)]
     pub trials: usize,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

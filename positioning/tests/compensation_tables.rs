@@ -441,3 +441,22 @@ fn the_reference_point_is_the_machines_home_by_default() {
     let a = applied(&t);
     assert!(a.at(500.0, true).abs() < 1e-9, "0 at home");
 }
+
+/// A spacing that would make a table of millions of points, or a reference point that is not a
+/// finite position, is refused with what to choose instead (issue: `--spacing 1e-9` asked for
+/// 1.6 TB, `--reference-point 1e308` overflowed, `nan` wrote `NaN` into the table).
+#[test]
+fn absurd_spacings_and_reference_points_are_refused() {
+    let d = run(3);
+    let e = build(&d, &opts(Dialect::LinuxCnc, Mode::Mean, Some(1e-9))).unwrap_err();
+    assert!(
+        matches!(e, CompensationError::TooManyPoints { .. }) && e.to_string().contains("at least"),
+        "{e}"
+    );
+    for r in [1e308, f64::NAN, f64::INFINITY] {
+        let mut o = opts(Dialect::LinuxCnc, Mode::Mean, None);
+        o.reference_mm = Some(r);
+        let e = build(&d, &o).unwrap_err();
+        assert!(matches!(e, CompensationError::BadReference(_)), "{r}: {e}");
+    }
+}

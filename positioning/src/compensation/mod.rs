@@ -85,6 +85,34 @@ pub struct Options {
 /// 18i/30i pitch data; older controls allow ±7, give `point_limit` for them).
 pub const FANUC_POINT_LIMIT: u32 = 127;
 
+/// The most table points any dialect is asked to hold (LinuxCNC takes 256, FANUC and SINUMERIK
+/// a few hundred to a few thousand): past it the spacing is a mistake, refused before a table
+/// of that size is allocated (a spacing of 1e-9 mm asked for 1.6 TB).
+pub const MAX_TABLE_POINTS: f64 = 10_000.0;
+
+/// A finite reference near the machine and a table of at most [`MAX_TABLE_POINTS`].
+fn check_table_size(
+    lo: f64,
+    hi: f64,
+    reference: f64,
+    spacing: f64,
+) -> Result<(), CompensationError> {
+    if !(reference.is_finite() && reference.abs() <= 1e6) {
+        return Err(CompensationError::BadReference(reference));
+    }
+    let span_mm = hi.max(reference) - lo.min(reference);
+    let points = (span_mm / spacing).ceil() + 1.0;
+    if !(points.is_finite() && points <= MAX_TABLE_POINTS) {
+        return Err(CompensationError::TooManyPoints {
+            spacing_mm: spacing,
+            span_mm,
+            points,
+            min_spacing_mm: span_mm / (MAX_TABLE_POINTS - 1.0),
+        });
+    }
+    Ok(())
+}
+
 /// Why no table could be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum CompensationError {
@@ -94,6 +122,20 @@ pub enum CompensationError {
     NotEnoughData(&'static str),
     #[error("spacing must be a positive number of mm (got {0})")]
     BadSpacing(f64),
+    #[error(
+        "the reference point must be a finite position within ±1 km of the machine zero, in mm (got {0})"
+    )]
+    BadReference(f64),
+    #[error(
+        "a spacing of {spacing_mm} mm over {span_mm} mm makes {points} table points; a controller's \
+         table holds at most a few hundred to a few thousand: choose a spacing of at least {min_spacing_mm} mm"
+    )]
+    TooManyPoints {
+        spacing_mm: f64,
+        span_mm: f64,
+        points: f64,
+        min_spacing_mm: f64,
+    },
     #[error("{dialect:?}: {message}")]
     Unsupported { dialect: Dialect, message: String },
     #[error("{dialect:?}: {message}")]
@@ -198,6 +240,7 @@ pub(crate) fn curve(data: &PositioningData, o: &Options) -> Result<Curve, Compen
         Some(r) => r,
         None => home_mm(data)?,
     };
+    check_table_size(lo, hi, reference, spacing)?;
     // Points aligned on the reference, covering the travel and the reference.
     let k0 = ((lo.min(reference) - reference) / spacing + 1e-9).floor() as i64;
     let k1 = ((hi.max(reference) - reference) / spacing - 1e-9).ceil() as i64;

@@ -420,3 +420,30 @@ pub mod fake {
         chunks
     }
 }
+
+/// Puts a descriptor (a pty side a test relays through) in non-blocking mode.
+pub fn nonblocking(fd: &OwnedFd) {
+    let flags = nix::fcntl::OFlag::from_bits_truncate(
+        nix::fcntl::fcntl(fd.as_fd(), nix::fcntl::FcntlArg::F_GETFL).expect("F_GETFL"),
+    );
+    nix::fcntl::fcntl(
+        fd.as_fd(),
+        nix::fcntl::FcntlArg::F_SETFL(flags | nix::fcntl::OFlag::O_NONBLOCK),
+    )
+    .expect("F_SETFL");
+}
+
+/// Writes all of `b` to a non-blocking descriptor, waiting out a full buffer (EAGAIN); any
+/// other error fails the test (a relay between two ptys must not lose bytes silently, unlike
+/// a fake device's port, which may vanish: [`FakeDevice`]'s writes stop quietly).
+pub fn relay_write(fd: &OwnedFd, mut b: &[u8]) {
+    while !b.is_empty() {
+        match nix::unistd::write(fd, b) {
+            Ok(n) => b = &b[n..],
+            Err(nix::errno::Errno::EAGAIN) => {
+                std::thread::sleep(std::time::Duration::from_micros(200))
+            }
+            Err(e) => panic!("relay write: {e}"),
+        }
+    }
+}

@@ -17,8 +17,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use drivers::{HostClock, ModbusTempConfig, SampleValues, TempSensor};
-use hil::{Collected, collect_until, finish};
-use nix::fcntl::{FcntlArg, OFlag, fcntl};
+use hil::{Collected, collect_until, finish, nonblocking, relay_write};
 use protocol::RejectKind;
 use sim::modbus::{Answered, ModbusFault, ModbusModule, ModbusModuleConfig, Reply};
 use tokio_util::sync::CancellationToken;
@@ -202,21 +201,6 @@ fn pymodbus_available(test: &str) -> bool {
     ok
 }
 
-fn nonblocking(fd: &std::os::fd::OwnedFd) {
-    let flags = OFlag::from_bits_truncate(fcntl(fd.as_fd(), FcntlArg::F_GETFL).unwrap());
-    fcntl(fd.as_fd(), FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK)).unwrap();
-}
-
-fn write_all(fd: &std::os::fd::OwnedFd, mut b: &[u8]) {
-    while !b.is_empty() {
-        match nix::unistd::write(fd, b) {
-            Ok(n) => b = &b[n..],
-            Err(nix::errno::Errno::EAGAIN) => std::thread::sleep(Duration::from_micros(200)),
-            Err(e) => panic!("relay write: {e}"),
-        }
-    }
-}
-
 /// What the relay does to the answer with this index (0-based).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Relay {
@@ -257,7 +241,7 @@ async fn our_driver_reads_the_pymodbus_slave() {
         let mut buf = [0u8; 1024];
         while !stop2.load(Ordering::Relaxed) {
             if let Ok(n) = nix::unistd::read(our_side.master.as_fd(), &mut buf) {
-                write_all(&py_side.master, &buf[..n]);
+                relay_write(&py_side.master, &buf[..n]);
             }
             if let Ok(n) = nix::unistd::read(py_side.master.as_fd(), &mut buf) {
                 answer.extend_from_slice(&buf[..n]);
@@ -279,11 +263,11 @@ async fn our_driver_reads_the_pymodbus_slave() {
                 let what = plan(r.len());
                 r.push(what);
                 match what {
-                    Relay::Pass => write_all(&our_side.master, &frame),
+                    Relay::Pass => relay_write(&our_side.master, &frame),
                     Relay::Drop => {}
                     Relay::CorruptCrc => {
                         frame[len - 1] ^= 0xFF;
-                        write_all(&our_side.master, &frame);
+                        relay_write(&our_side.master, &frame);
                     }
                 }
             }

@@ -16,25 +16,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use drivers::HostClock;
-use hil::{Collected, collect_until, finish};
-use nix::fcntl::{FcntlArg, OFlag, fcntl};
+use hil::{Collected, collect_until, finish, nonblocking, relay_write};
 use protocol::RejectKind;
 use tokio_util::sync::CancellationToken;
-
-fn nonblocking(fd: &std::os::fd::OwnedFd) {
-    let flags = OFlag::from_bits_truncate(fcntl(fd.as_fd(), FcntlArg::F_GETFL).unwrap());
-    fcntl(fd.as_fd(), FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK)).unwrap();
-}
-
-fn write_all(fd: &std::os::fd::OwnedFd, mut b: &[u8]) {
-    while !b.is_empty() {
-        match nix::unistd::write(fd, b) {
-            Ok(n) => b = &b[n..],
-            Err(nix::errno::Errno::EAGAIN) => std::thread::sleep(Duration::from_micros(200)),
-            Err(e) => panic!("relay write: {e}"),
-        }
-    }
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn python_can_slcan_frames_are_read_by_our_trigger_driver() {
@@ -79,14 +63,14 @@ async fn python_can_slcan_frames_are_read_by_our_trigger_driver() {
                         }
                         our_commands.push(cmd);
                         from_us.clear();
-                        write_all(&our_side.master, b"\r");
+                        relay_write(&our_side.master, b"\r");
                     } else {
                         from_us.push(b);
                     }
                 }
             }
             if open && !pending.is_empty() {
-                write_all(&our_side.master, &pending);
+                relay_write(&our_side.master, &pending);
                 pending.clear();
             }
             std::thread::sleep(Duration::from_micros(500));

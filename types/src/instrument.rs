@@ -11,7 +11,9 @@ pub enum Instrument {
     Capball,
     Psd,
     Trigger,
-    /// A Modbus RTU temperature module (instruments.md §5): environment, not pose-valued.
+    // A Modbus RTU temperature module (instruments.md §5): environment, not pose-valued.
+    // (A plain comment: a doc comment on one variant makes schemars write `oneOf`, which the
+    // viewers' JSON-schema reader does not take as a string field.)
     #[serde(rename = "temperature")]
     Thermometer,
 }

@@ -164,6 +164,16 @@ pub fn analyze_positioning(
     data: &PositioningData,
     reference_cycle: Option<usize>,
 ) -> PositioningAnalysis {
+    analyze_positioning_given(data, reference_cycle, |_| {})
+}
+
+/// [`analyze_positioning`] with contributors the operator gives (`assumed`, applied to the
+/// budget's [`Setup`] over what the dataset records).
+pub fn analyze_positioning_given(
+    data: &PositioningData,
+    reference_cycle: Option<usize>,
+    assumed: impl FnOnce(&mut Setup),
+) -> PositioningAnalysis {
     let iso: Iso230Report = iso230::evaluate(data);
     let ref_cycle = reference_cycle.unwrap_or_else(|| drift::default_reference_cycle(data));
     let drift = drift::eliminate(data, ref_cycle);
@@ -208,7 +218,7 @@ pub fn analyze_positioning(
             data.n_cycles()
         ));
     }
-    let uncertainty = uncertainty_of(data, &iso, |_| {});
+    let uncertainty = uncertainty_of(data, &iso, assumed);
     PositioningAnalysis {
         axis: data.axis.clone(),
         n_cycles: data.n_cycles(),

@@ -289,3 +289,86 @@ fn a_rotary_runs_report_and_charts_are_in_its_own_units() {
         assert!(t.contains("/ mdeg") && !t.contains("µm"), "{}", s.display());
     }
 }
+
+/// `--assume`: a contributor the run did not record, given by the operator, enters the budget
+/// marked assumed. Checked against ISO/TR 230-9's forms written here: the device term is
+/// U_cal·L/k, the cosine error L·(1 − cos θ) rectangular on [0, max] (u = max/√12).
+#[test]
+fn assumed_contributors_enter_the_budget_marked_as_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = write_run(dir.path(), vec![], false);
+    let (ok, out, err) = metrolog(&[
+        "analyze",
+        "positioning",
+        &csv,
+        "--json",
+        "--assume",
+        "device_um_per_m=1.5,misalignment_mrad=2",
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let u = &v["uncertainty"];
+    // The targets of write_run: 30·i + (i mod 4)·0.7 mm, i = 0..10.
+    let l_m = (300.0 + 2.0 * 0.7) / 1000.0;
+    let term = |sym: &str| {
+        u["contributors"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["symbol"] == sym)
+            .unwrap()
+            .clone()
+    };
+    let dev = term("u_DEVICE");
+    assert_eq!(dev["origin"]["origin"], "assumed", "{dev}");
+    assert!(dev["origin"]["note"].as_str().unwrap().contains("--assume"));
+    let want = 1.5 * l_m / 2.0;
+    assert!(
+        (dev["u_um"].as_f64().unwrap() - want).abs() < 1e-9,
+        "{dev} vs {want}"
+    );
+    let mis = term("u_MISALIGNMENT");
+    let want = l_m * 1e6 * (1.0 - 2e-3f64.cos()) / 12f64.sqrt();
+    assert!(
+        (mis["u_um"].as_f64().unwrap() - want).abs() < 1e-6 * want,
+        "{mis} vs {want}"
+    );
+    // E: neither is missing any more; U = 2·√Σu² of what acts on it.
+    let e = u["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["parameter"] == "E")
+        .unwrap();
+    let missing: Vec<&str> = e["missing"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m.as_str().unwrap())
+        .collect();
+    assert!(
+        !missing.contains(&"u_DEVICE") && !missing.contains(&"u_MISALIGNMENT"),
+        "{missing:?}"
+    );
+    let sum: f64 = e["contributions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c[1].as_f64().unwrap().powi(2))
+        .sum();
+    assert!((e["expanded_um"].as_f64().unwrap() - 2.0 * sum.sqrt()).abs() < 1e-12);
+
+    // Mistakes say what to fix.
+    for (arg, words) in [
+        (
+            "devise_um_per_m=1",
+            "not a contributor; one of: device_um_per_m",
+        ),
+        ("misalignment_mrad=-1", "must lie in [0, 100]"),
+        ("e_ve_um=nan", "must lie in"),
+        ("air_ppm", "expected KEY=VALUE"),
+    ] {
+        let (ok, _, err) = metrolog(&["analyze", "positioning", &csv, "--assume", arg]);
+        assert!(!ok && err.contains(words), "{arg}: {err}");
+    }
+}

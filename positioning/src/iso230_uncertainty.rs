@@ -582,3 +582,114 @@ pub fn evaluate(data: &PositioningData, report: &Iso230Report, setup: &Setup) ->
         results,
     }
 }
+
+/// The contributors an operator can give when the run did not record them (`--assume
+/// KEY=VALUE`): key, meaning with its unit, and the range a real value lies in.
+pub const GIVEN_KEYS: &[(&str, &str, f64, f64)] = &[
+    (
+        "device_um_per_m",
+        "expanded (k = 2) calibration uncertainty of the measuring device, µm/m (its certificate)",
+        0.0,
+        100.0,
+    ),
+    (
+        "air_ppm",
+        "half-width of the air compensation's error, ppm (interferometer)",
+        0.0,
+        100.0,
+    ),
+    (
+        "material_c",
+        "mean material temperature during the run, °C",
+        -20.0,
+        60.0,
+    ),
+    (
+        "material_accuracy_k",
+        "half-width of the material temperature measurement's error, K",
+        0.0,
+        10.0,
+    ),
+    (
+        "alpha_um_per_m_k",
+        "expansion coefficient of the axis, µm/(m·K)",
+        -50.0,
+        50.0,
+    ),
+    (
+        "alpha_accuracy_um_per_m_k",
+        "half-width of the uncertainty of α, µm/(m·K)",
+        0.0,
+        50.0,
+    ),
+    (
+        "misalignment_mrad",
+        "largest angle between the measuring direction and the axis, mrad",
+        0.0,
+        100.0,
+    ),
+    (
+        "dead_path_mm",
+        "optics to reflector at the datum, mm (interferometer)",
+        0.0,
+        100_000.0,
+    ),
+    (
+        "air_range_k",
+        "range (max − min) of the air temperature during the run, K",
+        0.0,
+        50.0,
+    ),
+    (
+        "pressure_range_kpa",
+        "range (max − min) of the air pressure during the run, kPa",
+        0.0,
+        50.0,
+    ),
+    (
+        "e_ve_um",
+        "E_VE measured by a drift test (machine at rest, the test's duration), µm",
+        0.0,
+        10_000.0,
+    ),
+];
+
+/// Check a given contributor `key = value` against [`GIVEN_KEYS`]: the message says what to fix.
+pub fn check_given(key: &str, value: f64) -> Result<(), String> {
+    let Some((_, meaning, lo, hi)) = GIVEN_KEYS.iter().find(|g| g.0 == key) else {
+        let keys: Vec<&str> = GIVEN_KEYS.iter().map(|g| g.0).collect();
+        return Err(format!(
+            "`{key}` is not a contributor; one of: {}",
+            keys.join(", ")
+        ));
+    };
+    if !(value.is_finite() && (*lo..=*hi).contains(&value)) {
+        return Err(format!(
+            "{key} = {value}: the {meaning} must lie in [{lo}, {hi}]"
+        ));
+    }
+    Ok(())
+}
+
+impl Setup {
+    /// Set a contributor the operator gives ([`GIVEN_KEYS`]; checked by [`check_given`]),
+    /// marked assumed with `note` as its source. It replaces a recorded value of the same key.
+    pub fn give(&mut self, key: &str, value: f64, note: &str) -> Result<(), String> {
+        check_given(key, value)?;
+        let k = Some(Known::assumed(value, note));
+        match key {
+            "device_um_per_m" => self.device_expanded_um_per_m = k,
+            "air_ppm" => self.air_compensation_ppm = k,
+            "material_c" => self.material_temp_c = k,
+            "material_accuracy_k" => self.material_temp_accuracy_k = k,
+            "alpha_um_per_m_k" => self.alpha_um_per_m_k = k,
+            "alpha_accuracy_um_per_m_k" => self.alpha_accuracy_um_per_m_k = k,
+            "misalignment_mrad" => self.misalignment_rad = Some(Known::assumed(value * 1e-3, note)),
+            "dead_path_mm" => self.dead_path_mm = k,
+            "air_range_k" => self.air_temp_range_k = k,
+            "pressure_range_kpa" => self.pressure_range_kpa = k,
+            _ => self.e_ve_um = k,
+        }
+        Ok(())
+    }
+}

@@ -5,7 +5,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use metrolog_analysis::positioning_report::{analyze_positioning, decide_tolerances, render_text};
+use metrolog_analysis::positioning_report::{
+    analyze_positioning_given, decide_tolerances, render_text,
+};
 use positioning::iso230;
 
 use crate::cmd::input::load_positioning_with;
@@ -28,6 +30,8 @@ pub struct PositioningArgs {
     pub units: crate::cmd::input::UnitArgs,
     #[command(flatten)]
     pub tolerances: crate::cmd::input::ToleranceArgs,
+    #[command(flatten)]
+    pub assumed: crate::cmd::input::AssumeArgs,
     /// Print a JSON report instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -84,7 +88,7 @@ fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
             data.n_cycles()
         );
     }
-    let mut an = analyze_positioning(&data, a.reference_cycle);
+    let mut an = analyze_positioning_given(&data, a.reference_cycle, |s| a.assumed.apply(s));
     an.conformance = decide_tolerances(&an, &a.tolerances.tolerance);
     if let Some(p) = &a.plot {
         let target = match a.plot_target {

@@ -282,6 +282,42 @@ fn parse_tolerance(s: &str) -> Result<(String, f64), String> {
     Ok((k, v))
 }
 
+/// `--assume KEY=VALUE`: contributors of the results' uncertainty the run did not record,
+/// given by the operator (a certificate, a data sheet, a measurement made beside the run).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct AssumeArgs {
+    /// A contributor of the ISO 230-2 results' uncertainty the run did not record, `KEY=VALUE`;
+    /// repeat or comma-separate. Keys: device_um_per_m (expanded calibration uncertainty, k = 2),
+    /// air_ppm, material_c, material_accuracy_k, alpha_um_per_m_k, alpha_accuracy_um_per_m_k,
+    /// misalignment_mrad, dead_path_mm, air_range_k, pressure_range_kpa, e_ve_um. The report
+    /// marks each as assumed (given with --assume); a value given replaces a recorded one.
+    #[arg(long, value_delimiter = ',', value_name = "KEY=VALUE", value_parser = parse_assume)]
+    pub assume: Vec<(String, f64)>,
+}
+
+impl AssumeArgs {
+    /// Give every `--assume` value to the budget's setup (each was checked when parsed).
+    pub fn apply(&self, setup: &mut positioning::iso230_uncertainty::Setup) {
+        for (k, v) in &self.assume {
+            // Checked by parse_assume: give() cannot refuse it here.
+            let _ = setup.give(k, *v, "given with --assume");
+        }
+    }
+}
+
+fn parse_assume(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}`: expected KEY=VALUE, e.g. device_um_per_m=0.5"))?;
+    let k = k.trim().to_lowercase();
+    let v: f64 = v
+        .trim()
+        .parse()
+        .map_err(|_| format!("{k} = `{v}`: not a number"))?;
+    positioning::iso230_uncertainty::check_given(&k, v)?;
+    Ok((k, v))
+}
+
 /// The most Monte Carlo trials a command accepts: every trial's outputs are kept for the
 /// coverage intervals, so the count bounds the memory (10⁷ trials: about 240 MB per output).
 pub const MAX_TRIALS: usize = 20_000_000;

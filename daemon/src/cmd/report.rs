@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use metrolog_analysis::html_report::{ReportHeader, ReportId, positioning_html};
-use metrolog_analysis::positioning_report::{analyze_positioning, decide_tolerances};
+use metrolog_analysis::positioning_report::{analyze_positioning_given, decide_tolerances};
 use positioning::standards::{Standard, evaluate};
 
 use crate::cmd::input::{load_positioning, print_out};
@@ -19,6 +19,8 @@ pub struct Args {
     pub units: crate::cmd::input::UnitArgs,
     #[command(flatten)]
     pub tolerances: crate::cmd::input::ToleranceArgs,
+    #[command(flatten)]
+    pub assumed: crate::cmd::input::AssumeArgs,
     /// The report to write: `.html` (one self-contained page) or `.pdf` (that page printed by
     /// a headless Chromium: `apt-get install chromium`, or METROLOG_BROWSER=/path/to/browser).
     #[arg(long, short = 'o')]
@@ -70,7 +72,7 @@ fn input_id(p: &std::path::Path) -> anyhow::Result<String> {
 pub fn run(a: Args) -> anyhow::Result<()> {
     let mut data = load_positioning(&a.input)?;
     a.units.apply(&mut data)?;
-    let mut an = analyze_positioning(&data, None);
+    let mut an = analyze_positioning_given(&data, None, |s| a.assumed.apply(s));
     an.conformance = decide_tolerances(&an, &a.tolerances.tolerance);
     let standards: Vec<_> = a.standard.iter().map(|s| evaluate(&data, *s)).collect();
     let mut h = ReportHeader::from_metadata(&data);

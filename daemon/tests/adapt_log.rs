@@ -184,6 +184,19 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
         T0_NS,
     )
     .unwrap();
+    // The identity the LI-80 answered to *IDN?, as the service records it on connect.
+    w.write_metadata(
+        metrolog_log::INSTRUMENT_METADATA,
+        [
+            ("instrument", "interferometer"),
+            ("identity", "METROLOG,LI-80,0042,2.1"),
+            ("port", "/dev/ttyUSB0"),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect(),
+    )
+    .unwrap();
     if spec.attach_trajectory {
         w.attach(
             "trajectory.csv",
@@ -202,8 +215,8 @@ fn write_log(dir: &Path, spec: &Spec) -> PathBuf {
             device_t_us: 0,
             fitted_ns: t_ns,
             air_c: air_c_at(t_s),
-            air_pa: 101325.0,
-            rh_pct: 45.0,
+            air_pa: 101325.0 + 10.0 * (k % 3) as f64,
+            rh_pct: 45.0 + 0.5 * (k % 2) as f64,
             material_c: vec![20.5, 20.7],
             n_air: 1.00027,
             valid: true,
@@ -505,4 +518,46 @@ fn simulator_convention_machine_fits_the_demo_poses() {
         .1
         .nominal_work_point_mm(&pose(0.0, 100.0, 50.0, 0.0, 90.0));
     assert!((w0 - nalgebra::Vector3::new(100.0, 0.0, 50.0)).norm() > 1.0);
+}
+
+/// The report's header comes from the log's own records: the run's start time, the identity
+/// and serial the instrument answered, the environment's min / mean / max (worked out here from
+/// what write_log wrote), the material temperature, and the sensor's budget (no borrowed terms).
+#[test]
+fn report_header_is_read_from_the_logs_own_metadata() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_log(dir.path(), &default_spec());
+    let html = dir.path().join("r.html");
+    let (ok, _, err) = metrolog(&[
+        "report",
+        path.to_str().unwrap(),
+        "-o",
+        html.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let text = std::fs::read_to_string(&html).unwrap();
+    // 1_795_305_600 s after the epoch = 20 779 days of 86 400 s: 2026-11-22, 00:00 UTC.
+    assert!(
+        text.contains("2026-11-22T00:00:00"),
+        "run start not in the header"
+    );
+    assert!(text.contains("(run start, from the log)"));
+    assert!(text.contains("s/n 0042"), "serial not in the header");
+    // Environment records k = 0..n: pressure 101.325 + 0.010·(k mod 3) kPa, humidity
+    // 45 + 0.5·(k mod 2) %RH.
+    let n = 2 * (rows(&CapballSetup::paper_default()).len() + 2);
+    let p: Vec<f64> = (0..n).map(|k| 101.325 + 0.010 * (k % 3) as f64).collect();
+    let h: Vec<f64> = (0..n).map(|k| 45.0 + 0.5 * (k % 2) as f64).collect();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let want_p = format!("101.325 / {:.3} / 101.345 kPa", mean(&p));
+    let want_h = format!("45.0 / {:.1} / 45.5 %RH", mean(&h));
+    assert!(text.contains(&want_p), "{want_p} not in the header");
+    assert!(text.contains(&want_h), "{want_h} not in the header");
+    // The material sensors read 20.5 and 20.7 °C at every record: each reading's material
+    // temperature is their mean, 20.60 °C.
+    assert!(
+        text.contains("<th>Material temperature</th><td>20.60 / 20.60 / 20.60 °C"),
+        "material temperature not shown"
+    );
+    assert!(text.contains("readings normalised to 20 °C from the material temperature"));
 }

@@ -401,6 +401,13 @@ pub fn build(data: &PositioningData, o: &Options) -> Result<CompensationTable, C
         Dialect::Heidenhain => heidenhain::write(&c),
         Dialect::LinuxCnc => linuxcnc::write(&c),
     }?;
+    if o.mode == Mode::Mean
+        && let Some(b) = evaluate(data).axis.b
+    {
+        t.notes.push(format!(
+            "a Mean table leaves the reversal error: B = {b:.2} µm stays after loading it (the table corrects the mean of both directions, each direction keeps half the backlash); use --backlash or --bidirectional (LinuxCNC, HEIDENHAIN) to remove it"
+        ));
+    }
     let [(xu, _), _] = means(data);
     if let (Some(lo), Some(hi)) = (xu.first(), xu.last())
         && !(*lo..=*hi).contains(&c.reference_mm)

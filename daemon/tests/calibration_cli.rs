@@ -343,3 +343,83 @@ fn report_pdf_without_a_browser_says_what_to_install() {
     assert!(!err.contains("panicked"), "{err}");
     assert!(!pdf.exists(), "nothing written");
 }
+
+/// `compensate verify`: the run a table came from against a re-measurement, both measured.
+/// The re-measurement here is the published run with each target's mean deviation per
+/// direction taken out (what an exact bidirectional table would leave): E after is computed
+/// independently from that CSV, and must be what the command prints.
+#[test]
+fn compensate_verify_compares_two_measured_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let before = PositioningData::from_csv_path(Path::new(RUN)).unwrap();
+    let mut after = before.clone();
+    let mean = |t: f64, d| {
+        let v: Vec<f64> = before
+            .readings
+            .iter()
+            .filter(|r| r.target_mm == t && r.direction == d)
+            .map(|r| r.deviation_um)
+            .collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    for r in &mut after.readings {
+        r.deviation_um -= mean(r.target_mm, r.direction);
+    }
+    let after_csv = dir.path().join("after.csv");
+    std::fs::write(&after_csv, after.to_csv_string()).unwrap();
+    let e = |d: &PositioningData| positioning::iso230::evaluate(d).axis.e.unwrap();
+    let (eb, ea) = (e(&before), e(&after));
+    assert!(ea < 0.05 * eb, "{eb} → {ea}");
+
+    let text = metrolog(&["compensate", "verify", RUN, after_csv.to_str().unwrap()]);
+    assert!(text.contains("measured before   measured after"), "{text}");
+    let row = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("E "))
+        .unwrap();
+    let nums: Vec<f64> = row
+        .split_whitespace()
+        .skip(1)
+        .map(|x| x.parse().unwrap())
+        .collect();
+    assert!(
+        (nums[0] - eb).abs() < 0.006 && (nums[1] - ea).abs() < 0.006,
+        "{row} vs {eb} {ea}"
+    );
+    let json = metrolog(&[
+        "compensate",
+        "verify",
+        RUN,
+        after_csv.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert!((v["after"]["E"].as_f64().unwrap() - ea).abs() < 1e-9);
+    assert_eq!(
+        v["targets"].as_array().unwrap().len(),
+        before.n_targets(),
+        "every target measured again"
+    );
+}
+
+/// `metrolog sim --apply-comp` loads the file as LinuxCNC does and refuses, with the reason,
+/// a file LinuxCNC would load as an empty table (a comment line at the top).
+#[test]
+fn sim_refuses_a_comp_file_linuxcnc_would_load_empty() {
+    let dir = tempfile::tempdir().unwrap();
+    let comp = dir.path().join("x_comp.txt");
+    std::fs::write(&comp, "# X axis\n0 0 0\n100 -0.001 -0.002\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["sim", "--dir"])
+        .arg(dir.path().join("sim"))
+        .arg("--apply-comp")
+        .arg(&comp)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("stops at the first line that is not three numbers"),
+        "{err}"
+    );
+}

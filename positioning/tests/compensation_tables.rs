@@ -460,3 +460,112 @@ fn absurd_spacings_and_reference_points_are_refused() {
         assert!(matches!(e, CompensationError::BadReference(_)), "{r}: {e}");
     }
 }
+
+const ALL_DIALECTS: [Dialect; 4] = [
+    Dialect::LinuxCnc,
+    Dialect::Sinumerik,
+    Dialect::Fanuc,
+    Dialect::Heidenhain,
+];
+
+/// An axis name goes into a file's syntax (`$AA_ENC_COMP[0,N,X1]`, a `.COM` column) and its
+/// name: only letters with optional digits are taken, from `--axis-name` or the run's
+/// `# axis:` line; a path, `]`, `=`, `;`, a space or a newline is refused for every dialect.
+#[test]
+fn axis_names_are_controller_names_or_refused() {
+    let d = run(3);
+    for bad in [
+        "../etc/x",
+        "X]",
+        "X=1",
+        "X;",
+        "X\nM30",
+        "X 1",
+        "",
+        "1X",
+        "X1A",
+        "ÄX",
+        "ABCDEFGH1",
+    ] {
+        for dialect in ALL_DIALECTS {
+            let mut o = opts(dialect, Mode::Backlash, None);
+            o.axis_name = Some(bad.into());
+            let e = build(&d, &o).expect_err(bad);
+            assert!(
+                matches!(e, CompensationError::BadAxisName { .. })
+                    && e.to_string().contains("--axis-name"),
+                "{dialect:?} {bad:?}: {e}"
+            );
+            // The same name from the run's own `# axis:` line.
+            let mut from_file = d.clone();
+            from_file.axis = Some(bad.into());
+            let e = build(&from_file, &opts(dialect, Mode::Backlash, None)).expect_err(bad);
+            assert!(
+                e.to_string().contains("# axis:"),
+                "{dialect:?} {bad:?}: {e}"
+            );
+        }
+    }
+    for good in ["X", "X1", "AX1", "z", "ABCDEFG1"] {
+        let mut o = opts(Dialect::Sinumerik, Mode::Backlash, None);
+        o.axis_name = Some(good.into());
+        let t = build(&d, &o).unwrap_or_else(|e| panic!("{good}: {e}"));
+        assert!(
+            file(&t, "_EEC.INI").contains(&format!("$AA_ENC_COMP[0,0,{good}]=")),
+            "{good}"
+        );
+        assert_eq!(t.files[0].0, format!("{good}_EEC.INI"));
+    }
+}
+
+/// `--axis-number 0` is refused (it was taken as 1); FANUC takes 1 to 32, LinuxCNC joints
+/// 0 to 15 (axis numbers 1 to 16).
+#[test]
+fn axis_numbers_out_of_range_are_refused() {
+    let d = run(4);
+    for (dialect, mode, max) in [
+        (Dialect::Fanuc, Mode::Backlash, 32),
+        (Dialect::LinuxCnc, Mode::Bidirectional, 16),
+    ] {
+        for n in [0, max + 1, usize::MAX] {
+            let mut o = opts(dialect, mode, None);
+            o.axis_number = n;
+            let e = build(&d, &o).expect_err("out of range");
+            assert!(
+                matches!(e, CompensationError::BadAxisNumber { number, .. } if number == n)
+                    && e.to_string().contains(&format!("1 to {max}")),
+                "{dialect:?} {n}: {e}"
+            );
+        }
+        let mut o = opts(dialect, mode, None);
+        o.axis_number = max;
+        build(&d, &o).unwrap_or_else(|e| panic!("{dialect:?} {max}: {e}"));
+    }
+    let mut o = opts(Dialect::Fanuc, Mode::Backlash, None);
+    o.axis_number = 32;
+    let t = build(&d, &o).expect("axis 32");
+    assert!(file(&t, "PARAM.TXT").contains("N03620A32P"));
+}
+
+/// A run holding a non-finite deviation makes no controller file: every writer refuses with
+/// what to fix instead of writing `NaN` or `inf` (or, for FANUC's integers, a silent 0).
+#[test]
+fn no_controller_file_holds_nan_or_infinity() {
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut d = run(5);
+        d.readings[7].deviation_um = bad;
+        for dialect in ALL_DIALECTS {
+            let mode = if dialect == Dialect::LinuxCnc {
+                Mode::Bidirectional
+            } else {
+                Mode::Backlash
+            };
+            let e = build(&d, &opts(dialect, mode, None)).expect_err("non-finite");
+            assert!(
+                matches!(e, CompensationError::NotFinite(_))
+                    && e.to_string().contains("not a finite number"),
+                "{dialect:?} {bad}: {e}"
+            );
+        }
+    }
+}

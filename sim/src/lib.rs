@@ -73,6 +73,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod axis_comp;
 mod device;
 mod devices;
 mod error;
@@ -92,6 +93,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tokio::sync::{mpsc, watch};
 
+pub use axis_comp::{CompFileError, ScrewComp};
 pub use error::SimError;
 pub use instrument::Device;
 pub use physics::{CapballTruth, PoseTiming, Schedule};

@@ -81,6 +81,9 @@ pub struct AxisVisit {
     pub direction: Direction,
     /// Random part drawn for this visit (noise and outliers of the axis model), µm.
     pub random_um: f64,
+    /// Trim of the loaded compensation table ([`Scenario::axis_comp`]) at this visit, relative
+    /// to the trim at home where the interferometer's datum is taken, µm (0 without a table).
+    pub comp_um: f64,
 }
 
 /// The true volumetric error at a pose: swap in another model through this trait.
@@ -407,6 +410,7 @@ impl World {
             .axis
             .deterministic_um(v.target_index, v.direction, t_s)
             + v.random_um
+            + v.comp_um
     }
 
     /// True deviation of the X axis (indicated minus programmed, at 20 °C), µm. Zero at home:
@@ -537,6 +541,15 @@ fn nearest_target(m: &AxisModel, x_mm: f64) -> usize {
     best
 }
 
+/// The trim the control of the X axis adds at commanded `x_mm` reached moving `dir`, less the
+/// trim at home (the interferometer's datum; homing ends moving up), µm: the joint goes to
+/// `pos-cmd + trim` (`crate::axis_comp`), so the reflector moves by the trim.
+fn comp_um(s: &Scenario, x_mm: f64, dir: Direction) -> f64 {
+    s.axis_comp.as_ref().map_or(0.0, |c| {
+        c.trim_um(x_mm, dir) - c.trim_um(s.program.home.x_mm, Direction::Up)
+    })
+}
+
 /// One random draw per visit of a pose: the axis model's repeatability belongs to the
 /// positioning of the machine, so it is constant over a dwell, not white from sample to sample.
 fn draw_visits(s: &Scenario, rng: &mut ChaCha8Rng) -> Vec<AxisVisit> {
@@ -568,6 +581,7 @@ fn draw_visits(s: &Scenario, rng: &mut ChaCha8Rng) -> Vec<AxisVisit> {
             target_index: idx,
             direction: dir,
             random_um,
+            comp_um: comp_um(s, r.x_mm, dir),
         });
         prev_x = r.x_mm;
         prev_dir = dir;

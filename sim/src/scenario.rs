@@ -11,6 +11,7 @@ use positioning::axis_model::AxisModel;
 use protocol::can::TriggerEvent;
 use serde::{Deserialize, Serialize};
 
+use crate::axis_comp::ScrewComp;
 use crate::instrument::Device;
 
 /// A complete simulation scenario.
@@ -41,6 +42,11 @@ pub struct Scenario {
     pub environment: Environment,
     /// The interferometer's axis: static deviations per target and direction, noise, effects.
     pub axis: AxisModel,
+    /// A compensation table loaded into the control of the X axis ([`ScrewComp`], LinuxCNC
+    /// semantics): the joint moves to the commanded position plus the table's trim. Not part
+    /// of the scenario file; set by `metrolog sim --apply-comp` and the demo's verification run.
+    #[serde(skip)]
+    pub axis_comp: Option<ScrewComp>,
     #[serde(default)]
     pub interferometer: Interferometer,
     #[serde(default)]

@@ -6,7 +6,8 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use positioning::compensation::{Dialect, Mode, Options, build, verify};
+use positioning::compensation::{Dialect, Mode, Options, Remeasured, build, remeasured, verify};
+use positioning::iso230::AxisStats;
 
 use crate::cmd::input::{load_positioning, print_out};
 
@@ -14,6 +15,20 @@ use crate::cmd::input::{load_positioning, print_out};
 pub enum Command {
     /// Pitch-error (leadscrew) compensation table of one axis from a positioning run.
     Positioning(PositioningArgs),
+    /// Measured before/after: the run a table was built from against the verification run
+    /// measured with the table loaded (ISO 230-2 of both, mean deviations at the targets).
+    Verify(VerifyArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct VerifyArgs {
+    /// The run the table was built from (CSV dataset or MCAP log).
+    pub before: PathBuf,
+    /// The verification run, measured with the table loaded (CSV dataset or MCAP log).
+    pub after: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -30,17 +45,20 @@ pub struct PositioningArgs {
     /// `home_mm` metadata, else 0 mm, the machine's home].
     #[arg(long, value_name = "MM")]
     pub reference_point: Option<f64>,
-    /// One table per direction of approach (LinuxCNC, HEIDENHAIN).
+    /// One table per direction of approach (LinuxCNC, HEIDENHAIN). Without this or
+    /// --backlash the table corrects the mean of both directions and leaves the backlash (the
+    /// reversal value B) as measured.
     #[arg(long, conflicts_with = "backlash")]
     pub bidirectional: bool,
     /// One table from the positive direction plus a backlash value.
     #[arg(long)]
     pub backlash: bool,
-    /// Axis name as the controller knows it [default: the run's axis; SINUMERIK: its machine
-    /// axis, e.g. X1 for X, as in Siemens' K3 example].
+    /// Axis name as the controller knows it: letters and optional digits, at most 8 (X, X1,
+    /// AX1) [default: the run's axis; SINUMERIK: its machine axis, e.g. X1 for X, as in
+    /// Siemens' K3 example].
     #[arg(long)]
     pub axis_name: Option<String>,
-    /// Axis number (FANUC parameter axis, LinuxCNC joint + 1).
+    /// Axis number: FANUC parameter axis 1 to 32, LinuxCNC joint + 1 (1 to 16).
     #[arg(long, default_value_t = 1)]
     pub axis_number: usize,
     /// FANUC: the largest value one pitch point may hold (the control model's limit, in
@@ -56,7 +74,86 @@ pub struct PositioningArgs {
 }
 
 pub fn run(c: Command) -> anyhow::Result<()> {
-    let Command::Positioning(a) = c;
+    match c {
+        Command::Positioning(a) => positioning(a),
+        Command::Verify(a) => verify_runs(a),
+    }
+}
+
+fn verify_runs(a: VerifyArgs) -> anyhow::Result<()> {
+    let before = load_positioning(&a.before)?;
+    let after = load_positioning(&a.after)?;
+    let r = remeasured(&before, &after);
+    if a.json {
+        return print_out(&(serde_json::to_string_pretty(&r)? + "\n"));
+    }
+    print_out(&before_after_text(&r, None))
+}
+
+fn um(x: Option<f64>) -> String {
+    x.map(|x| metrolog_analysis::export::num(x, 2))
+        .unwrap_or_else(|| "—".into())
+}
+
+/// Measured before → measured after (and the prediction beside it when given): ISO 230-2 of
+/// both runs and the mean deviations at the targets they share.
+pub fn before_after_text(r: &Remeasured, predicted: Option<&AxisStats>) -> String {
+    let mut s = String::from("ISO 230-2 (µm)   measured before   measured after");
+    if predicted.is_some() {
+        s.push_str("   predicted after");
+    }
+    s.push('\n');
+    let p = |f: fn(&AxisStats) -> Option<f64>| predicted.map(f);
+    for (k, b, af, pr) in [
+        ("E", r.before.e, r.after.e, p(|a| a.e)),
+        ("A", r.before.a, r.after.a, p(|a| a.a)),
+        ("B", r.before.b, r.after.b, p(|a| a.b)),
+        ("R", r.before.r, r.after.r, p(|a| a.r)),
+        ("M", r.before.m, r.after.m, p(|a| a.m)),
+    ] {
+        let _ = write!(s, "  {k:<14} {:>15} {:>16}", um(b), um(af));
+        if let Some(pr) = pr {
+            let _ = write!(s, " {:>17}", um(pr));
+        }
+        s.push('\n');
+    }
+    if let Some(q) = r.e_ratio() {
+        let _ = writeln!(
+            s,
+            "  the table left {:.1} % of E, the error at the targets in both directions",
+            100.0 * q
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nmean deviation at the targets (µm)   before ↑   before ↓    after ↑    after ↓"
+    );
+    for t in &r.targets {
+        let _ = writeln!(
+            s,
+            "  {:>12.3} mm {:>25} {:>10} {:>10} {:>10}",
+            t.target_mm,
+            um(t.before_up_um),
+            um(t.before_down_um),
+            um(t.after_up_um),
+            um(t.after_down_um)
+        );
+    }
+    if !r.unmatched_mm.is_empty() {
+        let _ = writeln!(
+            s,
+            "  not measured again: {} mm",
+            r.unmatched_mm
+                .iter()
+                .map(|x| format!("{x:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    s
+}
+
+fn positioning(a: PositioningArgs) -> anyhow::Result<()> {
     let data = load_positioning(&a.input)?;
     let mode = match (a.bidirectional, a.backlash) {
         (true, _) => Mode::Bidirectional,
@@ -120,7 +217,8 @@ pub fn run(c: Command) -> anyhow::Result<()> {
     }
     let _ = writeln!(
         s,
-        "The prediction assumes the same repeatability and drift after compensation; measure the axis again to confirm."
+        "The prediction assumes the same repeatability and drift after compensation; measure the axis again with the table loaded and compare: metrolog compensate verify {} VERIFICATION_RUN",
+        a.input.display()
     );
     print_out(&s)
 }

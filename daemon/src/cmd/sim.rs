@@ -20,6 +20,30 @@ pub struct Args {
     /// scenario starts its program manually, which only a caller in the same process can do).
     #[arg(long, default_value_t = 3.0)]
     pub start_delay_s: f64,
+    /// A LinuxCNC comp file (`COMP_FILE_TYPE = 1`, e.g. the `x_comp.txt` of `metrolog
+    /// compensate positioning --dialect linuxcnc`) loaded into the simulated X axis, applied
+    /// as LinuxCNC applies it: the joint moves to the commanded position plus the trim of the
+    /// direction of motion. Measure again and compare with `metrolog compensate verify`.
+    #[arg(long, value_name = "FILE")]
+    pub apply_comp: Option<PathBuf>,
+}
+
+/// Reads a LinuxCNC type-1 comp file as LinuxCNC loads it ([`sim::ScrewComp`]); lines LinuxCNC
+/// would ignore are reported on stderr.
+pub fn load_comp_file(path: &Path) -> anyhow::Result<sim::ScrewComp> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let comp = sim::ScrewComp::from_linuxcnc(&text)
+        .with_context(|| format!("{} is not a LinuxCNC comp file", path.display()))?;
+    if comp.ignored_lines > 0 {
+        eprintln!(
+            "warning: {}: {} line(s) after triplet {} are not three numbers; LinuxCNC ignores them and so does the simulation",
+            path.display(),
+            comp.ignored_lines,
+            comp.nominal_mm.len()
+        );
+    }
+    Ok(comp)
 }
 
 /// Device rates the generated daemon config asks for, within each data sheet. The LI-80 runs at
@@ -143,6 +167,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(p) => Scenario::load(p)?,
         None => Scenario::demo(),
     };
+    if let Some(p) = &args.apply_comp {
+        scenario.axis_comp = Some(load_comp_file(p)?);
+    }
     if scenario.program.start == ProgramStart::Manual {
         // Nobody in this process can press start: start when the daemon opens the CAN channel.
         scenario.program.start = ProgramStart::OnCanOpen;
@@ -160,6 +187,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     rt.block_on(async move {
         let sim = sim::Sim::start(scenario, &dir)?;
         println!("simulated instruments running:");
+        if let Some(p) = &args.apply_comp {
+            println!("  the X axis applies {} (LinuxCNC screw compensation)", p.display());
+        }
         for d in [Device::Interferometer, Device::Capball, Device::Psd, Device::Trigger] {
             println!("  {:<15} {}", d.name(), sim.port(d).display());
         }

@@ -119,6 +119,7 @@ fn tapes(c: &Curve, v: &[i64], mag: u32, b_units: Option<i64>) -> (String, Strin
 }
 
 pub(crate) fn write(c: &Curve, point_limit: u32) -> Result<CompensationTable, CompensationError> {
+    c.check_finite()?;
     if c.mode == Mode::Bidirectional {
         return Err(CompensationError::Unsupported {
             dialect: Dialect::Fanuc,

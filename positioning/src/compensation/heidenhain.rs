@@ -27,6 +27,7 @@ fn q(v_um: f64) -> f64 {
 }
 
 pub(crate) fn write(c: &Curve) -> Result<CompensationTable, CompensationError> {
+    c.check_finite()?;
     let n = c.points_mm.len();
     let up: Vec<f64> = c.up_um.iter().map(|&v| q(v)).collect();
     let down: Vec<f64> = c.down_um.iter().map(|&v| q(v)).collect();

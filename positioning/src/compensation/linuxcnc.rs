@@ -29,6 +29,7 @@ fn q(v_um: f64) -> f64 {
 }
 
 pub(crate) fn write(c: &Curve) -> Result<CompensationTable, CompensationError> {
+    c.check_finite()?;
     let n = c.points_mm.len();
     if n > MAX_TRIPLETS {
         return Err(CompensationError::Limit {

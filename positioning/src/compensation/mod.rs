@@ -17,7 +17,10 @@
 mod fanuc;
 mod heidenhain;
 mod linuxcnc;
+mod remeasure;
 mod sinumerik;
+
+pub use remeasure::{Remeasured, TargetBeforeAfter, remeasured};
 
 use serde::{Deserialize, Serialize};
 
@@ -142,6 +145,75 @@ pub enum CompensationError {
     Limit { dialect: Dialect, message: String },
     #[error("bad metadata `home_mm: {0}`: expected a number of mm")]
     BadHome(String),
+    #[error(
+        "axis name {name:?} ({source_of}) cannot go into a controller file: a controller axis name is letters followed by optional digits, at most {MAX_AXIS_NAME} characters (X, X1, AX1); set --axis-name"
+    )]
+    BadAxisName {
+        name: String,
+        source_of: &'static str,
+    },
+    #[error(
+        "{dialect:?}: axis number {number} is out of range: give --axis-number 1 to {max}{why}"
+    )]
+    BadAxisNumber {
+        dialect: Dialect,
+        number: usize,
+        max: usize,
+        why: &'static str,
+    },
+    #[error(
+        "{0} is not a finite number: the run holds a non-finite deviation or position; fix or remove that reading (no controller file is written with NaN or infinity)"
+    )]
+    NotFinite(&'static str),
+}
+
+/// The longest axis name written (SINUMERIK machine axis names such as `AX1`, `X1`; FANUC and
+/// LinuxCNC do not write it into the file's syntax but into its name).
+pub const MAX_AXIS_NAME: usize = 8;
+
+/// The largest axis number: FANUC parameter axes (`N03620A<n>`) 1 to 32, the writer's limit.
+pub const MAX_AXIS_NUMBER: usize = 32;
+
+/// LinuxCNC 2.9's `EMCMOT_MAX_JOINTS` (`src/emc/motion/emcmotcfg.h`): joints 0 to 15.
+pub const LINUXCNC_MAX_JOINTS: usize = 16;
+
+/// A controller axis name: ASCII letters, then optional ASCII digits (X, X1, AX1), at most
+/// [`MAX_AXIS_NAME`] characters. Anything else (a path, `]`, `=`, `;`, a space, a newline)
+/// would change the syntax of the file it is written into or the file's name.
+pub fn check_axis_name(name: &str, source_of: &'static str) -> Result<(), CompensationError> {
+    let letters = name.bytes().take_while(u8::is_ascii_alphabetic).count();
+    let ok = letters > 0
+        && name.len() <= MAX_AXIS_NAME
+        && name.bytes().skip(letters).all(|b| b.is_ascii_digit());
+    if ok {
+        Ok(())
+    } else {
+        Err(CompensationError::BadAxisName {
+            name: name.to_string(),
+            source_of,
+        })
+    }
+}
+
+/// The axis number the dialect can address: 0 is refused, not taken as 1.
+fn check_axis_number(dialect: Dialect, number: usize) -> Result<(), CompensationError> {
+    let (max, why) = match dialect {
+        Dialect::LinuxCnc => (
+            LINUXCNC_MAX_JOINTS,
+            " (joint = axis number − 1; LinuxCNC 2.9 has joints 0 to 15)",
+        ),
+        _ => (MAX_AXIS_NUMBER, ""),
+    };
+    if (1..=max).contains(&number) {
+        Ok(())
+    } else {
+        Err(CompensationError::BadAxisNumber {
+            dialect,
+            number,
+            max,
+            why,
+        })
+    }
 }
 
 /// A table as the control will apply it: the correction it adds to the commanded position
@@ -180,6 +252,28 @@ pub(crate) struct Curve {
     pub down_um: Vec<f64>,
     pub backlash_um: Option<f64>,
     pub mode: Mode,
+}
+
+impl Curve {
+    /// Every number a writer puts into a file is finite: the guard each writer calls first.
+    pub(crate) fn check_finite(&self) -> Result<(), CompensationError> {
+        let all = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if !(self.reference_mm.is_finite() && self.spacing_mm.is_finite()) {
+            return Err(CompensationError::NotFinite(
+                "the reference point or spacing",
+            ));
+        }
+        if !all(&self.points_mm) {
+            return Err(CompensationError::NotFinite("a table point"));
+        }
+        if !(all(&self.up_um) && all(&self.down_um)) {
+            return Err(CompensationError::NotFinite("a compensation value"));
+        }
+        if self.backlash_um.is_some_and(|b| !b.is_finite()) {
+            return Err(CompensationError::NotFinite("the backlash"));
+        }
+        Ok(())
+    }
 }
 
 /// Linear interpolation in a sorted table, holding the end values outside it.
@@ -266,13 +360,16 @@ pub(crate) fn curve(data: &PositioningData, o: &Options) -> Result<Curve, Compen
     for v in up_um.iter_mut().chain(down_um.iter_mut()) {
         *v -= e0;
     }
+    let axis = match (&o.axis_name, &data.axis) {
+        (Some(a), _) => (a.clone(), "--axis-name"),
+        (None, Some(a)) => (a.clone(), "the run's axis, `# axis:` or the log's metadata"),
+        (None, None) => ("X".to_string(), "default"),
+    };
+    check_axis_name(&axis.0, axis.1)?;
+    check_axis_number(o.dialect, o.axis_number)?;
     Ok(Curve {
-        axis: o
-            .axis_name
-            .clone()
-            .or_else(|| data.axis.clone())
-            .unwrap_or_else(|| "X".to_string()),
-        axis_number: o.axis_number.max(1),
+        axis: axis.0,
+        axis_number: o.axis_number,
         reference_mm: reference,
         spacing_mm: spacing,
         points_mm,
@@ -290,6 +387,7 @@ pub fn build(data: &PositioningData, o: &Options) -> Result<CompensationTable, C
     if o.dialect == Dialect::Sinumerik && o.axis_name.is_none() {
         // LEC tables address the machine axis (K3 §4.4.2.3's example: `X1`).
         let a = data.axis.clone().unwrap_or_else(|| "X".into());
+        check_axis_name(&a, "the run's axis, `# axis:` or the log's metadata")?;
         o.axis_name = Some(format!("{a}1"));
     }
     if o.dialect == Dialect::Fanuc {
@@ -303,6 +401,13 @@ pub fn build(data: &PositioningData, o: &Options) -> Result<CompensationTable, C
         Dialect::Heidenhain => heidenhain::write(&c),
         Dialect::LinuxCnc => linuxcnc::write(&c),
     }?;
+    if o.mode == Mode::Mean
+        && let Some(b) = evaluate(data).axis.b
+    {
+        t.notes.push(format!(
+            "a Mean table leaves the reversal error: B = {b:.2} µm stays after loading it (the table corrects the mean of both directions, each direction keeps half the backlash); use --backlash or --bidirectional (LinuxCNC, HEIDENHAIN) to remove it"
+        ));
+    }
     let [(xu, _), _] = means(data);
     if let (Some(lo), Some(hi)) = (xu.first(), xu.last())
         && !(*lo..=*hi).contains(&c.reference_mm)

@@ -27,6 +27,7 @@ fn q(v_um: f64) -> f64 {
 }
 
 pub(crate) fn write(c: &Curve) -> Result<CompensationTable, CompensationError> {
+    c.check_finite()?;
     if c.mode == Mode::Bidirectional {
         return Err(CompensationError::Unsupported {
             dialect: Dialect::Sinumerik,

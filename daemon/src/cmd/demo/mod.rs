@@ -5,8 +5,10 @@
 //! run` runs (real drivers, real pipeline, real MCAP writer) through the scenario's CNC program:
 //! an ISO 230-2 style interferometer run on one axis, a CapBall pose sequence and a PSD segment.
 //! Then it compares every steady value with the simulation's true value and prints a report.
+//! Last, it closes the compensation loop ([`verify`]): the LinuxCNC table of the run, loaded
+//! into the simulated axis, and the positioning run measured again with it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::Context;
@@ -21,6 +23,8 @@ use crate::acquire::service::Notifier;
 use crate::cmd::run::{Acquire, RunReport, acquire};
 use metrolog_log::topics::PoseMsg;
 use types::PoseStatus;
+
+pub mod verify;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -56,7 +60,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     print_report(&report, &truth, home_x_mm, &reversals);
     print_analysis(&report);
     print_capball_truth();
+    let l = rt.block_on(verify::compensate_and_verify(&report.log_path, &out))?;
+    print_loop(&l);
     Ok(())
+}
+
+/// The compensate-and-verify loop's files and its measured before/after.
+fn print_loop(l: &verify::Loop) {
+    println!(
+        "\ncompensate and verify: LinuxCNC table ({:?}, {} points, reference {:.3} mm) from the calibration run",
+        l.table.mode,
+        l.table.points_mm.len(),
+        l.table.reference_mm
+    );
+    for f in &l.files {
+        println!("  wrote {}", f.display());
+    }
+    println!("  verification log: {}\n", l.verify_log.display());
+    print!(
+        "{}",
+        crate::cmd::compensate::before_after_text(&l.remeasured, Some(&l.predicted))
+    );
+    println!(
+        "  a pitch table removes the error that repeats at each target; A and R keep the drift within the run (the axis's thermal expansion and cyclic drift above), and the mean deviations after keep a constant offset (the error at the reference point, which the table takes as exact)\n  compare any two runs: metrolog compensate verify BEFORE.mcap AFTER.mcap"
+    );
 }
 
 /// What the simulation put into the CapBall data, to hold against the report's CapBall
@@ -89,26 +116,39 @@ fn print_capball_truth() {
 }
 
 async fn demo(out: PathBuf) -> anyhow::Result<(RunReport, Vec<PoseTruth>, f64)> {
-    let ports = out.join("ports");
-    std::fs::create_dir_all(&ports)
-        .with_context(|| format!("cannot create {}", ports.display()))?;
     let scenario = Scenario::demo();
     let home_x_mm = scenario.program.home.x_mm;
+    let (report, truth) = sim_run(scenario, &out, "metrolog demo").await?;
+    Ok((report, truth, home_x_mm))
+}
+
+/// One run of `scenario` on simulated instruments through the very acquisition `metrolog run`
+/// runs: port links in `dir/ports`, the config `dir/metrolog.toml`, the log in `dir`. The CNC
+/// program starts once every instrument streams; `what` names the run in the first line
+/// printed. Returns the run's report and the simulation's per-pose truth.
+pub async fn sim_run(
+    scenario: Scenario,
+    dir: &Path,
+    what: &str,
+) -> anyhow::Result<(RunReport, Vec<PoseTruth>)> {
+    let ports = dir.join("ports");
+    std::fs::create_dir_all(&ports)
+        .with_context(|| format!("cannot create {}", ports.display()))?;
     let total = scenario.program.poses.len() as u64;
     let sim = sim::Sim::start(scenario, &ports)?;
-    let toml = crate::cmd::sim::write_daemon_config(&sim, &ports, &out, true)?;
-    let cfg_path = out.join("metrolog.toml");
+    let toml = crate::cmd::sim::write_daemon_config(&sim, &ports, dir, true)?;
+    let cfg_path = dir.join("metrolog.toml");
     std::fs::write(&cfg_path, &toml)
         .with_context(|| format!("cannot write {}", cfg_path.display()))?;
     // Through the same loader as the service, so the demo checks the config path too.
     let cfg = Config::load(&cfg_path)?;
     println!(
-        "metrolog demo: simulated instruments on {}; CNC program of {total} poses, about {:.0} s",
+        "{what}: simulated instruments on {}; CNC program of {total} poses, about {:.0} s",
         ports.display(),
         sim.program_duration_s()
     );
 
-    let (progress_tx, mut progress) = watch::channel(Status::default());
+    let (progress_tx, progress) = watch::channel(Status::default());
     let stop = CancellationToken::new();
     let run = acquire(
         &cfg,
@@ -121,69 +161,78 @@ async fn demo(out: PathBuf) -> anyhow::Result<(RunReport, Vec<PoseTruth>, f64)> 
         },
     );
     let instruments = cfg.instruments();
-    let program_s = sim.program_duration_s();
-    let control = async {
-        // Start the CNC program only when every instrument streams, as an operator would.
-        let wait = async {
-            loop {
-                {
-                    let st = progress.borrow_and_update();
-                    let ready = instruments.iter().all(|i| {
-                        st.instruments.get(i).is_some_and(|s| {
-                            s.connected && (*i == Instrument::Trigger || s.received > 0)
-                        })
-                    });
-                    if ready {
-                        return;
-                    }
-                }
-                if progress.changed().await.is_err() {
-                    return;
-                }
-            }
-        };
-        if tokio::time::timeout(CONNECT_TIMEOUT, wait).await.is_err() {
-            let st = progress.borrow().clone();
-            stop.cancel();
-            return Err(anyhow::anyhow!(
-                "the instruments did not all stream within {CONNECT_TIMEOUT:?}: {}",
-                st.summary()
-            ));
-        }
-        sim.start_program();
-        let bar = indicatif::ProgressBar::new(total);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} poses {pos}/{len} [{bar:40}] {elapsed_precise} {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(program_s + 20.0);
-        loop {
-            {
-                let st = progress.borrow_and_update();
-                bar.set_position((st.last_pose as u64).min(total));
-                bar.set_message(format!("{} samples, {} faults", st.samples(), st.faults()));
-            }
-            tokio::select! {
-                r = progress.changed() => if r.is_err() { break },
-                _ = tokio::time::sleep_until(deadline) => {
-                    bar.println("the program did not end in time; stopping");
-                    stop.cancel();
-                    break;
-                }
-            }
-        }
-        bar.finish();
-        Ok(())
-    };
+    let control = control(&sim, &instruments, progress, &stop, total);
     let (report, control) = tokio::join!(run, control);
     let report = report?;
     control?;
     let truth = sim.record().truth;
     sim.shutdown().await;
-    Ok((report, truth, home_x_mm))
+    Ok((report, truth))
+}
+
+/// Starts the CNC program when every instrument streams, as an operator would, and shows the
+/// progress until the run ends (or stops it when the program overruns by 20 s).
+async fn control(
+    sim: &sim::SimHandle,
+    instruments: &[Instrument],
+    mut progress: watch::Receiver<Status>,
+    stop: &CancellationToken,
+    total: u64,
+) -> anyhow::Result<()> {
+    let wait = async {
+        loop {
+            {
+                let st = progress.borrow_and_update();
+                let ready = instruments.iter().all(|i| {
+                    st.instruments.get(i).is_some_and(|s| {
+                        s.connected && (*i == Instrument::Trigger || s.received > 0)
+                    })
+                });
+                if ready {
+                    return;
+                }
+            }
+            if progress.changed().await.is_err() {
+                return;
+            }
+        }
+    };
+    if tokio::time::timeout(CONNECT_TIMEOUT, wait).await.is_err() {
+        let st = progress.borrow().clone();
+        stop.cancel();
+        return Err(anyhow::anyhow!(
+            "the instruments did not all stream within {CONNECT_TIMEOUT:?}: {}",
+            st.summary()
+        ));
+    }
+    sim.start_program();
+    let bar = indicatif::ProgressBar::new(total);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} poses {pos}/{len} [{bar:40}] {elapsed_precise} {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let deadline =
+        tokio::time::Instant::now() + Duration::from_secs_f64(sim.program_duration_s() + 20.0);
+    loop {
+        {
+            let st = progress.borrow_and_update();
+            bar.set_position((st.last_pose as u64).min(total));
+            bar.set_message(format!("{} samples, {} faults", st.samples(), st.faults()));
+        }
+        tokio::select! {
+            r = progress.changed() => if r.is_err() { break },
+            _ = tokio::time::sleep_until(deadline) => {
+                bar.println("the program did not end in time; stopping");
+                stop.cancel();
+                break;
+            }
+        }
+    }
+    bar.finish();
+    Ok(())
 }
 
 /// What one instrument measured against the simulation's truth.

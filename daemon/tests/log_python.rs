@@ -18,6 +18,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 counts = {}
 batches = {}
 errors = []
+temperatures = []
 with open(sys.argv[1], "rb") as f:
     reader = make_reader(f, validate_crcs=True)
     summary = reader.get_summary()
@@ -41,13 +42,17 @@ with open(sys.argv[1], "rb") as f:
             # (repeated fields are the containers with a length)
             columns = [(f.name, getattr(m, f.name)) for m in (batch, batch.header)
                        for f in m.DESCRIPTOR.fields
-                       if hasattr(getattr(m, f.name), "__len__") and f.name != "material_c"]
+                       if hasattr(getattr(m, f.name), "__len__") and f.name not in ("material_c", "values_c")]
             for name, col in columns:
                 empty_ok = channel.topic == "/capball/sample" and len(col) == 0
                 if len(col) != n and not empty_ok:
                     errors.append(f"{channel.topic}: column {name} is not {n} long")
             if channel.topic == "/capball/sample" and len(batch.code_1_delta) != n and len(batch.ex_um) != n:
                 errors.append(f"{channel.topic}: neither codes nor values")
+            if channel.topic == "/temperature":
+                if sum(batch.channels) != len(batch.values_c):
+                    errors.append(f"{channel.topic}: channels do not add up to values_c")
+                temperatures.extend(None if v != v else v for v in batch.values_c)
             counts[channel.topic] = counts.get(channel.topic, 0) + n
             batches[channel.topic] = batches.get(channel.topic, 0) + 1
             continue
@@ -71,6 +76,7 @@ print(json.dumps({
     "errors": errors[:20],
     "n_errors": len(errors),
     "batches": batches,
+    "temperatures": temperatures,
     "attachments": attachments,
     "run": metadata.get("metrolog.run", {}),
     "summary_counts": {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()},
@@ -82,6 +88,7 @@ fn python_reads_the_log_and_every_message_matches_its_schema() {
     let dir = tempfile::tempdir().unwrap();
     let run = SyntheticRun {
         targets_mm: vec![0.0, 10.0, 20.0],
+        temperature_hz: 2.0,
         ..SyntheticRun::default()
     };
     let w = log_common::write_run(dir.path(), "run.mcap", &run);
@@ -109,8 +116,7 @@ fn python_reads_the_log_and_every_message_matches_its_schema() {
                 drivers::SampleValues::Environment { .. } => "/interferometer/environment",
                 drivers::SampleValues::Capball { .. } => "/capball/sample",
                 drivers::SampleValues::Psd { .. } => "/psd/sample",
-                // Not logged yet (no raw topic).
-                drivers::SampleValues::Temperature { .. } => continue,
+                drivers::SampleValues::Temperature { .. } => "/temperature",
             },
             drivers::DriverEvent::Trigger(_) => "/cnc/trigger",
             drivers::DriverEvent::Connected { .. } => "/event",
@@ -127,6 +133,28 @@ fn python_reads_the_log_and_every_message_matches_its_schema() {
         );
     }
     assert!(r["counts"]["/status"].as_u64().unwrap() >= 9);
+    // The temperatures protobuf decoded, channel after channel (NaN: an open sensor, null).
+    let temps: Vec<f64> = w
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            drivers::DriverEvent::Sample(s) => match &s.values {
+                drivers::SampleValues::Temperature { values_c } => Some(values_c.clone()),
+                _ => None,
+            },
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    let got = r["temperatures"].as_array().unwrap();
+    assert!(want["/temperature"] >= 10, "{want:?}");
+    assert_eq!(got.len(), temps.len());
+    for (g, t) in got.iter().zip(&temps) {
+        match g.as_f64() {
+            Some(g) => assert_eq!(g, *t),
+            None => assert!(t.is_nan() && g.is_null(), "{g} vs {t}"),
+        }
+    }
     assert_eq!(w.poses.len(), 9);
     assert_eq!(
         r["attachments"]["config.toml"],

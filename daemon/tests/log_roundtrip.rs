@@ -313,6 +313,7 @@ fn info_and_replay_commands() {
     let dir = tempfile::tempdir().unwrap();
     let run = SyntheticRun {
         targets_mm: vec![0.0, 10.0],
+        temperature_hz: 2.0,
         ..SyntheticRun::default()
     };
     let w = log_common::write_run(dir.path(), "run.mcap", &run);
@@ -345,6 +346,22 @@ fn info_and_replay_commands() {
         .as_f64()
         .unwrap();
     assert!((rate - 1000.0).abs() < 1.0, "{rate}");
+    // The temperature module's samples: every one written, at 2 Hz.
+    let temps: Vec<&Vec<f64>> = w
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            DriverEvent::Sample(s) => match &s.values {
+                drivers::SampleValues::Temperature { values_c } => Some(values_c),
+                _ => None,
+            },
+            _ => None,
+        })
+        .collect();
+    assert!(temps.len() >= 10, "{}", temps.len());
+    assert_eq!(j["topics"]["/temperature"]["samples"], temps.len() as u64);
+    let rate = j["topics"]["/temperature"]["rate_hz"].as_f64().unwrap();
+    assert!((rate - 2.0).abs() < 0.01, "{rate}");
 
     let out = std::process::Command::new(bin)
         .arg("replay")
@@ -361,6 +378,21 @@ fn info_and_replay_commands() {
         text.contains("all 6 logged pose values reproduced exactly"),
         "{text}"
     );
+    // The temperatures' range per channel, computed here from what was written (the log of
+    // the test has no sensor names: channels are numbered).
+    let range = |k: usize| {
+        let v: Vec<f64> = temps.iter().map(|t| t[k]).collect();
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        format!("ch{k} {lo:.2}..{hi:.2} °C")
+    };
+    let want = format!(
+        "temperatures: {} samples; {}, {}, ch2: no reading",
+        temps.len(),
+        range(0),
+        range(1)
+    );
+    assert!(text.contains(&want), "{want} not in {text}");
 
     let out = std::process::Command::new(bin)
         .arg("info")

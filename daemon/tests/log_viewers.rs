@@ -63,6 +63,7 @@ fn every_channel_opens_in_the_viewers_and_decodes_to_what_was_written() {
     let dir = tempfile::tempdir().unwrap();
     let run = SyntheticRun {
         targets_mm: vec![0.0, 10.0, 20.0],
+        temperature_hz: 2.0,
         ..SyntheticRun::default()
     };
     let w = log_common::write_run(dir.path(), "demo.mcap", &run);
@@ -74,6 +75,7 @@ fn every_channel_opens_in_the_viewers_and_decodes_to_what_was_written() {
         "/interferometer/environment",
         "/capball/sample",
         "/psd/sample",
+        "/temperature",
         "/cnc/trigger",
         "/pose",
         "/status",
@@ -152,8 +154,19 @@ fn every_channel_opens_in_the_viewers_and_decodes_to_what_was_written() {
                 }
             }
             SampleValues::Psd { y_um, .. } => assert_eq!(f("y_um"), *y_um),
-            // Not logged yet (no raw topic): never in a log.
-            SampleValues::Temperature { .. } => unreachable!("{topic}"),
+            SampleValues::Temperature { values_c } => {
+                // The first sample's channels lead `values_c`; NaN (an open sensor) comes out of
+                // JSON.stringify as null.
+                assert_eq!(first["channels"][0], values_c.len() as u64, "{topic}");
+                for (k, v) in values_c.iter().enumerate() {
+                    let got = &first["values_c"][k];
+                    if v.is_nan() {
+                        assert!(got.is_null(), "{topic} channel {k}: {got}");
+                    } else {
+                        assert_eq!(got.as_f64(), Some(*v), "{topic} channel {k}");
+                    }
+                }
+            }
         }
     }
     // JSON topics: the first /pose with its times as {sec, nsec}.

@@ -95,7 +95,10 @@ fn example_config_in_deploy_is_valid() {
     .unwrap();
     let c = Config::parse(&dir.path().join("metrolog.toml"), &text).unwrap();
     assert_eq!(c.run.trajectory.as_ref().unwrap().rows.len(), 2);
-    assert_eq!(c.instruments().len(), 4);
+    assert_eq!(c.instruments().len(), 5);
+    let t = c.temperature.as_ref().unwrap();
+    assert_eq!((t.unit, t.sensors.len()), (1, 3));
+    assert_eq!(t.sensors[0].location, "spindle housing, front bearing");
 }
 
 #[test]

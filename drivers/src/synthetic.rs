@@ -26,6 +26,9 @@ pub struct SyntheticRun {
     pub triggers: bool,
     /// Every k-th PSD sample is dark (no light: x, y NaN, sum 0, invalid); 0 = never.
     pub psd_dark_every: u64,
+    /// Polls per second of a Modbus temperature module of [`SyntheticRun::TEMPERATURES`]
+    /// channels (the last an open sensor: NaN, the sample invalid); 0 = no module.
+    pub temperature_hz: f64,
     pub seed: u64,
 }
 
@@ -44,12 +47,16 @@ impl Default for SyntheticRun {
             noise_um: 0.01,
             triggers: true,
             psd_dark_every: 0,
+            temperature_hz: 0.0,
             seed: 1,
         }
     }
 }
 
 impl SyntheticRun {
+    /// Channels of the synthetic temperature module.
+    pub const TEMPERATURES: usize = 3;
+
     /// A run of two poses at low rates (a few kB of log): fuzz seeds and reader tests.
     pub fn small() -> SyntheticRun {
         SyntheticRun {
@@ -131,8 +138,15 @@ impl SyntheticRun {
         SyntheticEvents {
             run: self,
             rng: self.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
-            next: [0.0; 5],
-            count: [0; 5],
+            next: [
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                temperature_start(self.temperature_hz),
+            ],
+            count: [0; 6],
             trig,
             ti: 0,
             pending: Vec::new(),
@@ -141,13 +155,18 @@ impl SyntheticRun {
     }
 }
 
+/// When the temperature stream starts: never without a module.
+fn temperature_start(hz: f64) -> f64 {
+    if hz > 0.0 { 0.0 } else { f64::INFINITY }
+}
+
 /// Iterator over the events of a [`SyntheticRun`].
 pub struct SyntheticEvents<'a> {
     run: &'a SyntheticRun,
     rng: u64,
-    /// Next time (s) of: li80 position, li80 environment, cb3, psd, counters.
-    next: [f64; 5],
-    count: [u64; 5],
+    /// Next time (s) of: li80 position, li80 environment, cb3, psd, counters, temperatures.
+    next: [f64; 6],
+    count: [u64; 6],
     trig: Vec<(f64, TriggerEvent, u16)>,
     ti: usize,
     pending: Vec<DriverEvent>,
@@ -166,16 +185,24 @@ impl SyntheticEvents<'_> {
         let (u1, u2) = (self.uniform(), self.uniform());
         (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
     }
-    /// The connections of the four instruments, first of all events.
+    /// The connections of the instruments (four, five with a temperature module), first of
+    /// all events.
     fn connect_all(&mut self) -> Option<DriverEvent> {
         self.started = true;
         self.next[4] = 1.0;
-        for (i, id) in [
+        let mut all = vec![
             (Instrument::Interferometer, "LI-80,SN1234,FW2.1"),
             (Instrument::Capball, "CB-3,SN77,FW1.4"),
             (Instrument::Psd, "PSD-2,SN5,FW3.0"),
             (Instrument::Trigger, "SLCAN,V1013"),
-        ] {
+        ];
+        if self.run.temperature_hz > 0.0 {
+            all.push((
+                Instrument::Thermometer,
+                "Modbus RTU temperature module, unit 1",
+            ));
+        }
+        for (i, id) in all {
             self.pending.push(DriverEvent::Connected {
                 instrument: i,
                 port: format!("/dev/ttyV{}", i as u8),
@@ -198,12 +225,16 @@ impl SyntheticEvents<'_> {
 
     /// The once-a-second counters of every instrument.
     fn push_counters(&mut self, seq: u64) -> Option<DriverEvent> {
-        for (i, n) in [
+        let mut all = vec![
             (Instrument::Interferometer, self.count[0]),
             (Instrument::Capball, self.count[2]),
             (Instrument::Psd, self.count[3]),
             (Instrument::Trigger, self.ti as u64),
-        ] {
+        ];
+        if self.run.temperature_hz > 0.0 {
+            all.push((Instrument::Thermometer, self.count[5]));
+        }
+        for (i, n) in all {
             let mut c = Counters {
                 samples: n,
                 clock_drift_ppm: Some(1.5),
@@ -217,6 +248,16 @@ impl SyntheticEvents<'_> {
             });
         }
         self.pending.pop()
+    }
+
+    /// The temperature module's channels at `t` s: a warming spindle, the air, an open sensor.
+    fn temperatures_at(&mut self, t: f64) -> Vec<f64> {
+        let mut v = vec![
+            20.0 + 2.0 * (1.0 - (-t / 600.0).exp()) + 0.02 * self.gauss(),
+            20.5 + 0.02 * self.gauss(),
+        ];
+        v.resize(SyntheticRun::TEMPERATURES, f64::NAN);
+        v
     }
 
     /// The values of stream `which` (0 position, 1 environment, 2 CapBall, 3 PSD) at `t` s.
@@ -321,7 +362,7 @@ impl Iterator for SyntheticEvents<'_> {
             return self.connect_all();
         }
         let r = self.run;
-        let rates_hz = [r.li80_hz, 1.0, r.cb3_hz, r.psd_hz, 1.0];
+        let rates_hz = [r.li80_hz, 1.0, r.cb3_hz, r.psd_hz, 1.0, r.temperature_hz];
         let t_trig = self.trig.get(self.ti).map(|x| x.0).unwrap_or(f64::INFINITY);
         let (mut which, mut t) = (usize::MAX, t_trig);
         for (i, &tn) in self.next.iter().enumerate() {
@@ -360,6 +401,14 @@ impl Iterator for SyntheticEvents<'_> {
             4 => return self.push_counters(seq),
             // A dark PSD sample: no light, no position.
             3 if r.psd_dark_every > 0 && seq.is_multiple_of(r.psd_dark_every) => {
+                sample.valid = false;
+            }
+            5 => {
+                sample.instrument = Instrument::Thermometer;
+                sample.values = SampleValues::Temperature {
+                    values_c: self.temperatures_at(t),
+                };
+                // The last channel is an open sensor.
                 sample.valid = false;
             }
             _ => (sample.instrument, sample.values) = self.values_at(which, t),

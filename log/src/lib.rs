@@ -59,7 +59,8 @@ pub use reader::{
 pub use recover::recover;
 pub use run::{
     CAPBALL_CALIBRATION_KEY, CONFIG_ATTACHMENT, DETECTOR_KEY, INSTRUMENT_METADATA, LOG_FORMAT,
-    LOG_FORMAT_KEY, LogError, RUN_METADATA, RunMetadata, TRAJECTORY_ATTACHMENT, rfc3339,
+    LOG_FORMAT_KEY, LogError, RUN_METADATA, RunMetadata, TEMPERATURE_SENSORS_KEY,
+    TRAJECTORY_ATTACHMENT, rfc3339,
 };
 pub use topics::{DecodeError, LogMessage, decode_message};
 pub use trajectory::{TrajectoryRow, parse_trajectory, write_trajectory};

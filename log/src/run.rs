@@ -23,6 +23,9 @@ pub const LOG_FORMAT: u32 = 3;
 /// Key of the CapBall calibration (JSON of `protocol::convert::CapBallCalibration`) in the run
 /// metadata; every CapBall batch of format 3 carries it too.
 pub const CAPBALL_CALIBRATION_KEY: &str = "capball_calibration";
+/// Key of the temperature module's sensors in the run metadata: JSON array of
+/// `{"name", "location"}` in channel order, the order of `values_c` in `/temperature`.
+pub const TEMPERATURE_SENSORS_KEY: &str = "temperature_sensors";
 /// Key of the detector settings (JSON of [`DetectorSettings`]) in the run metadata.
 pub const DETECTOR_KEY: &str = "detector";
 

@@ -441,8 +441,8 @@ pub enum Decoded {
     Pose(PoseMsg),
     Status(StatusMsg),
     Event(EventMsg),
-    /// A sample of an instrument that has no log topic yet (the Modbus temperature module,
-    /// until the daemon's `[temperature]` step adds `/temperature`); never decoded from a log.
+    /// A sample of an instrument that has no JSON topic (the Modbus temperature module: logged
+    /// in `/temperature` batches only, which format 1 predates); never decoded from a log.
     Unlogged(Instrument),
 }
 

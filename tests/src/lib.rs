@@ -447,3 +447,127 @@ pub fn relay_write(fd: &OwnedFd, mut b: &[u8]) {
         }
     }
 }
+
+/// What a [`ModbusRelay`] does to the answer with this index (0-based).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Relay {
+    Pass,
+    Drop,
+    CorruptCrc,
+}
+
+/// A Modbus RTU line between our side (a stable `link` to a pty our driver opens) and a peer
+/// on another pty ([`ModbusRelay::peer_path`]): requests pass as they come, answers frame by
+/// frame (their length from the function code and byte count, instruments.md §5) with what
+/// `plan` says for each.
+pub struct ModbusRelay {
+    /// The pty the peer (the Modbus slave) opens.
+    pub peer_path: PathBuf,
+    stop: Arc<AtomicBool>,
+    relayed: Arc<Mutex<Vec<Relay>>>,
+    request_bytes: Arc<std::sync::atomic::AtomicUsize>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl ModbusRelay {
+    pub fn start(
+        link: &Path,
+        plan: impl Fn(usize) -> Relay + Send + 'static,
+    ) -> anyhow::Result<ModbusRelay> {
+        let peer = pty()?;
+        let ours = pty()?;
+        point_link(link, &ours.path)?;
+        nonblocking(&peer.master);
+        nonblocking(&ours.master);
+        let stop = Arc::new(AtomicBool::new(false));
+        let relayed = Arc::new(Mutex::new(Vec::new()));
+        let request_bytes = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let (stop2, relayed2, req2) = (stop.clone(), relayed.clone(), request_bytes.clone());
+        let peer_path = peer.path.clone();
+        let thread = std::thread::spawn(move || {
+            let mut answer: Vec<u8> = Vec::new();
+            let mut buf = [0u8; 1024];
+            while !stop2.load(Ordering::Relaxed) {
+                if let Ok(n) = nix::unistd::read(ours.master.as_fd(), &mut buf) {
+                    req2.fetch_add(n, Ordering::Relaxed);
+                    relay_write(&peer.master, &buf[..n]);
+                }
+                if let Ok(n) = nix::unistd::read(peer.master.as_fd(), &mut buf) {
+                    answer.extend_from_slice(&buf[..n]);
+                }
+                while let Some(len) = answer_len(&answer) {
+                    let mut frame: Vec<u8> = answer.drain(..len).collect();
+                    let mut r = relayed2.lock().unwrap_or_else(|e| e.into_inner());
+                    let what = plan(r.len());
+                    r.push(what);
+                    match what {
+                        Relay::Pass => relay_write(&ours.master, &frame),
+                        Relay::Drop => {}
+                        Relay::CorruptCrc => {
+                            frame[len - 1] ^= 0xFF;
+                            relay_write(&ours.master, &frame);
+                        }
+                    }
+                }
+                std::thread::sleep(Duration::from_micros(300));
+            }
+        });
+        Ok(ModbusRelay {
+            peer_path,
+            stop,
+            relayed,
+            request_bytes,
+            thread: Some(thread),
+        })
+    }
+
+    /// What was done to each answer so far, in order.
+    pub fn relayed(&self) -> Vec<Relay> {
+        self.relayed
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    /// Read requests our side has sent (8 bytes each).
+    pub fn requests(&self) -> usize {
+        self.request_bytes.load(Ordering::Relaxed) / 8
+    }
+
+    pub fn stop(mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            t.join().expect("the relay thread panicked");
+        }
+    }
+}
+
+/// Length of the complete answer frame at the start of `b`, if there is one: an exception
+/// is 5 bytes, a read answer 5 + its byte count.
+fn answer_len(b: &[u8]) -> Option<usize> {
+    let len = match b.get(1)? {
+        f if f & 0x80 != 0 => 5,
+        _ => 5 + *b.get(2)? as usize,
+    };
+    (b.len() >= len).then_some(len)
+}
+
+/// Whether python3 with pymodbus and pyserial is there; without it, skip locally (with a
+/// message) and fail in CI.
+pub fn pymodbus_available(test: &str) -> bool {
+    let ok = std::process::Command::new("python3")
+        .args(["-c", "import pymodbus, serial"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if !ok {
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "{test}: python3 with pymodbus and pyserial is required in CI (pip install pymodbus pyserial)"
+        );
+        eprintln!(
+            "skipped: {test}: python3 with pymodbus is missing (pip install pymodbus pyserial)"
+        );
+    }
+    ok
+}

@@ -11,13 +11,11 @@
 //! order, with the values the peer sent. The Python tests skip with a message when python3 or
 //! pymodbus is missing, and fail instead when `CI=true`.
 
-use std::os::fd::AsFd;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
 use drivers::{HostClock, ModbusTempConfig, SampleValues, TempSensor};
-use hil::{Collected, collect_until, finish, nonblocking, relay_write};
+use hil::{Collected, ModbusRelay, Relay, collect_until, finish, pymodbus_available};
 use protocol::RejectKind;
 use sim::modbus::{Answered, ModbusFault, ModbusModule, ModbusModuleConfig, Reply};
 use tokio_util::sync::CancellationToken;
@@ -181,34 +179,6 @@ async fn our_driver_reads_the_simulated_module_and_counts_each_fault() {
     }
 }
 
-/// Whether python3 with pymodbus and pyserial is there; without it, skip locally (with a
-/// message) and fail in CI.
-fn pymodbus_available(test: &str) -> bool {
-    let ok = std::process::Command::new("python3")
-        .args(["-c", "import pymodbus, serial"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !ok {
-        assert!(
-            std::env::var("CI").as_deref() != Ok("true"),
-            "{test}: python3 with pymodbus and pyserial is required in CI (pip install pymodbus pyserial)"
-        );
-        eprintln!(
-            "skipped: {test}: python3 with pymodbus is missing (pip install pymodbus pyserial)"
-        );
-    }
-    ok
-}
-
-/// What the relay does to the answer with this index (0-based).
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Relay {
-    Pass,
-    Drop,
-    CorruptCrc,
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn our_driver_reads_the_pymodbus_slave() {
     hil::init_tracing();
@@ -225,58 +195,10 @@ async fn our_driver_reads_the_pymodbus_slave() {
     };
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("temp");
-    let py_side = hil::pty().unwrap();
-    let our_side = hil::pty().unwrap();
-    hil::point_link(&link, &our_side.path).unwrap();
-    nonblocking(&py_side.master);
-    nonblocking(&our_side.master);
-    let stop = Arc::new(AtomicBool::new(false));
-    let stop2 = stop.clone();
-    let relayed = Arc::new(Mutex::new(Vec::<Relay>::new()));
-    let relayed2 = relayed.clone();
-    // The relay passes requests as they come and answers frame by frame (their length from
-    // the function code and byte count, data sheet §5), applying the plan.
-    let relay = std::thread::spawn(move || {
-        let mut answer: Vec<u8> = Vec::new();
-        let mut buf = [0u8; 1024];
-        while !stop2.load(Ordering::Relaxed) {
-            if let Ok(n) = nix::unistd::read(our_side.master.as_fd(), &mut buf) {
-                relay_write(&py_side.master, &buf[..n]);
-            }
-            if let Ok(n) = nix::unistd::read(py_side.master.as_fd(), &mut buf) {
-                answer.extend_from_slice(&buf[..n]);
-            }
-            loop {
-                let len = match answer.get(1) {
-                    Some(f) if f & 0x80 != 0 => 5,
-                    Some(_) => match answer.get(2) {
-                        Some(&n) => 5 + n as usize,
-                        None => break,
-                    },
-                    None => break,
-                };
-                if answer.len() < len {
-                    break;
-                }
-                let mut frame: Vec<u8> = answer.drain(..len).collect();
-                let mut r = relayed2.lock().unwrap();
-                let what = plan(r.len());
-                r.push(what);
-                match what {
-                    Relay::Pass => relay_write(&our_side.master, &frame),
-                    Relay::Drop => {}
-                    Relay::CorruptCrc => {
-                        frame[len - 1] ^= 0xFF;
-                        relay_write(&our_side.master, &frame);
-                    }
-                }
-            }
-            std::thread::sleep(Duration::from_micros(300));
-        }
-    });
+    let relay = ModbusRelay::start(&link, plan).unwrap();
 
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/python/modbus_slave.py");
-    let py_path = py_side.path.clone();
+    let py_path = relay.peer_path.clone();
     let slave = tokio::task::spawn_blocking(move || {
         std::process::Command::new("python3")
             .arg(script)
@@ -303,8 +225,8 @@ async fn our_driver_reads_the_pymodbus_slave() {
     cancel.cancel();
     let out = slave.await.unwrap().expect("python3 runs");
     finish(cancel, task, &mut rx, &mut c).await;
-    stop.store(true, Ordering::Relaxed);
-    relay.join().unwrap();
+    let relayed = relay.relayed();
+    relay.stop();
     assert!(
         out.status.success(),
         "pymodbus slave failed: {}",
@@ -314,7 +236,7 @@ async fn our_driver_reads_the_pymodbus_slave() {
     let samples_at_done = c.samples.len();
     let log: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(log.len(), REQUESTS, "{log:?}");
-    let relayed = relayed.lock().unwrap()[..REQUESTS].to_vec();
+    let relayed = relayed[..REQUESTS].to_vec();
 
     // What must have become samples: pymodbus's register answers the relay passed intact.
     let want: Vec<Vec<u16>> = log

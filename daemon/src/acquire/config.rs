@@ -68,6 +68,7 @@ struct RawConfig {
     psd: Option<Spanned<RawPsd>>,
     trigger: Option<Spanned<RawTrigger>>,
     live: Option<Spanned<RawLive>>,
+    temperature: Option<Spanned<RawTemperature>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -146,6 +147,8 @@ pub struct Config {
     pub trigger: Option<TriggerConfig>,
     /// The live view (`[live]`, off when absent): docs/live-view.md.
     pub live: Option<LiveConfig>,
+    /// The Modbus RTU temperature module (`[temperature]`): docs/instruments.md §5.
+    pub temperature: Option<drivers::ModbusTempConfig>,
 }
 
 /// Default of `[live] raw_hz`: raw batches per second and raw topic sent to the live view.
@@ -234,6 +237,9 @@ impl Config {
         }
         if self.trigger.is_some() {
             v.push(drivers::Instrument::Trigger);
+        }
+        if self.temperature.is_some() {
+            v.push(drivers::Instrument::Thermometer);
         }
         v
     }
@@ -346,6 +352,11 @@ impl Ctx<'_> {
             Some(s) => Some(self.validate_live(s.into_inner())?),
         };
 
+        let temperature = match raw.temperature {
+            None => None,
+            Some(s) => Some(self.validate_temperature(s)?),
+        };
+
         Ok(Config {
             path: self.path.to_path_buf(),
             text: self.text.to_string(),
@@ -356,6 +367,7 @@ impl Ctx<'_> {
             psd,
             trigger,
             live,
+            temperature,
         })
     }
 
@@ -639,6 +651,304 @@ impl Ctx<'_> {
                 transform,
             },
             transform_file,
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// `[temperature]`: the Modbus RTU temperature module (docs/instruments.md §5). Kept apart from
+// the other sections: its own raw structs, checks and limits.
+
+/// Baud rates of the RS-485 temperature modules metrolog reads (the Modbus serial line's set).
+pub const TEMPERATURE_BAUDS: [u32; 8] = [1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200];
+/// Longest poll period, s (an hour; thermal tests sample every few seconds to a minute).
+pub const TEMPERATURE_MAX_POLL_S: f64 = 3600.0;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTemperature {
+    port: Spanned<String>,
+    baud: Option<Spanned<i64>>,
+    parity: Option<Spanned<drivers::Parity>>,
+    unit: Spanned<i64>,
+    registers: Option<Spanned<drivers::RegisterKind>>,
+    start_register: Option<Spanned<i64>>,
+    scale_c: Option<Spanned<f64>>,
+    offset_c: Option<Spanned<f64>>,
+    fault_values: Option<Spanned<Vec<i64>>>,
+    poll_period_s: Option<Spanned<f64>>,
+    timeout_s: Option<Spanned<f64>>,
+    silence_s: Option<Spanned<f64>>,
+    sensors: Option<Spanned<Vec<Spanned<RawSensor>>>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSensor {
+    name: Spanned<String>,
+    #[serde(default)]
+    location: String,
+}
+
+/// Seconds one poll takes on the wire at `baud` for `channels` registers: the request
+/// (8 bytes), the answer (5 + 2·channels bytes), 11 bits a character, and the silence that
+/// ends each frame.
+pub fn temperature_exchange_s(baud: u32, channels: usize) -> f64 {
+    let chars = (8 + 5 + 2 * channels) as f64;
+    chars * 11.0 / baud as f64 + 2.0 * protocol::modbus::frame_gap_us(baud) as f64 * 1e-6
+}
+
+impl Ctx<'_> {
+    fn validate_temperature(
+        &self,
+        s: Spanned<RawTemperature>,
+    ) -> Result<drivers::ModbusTempConfig, ConfigError> {
+        let span = s.span();
+        let r = s.into_inner();
+        let d = drivers::ModbusTempConfig {
+            port: String::new(),
+            baud: 9600,
+            parity: drivers::Parity::default(),
+            unit: 1,
+            registers: drivers::RegisterKind::default(),
+            start_register: 0,
+            sensors: Vec::new(),
+            scale_c: 0.1,
+            offset_c: 0.0,
+            fault_values: vec![i16::MIN, i16::MAX],
+            poll_period_s: 1.0,
+            timeout_s: 0.3,
+            silence_s: 10.0,
+        };
+        let sensors = self.temperature_sensors(r.sensors, span.clone())?;
+        let baud = self.temperature_baud(r.baud, d.baud)?;
+        let unit = self.temperature_unit(r.unit)?;
+        let start_register = self.temperature_start(r.start_register, sensors.len())?;
+        let cfg = drivers::ModbusTempConfig {
+            port: self.port(r.port)?,
+            baud,
+            parity: r.parity.map_or(d.parity, Spanned::into_inner),
+            unit,
+            registers: r.registers.map_or(d.registers, Spanned::into_inner),
+            start_register,
+            scale_c: self.temperature_scale(r.scale_c, d.scale_c)?,
+            offset_c: self.temperature_offset(r.offset_c, d.offset_c)?,
+            fault_values: self.temperature_faults(r.fault_values, d.fault_values)?,
+            sensors,
+            ..d
+        };
+        let times = [r.poll_period_s, r.timeout_s, r.silence_s];
+        let cfg = self.temperature_timing(cfg, times, span.clone())?;
+        // Everything the driver checks was checked above with its key; this only guards
+        // against the two drifting apart.
+        cfg.validate()
+            .map_err(|e| self.err(span, format!("[temperature]: {e}")))?;
+        Ok(cfg)
+    }
+
+    fn temperature_sensors(
+        &self,
+        v: Option<Spanned<Vec<Spanned<RawSensor>>>>,
+        section: Range<usize>,
+    ) -> Result<Vec<drivers::TempSensor>, ConfigError> {
+        let max = protocol::modbus::MAX_READ_REGISTERS as usize;
+        let Some(v) = v else {
+            return Err(self.err(
+                section,
+                "[temperature] has no sensors; add one [[temperature.sensors]] with name = \"...\" per channel, in register order",
+            ));
+        };
+        let span = v.span();
+        let list = v.into_inner();
+        if list.is_empty() || list.len() > max {
+            return Err(self.err(
+                span,
+                format!(
+                    "sensors lists {} channels; one Modbus read takes 1 to {max} registers",
+                    list.len()
+                ),
+            ));
+        }
+        let mut out: Vec<drivers::TempSensor> = Vec::with_capacity(list.len());
+        for s in list {
+            let s = s.into_inner();
+            let name = s.name.get_ref();
+            let ok = name.starts_with(|c: char| c.is_ascii_alphabetic())
+                && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+            if !ok {
+                return Err(self.err(
+                    s.name.span(),
+                    format!("sensor name = {name:?} must start with a letter and hold only letters, digits and '_' (it names a column, e.g. spindle_head)"),
+                ));
+            }
+            if out.iter().any(|o| o.name == *name) {
+                return Err(self.err(
+                    s.name.span(),
+                    format!(
+                        "sensor name = {name:?} is given twice; each channel needs its own name"
+                    ),
+                ));
+            }
+            out.push(drivers::TempSensor {
+                name: s.name.into_inner(),
+                location: s.location.trim().to_string(),
+            });
+        }
+        Ok(out)
+    }
+
+    fn temperature_baud(&self, v: Option<Spanned<i64>>, default: u32) -> Result<u32, ConfigError> {
+        let Some(b) = v else { return Ok(default) };
+        let x = *b.get_ref();
+        match TEMPERATURE_BAUDS.iter().find(|&&p| i64::from(p) == x) {
+            Some(&p) => Ok(p),
+            None => Err(self.err(
+                b.span(),
+                format!("baud = {x} is not a Modbus RTU baud rate ({TEMPERATURE_BAUDS:?}); use the module's setting, 9600 on most"),
+            )),
+        }
+    }
+
+    fn temperature_unit(&self, v: Spanned<i64>) -> Result<u8, ConfigError> {
+        let x = *v.get_ref();
+        if !(1..=247).contains(&x) {
+            return Err(self.err(
+                v.span(),
+                format!("unit = {x} is not a Modbus unit (slave) address; it must be 1 to 247, as set on the module"),
+            ));
+        }
+        Ok(x as u8)
+    }
+
+    fn temperature_start(
+        &self,
+        v: Option<Spanned<i64>>,
+        channels: usize,
+    ) -> Result<u16, ConfigError> {
+        let Some(v) = v else { return Ok(0) };
+        let x = *v.get_ref();
+        let end = x + channels as i64;
+        if !(0..=65535).contains(&x) || end > 65536 {
+            return Err(self.err(
+                v.span(),
+                format!("start_register = {x} with {channels} sensors reads registers {x} to {}; Modbus registers are 0 to 65535 (the protocol address: 30001 in the manual's numbering is 0)", end - 1),
+            ));
+        }
+        Ok(x as u16)
+    }
+
+    fn temperature_scale(&self, v: Option<Spanned<f64>>, default: f64) -> Result<f64, ConfigError> {
+        let Some(v) = v else { return Ok(default) };
+        let x = *v.get_ref();
+        if !x.is_finite() || x == 0.0 {
+            return Err(self.err(
+                v.span(),
+                format!("scale_c = {x} must be a finite number other than 0: °C per count of the register, e.g. 0.1"),
+            ));
+        }
+        Ok(x)
+    }
+
+    fn temperature_offset(
+        &self,
+        v: Option<Spanned<f64>>,
+        default: f64,
+    ) -> Result<f64, ConfigError> {
+        let Some(v) = v else { return Ok(default) };
+        let x = *v.get_ref();
+        if !x.is_finite() {
+            return Err(self.err(
+                v.span(),
+                format!("offset_c = {x} must be a finite number of °C"),
+            ));
+        }
+        Ok(x)
+    }
+
+    fn temperature_faults(
+        &self,
+        v: Option<Spanned<Vec<i64>>>,
+        default: Vec<i16>,
+    ) -> Result<Vec<i16>, ConfigError> {
+        let Some(v) = v else { return Ok(default) };
+        let mut out = Vec::with_capacity(v.get_ref().len());
+        for &x in v.get_ref() {
+            let r = i16::try_from(x).map_err(|_| {
+                self.err(
+                    v.span(),
+                    format!("fault_values holds {x}, which no register can hold; give raw signed 16-bit values (-32768 to 32767)"),
+                )
+            })?;
+            out.push(r);
+        }
+        Ok(out)
+    }
+
+    /// A time in seconds: finite and > 0; `None` keeps `default`.
+    fn seconds(
+        &self,
+        v: &Option<Spanned<f64>>,
+        key: &str,
+        default: f64,
+    ) -> Result<f64, ConfigError> {
+        let Some(v) = v else { return Ok(default) };
+        let x = *v.get_ref();
+        if !(x.is_finite() && x > 0.0) {
+            return Err(self.err(
+                v.span(),
+                format!("{key} = {x} must be a number of seconds > 0"),
+            ));
+        }
+        Ok(x)
+    }
+
+    fn temperature_timing(
+        &self,
+        cfg: drivers::ModbusTempConfig,
+        [poll, timeout, silence]: [Option<Spanned<f64>>; 3],
+        section: Range<usize>,
+    ) -> Result<drivers::ModbusTempConfig, ConfigError> {
+        let poll_period_s = self.seconds(&poll, "poll_period_s", cfg.poll_period_s)?;
+        let timeout_s = self.seconds(&timeout, "timeout_s", cfg.timeout_s)?;
+        let silence_s = self.seconds(&silence, "silence_s", cfg.silence_s)?;
+        // A default that does not fit (a slow line, many channels) is reported at the section.
+        let span = |v: &Option<Spanned<f64>>| v.as_ref().map_or(section.clone(), |v| v.span());
+        let wire = temperature_exchange_s(cfg.baud, cfg.sensors.len());
+        let wire_text = format!(
+            "one read of {} registers takes about {:.1} ms on the wire at {} baud",
+            cfg.sensors.len(),
+            wire * 1e3,
+            cfg.baud
+        );
+        if poll_period_s > TEMPERATURE_MAX_POLL_S {
+            return Err(self.err(
+                span(&poll),
+                format!("poll_period_s = {poll_period_s} is more than an hour ({TEMPERATURE_MAX_POLL_S} s); poll at least once an hour"),
+            ));
+        }
+        if poll_period_s < wire {
+            return Err(self.err(
+                span(&poll),
+                format!("poll_period_s = {poll_period_s} is shorter than a poll: {wire_text}; raise poll_period_s or baud"),
+            ));
+        }
+        if timeout_s < wire {
+            return Err(self.err(
+                span(&timeout),
+                format!("timeout_s = {timeout_s} is shorter than the answer can take: {wire_text}; raise timeout_s or baud"),
+            ));
+        }
+        if silence_s < poll_period_s + timeout_s {
+            return Err(self.err(
+                span(&silence),
+                format!("silence_s = {silence_s} would reopen the port after a single missed poll; it must be at least poll_period_s + timeout_s = {} s", poll_period_s + timeout_s),
+            ));
+        }
+        Ok(drivers::ModbusTempConfig {
+            poll_period_s,
+            timeout_s,
+            silence_s,
+            ..cfg
         })
     }
 }

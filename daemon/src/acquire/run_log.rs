@@ -55,6 +55,12 @@ fn run_metadata(
             .collect::<Vec<_>>()
             .join(","),
     );
+    if let Some(t) = &cfg.temperature {
+        extra.insert(
+            metrolog_log::TEMPERATURE_SENSORS_KEY.to_string(),
+            serde_json::to_string(&t.sensors).unwrap_or_default(),
+        );
+    }
     metrolog_log::RunMetadata {
         machine: cfg.run.machine.clone(),
         started_ns: now_ns,

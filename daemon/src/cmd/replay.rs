@@ -68,6 +68,83 @@ pub struct ReplayOutcome {
     /// Replayed poses whose JSON is byte-identical to the logged one at the same position.
     pub identical: usize,
     pub output: Option<PathBuf>,
+    /// The temperature module's samples (`/temperature`), per channel.
+    pub temperatures: TemperatureSummary,
+}
+
+/// What `/temperature` held: samples, and per channel (named as in the run metadata) the
+/// range and last value of its readings (NaN readings, sensor faults, left out).
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct TemperatureSummary {
+    pub samples: u64,
+    pub channels: Vec<ChannelRange>,
+}
+
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ChannelRange {
+    pub name: String,
+    /// Readings that were numbers (not a sensor fault).
+    pub readings: u64,
+    pub min_c: Option<f64>,
+    pub max_c: Option<f64>,
+    pub last_c: Option<f64>,
+}
+
+impl TemperatureSummary {
+    /// Channel names from the run metadata (`ch<i>` where it has none).
+    fn new(run: &RunMetadata) -> TemperatureSummary {
+        let names: Vec<String> = run
+            .extra
+            .get(metrolog_log::TEMPERATURE_SENSORS_KEY)
+            .and_then(|j| serde_json::from_str::<Vec<drivers::TempSensor>>(j).ok())
+            .map(|v| v.into_iter().map(|s| s.name).collect())
+            .unwrap_or_default();
+        TemperatureSummary {
+            samples: 0,
+            channels: names.into_iter().map(ChannelRange::named).collect(),
+        }
+    }
+
+    fn add(&mut self, values_c: &[f64]) {
+        self.samples += 1;
+        for (i, &v) in values_c.iter().enumerate() {
+            if self.channels.len() <= i {
+                self.channels.push(ChannelRange::named(format!("ch{i}")));
+            }
+            let c = &mut self.channels[i];
+            if v.is_finite() {
+                c.readings += 1;
+                c.min_c = Some(c.min_c.map_or(v, |m| m.min(v)));
+                c.max_c = Some(c.max_c.map_or(v, |m| m.max(v)));
+                c.last_c = Some(v);
+            }
+        }
+    }
+
+    /// One line, e.g. `120 samples; spindle 20.1..22.4 °C, air 20.4..20.6 °C, open: no reading`.
+    pub fn line(&self) -> String {
+        let ch: Vec<String> = self
+            .channels
+            .iter()
+            .map(|c| match (c.min_c, c.max_c) {
+                (Some(a), Some(b)) => format!("{} {a:.2}..{b:.2} °C", c.name),
+                _ => format!("{}: no reading", c.name),
+            })
+            .collect();
+        format!("{} samples; {}", self.samples, ch.join(", "))
+    }
+}
+
+impl ChannelRange {
+    fn named(name: String) -> ChannelRange {
+        ChannelRange {
+            name,
+            readings: 0,
+            min_c: None,
+            max_c: None,
+            last_c: None,
+        }
+    }
 }
 
 impl ReplayOutcome {
@@ -116,6 +193,7 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
         None => None,
     };
 
+    let mut temperatures = TemperatureSummary::new(&run);
     let mut logged = Vec::new();
     let mut replayed = Vec::new();
     let mut last_ns = 0u64;
@@ -153,6 +231,9 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
                         Some(LogMessage::Samples(samples)) => {
                             for s in &samples {
                                 last_ns = last_ns.max(s.host_ns);
+                                if let drivers::SampleValues::Temperature { values_c } = &s.values {
+                                    temperatures.add(values_c);
+                                }
                                 let new_poses = engine.on_sample(s);
                                 if let Some(w) = writer.as_mut() {
                                     w.write_sample(s)?;
@@ -237,6 +318,7 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
         replayed,
         identical,
         output: opts.output.clone(),
+        temperatures,
     })
 }
 
@@ -300,6 +382,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     for ((i, s), n) in &by_status {
         println!("  {i:<16} {s:<16} {n}");
+    }
+    if out.temperatures.samples > 0 {
+        println!("temperatures: {}", out.temperatures.line());
     }
     if out.same_settings {
         if out.reproduces_log() {

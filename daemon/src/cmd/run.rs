@@ -92,6 +92,15 @@ pub fn describe(cfg: &Config) -> String {
             c.port, c.rate_hz, c.baud
         ));
     }
+    if let Some(c) = &cfg.temperature {
+        parts.push(format!(
+            "{} temperatures (Modbus unit {}) on {} every {} s",
+            c.sensors.len(),
+            c.unit,
+            c.port,
+            c.poll_period_s
+        ));
+    }
     match &cfg.trigger {
         Some(TriggerConfig::Slcan(s)) => parts.push(format!(
             "triggers via SLCAN on {} (id {:#x})",
@@ -204,6 +213,14 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     }
     if let Some(c) = &cfg.psd {
         handles.push(drivers::spawn_psd(
+            c.clone(),
+            clock,
+            tx.clone(),
+            drivers_cancel.child_token(),
+        ));
+    }
+    if let Some(c) = &cfg.temperature {
+        handles.push(drivers::spawn_modbus_temperature(
             c.clone(),
             clock,
             tx.clone(),

@@ -125,6 +125,11 @@ pub(super) enum Values<'a> {
         sum_pa: Col<'a, f64>,
         head_c: Col<'a, f64>,
     },
+    /// A sample's channels are the next `channels[i]` entries of `values_c`.
+    Temperature {
+        values_c: Col<'a, f64>,
+        channels: Col<'a, u32>,
+    },
 }
 
 /// The names of the CapBall's nine value columns (both formats).
@@ -193,6 +198,26 @@ impl<'a> Values<'a> {
         }
     }
 
+    pub(super) fn temperature(values_c: &'a [f64], channels: &'a [u32]) -> Self {
+        Values::Temperature {
+            values_c: col("values_c", values_c),
+            channels: col("channels", channels),
+        }
+    }
+
+    /// The concatenated column and its per-sample counts, if the topic has one.
+    fn concatenated(&self) -> Option<(&Col<'a, f64>, &Col<'a, u32>)> {
+        match self {
+            Values::Environment {
+                material_c,
+                material_count,
+                ..
+            } => Some((material_c, material_count)),
+            Values::Temperature { values_c, channels } => Some((values_c, channels)),
+            _ => None,
+        }
+    }
+
     /// Name and length of every per-sample column.
     fn lengths(&self) -> Vec<(&'static str, usize)> {
         fn l<T: Clone>(c: &Col<'_, T>) -> (&'static str, usize) {
@@ -220,6 +245,7 @@ impl<'a> Values<'a> {
                 sum_pa,
                 head_c,
             } => vec![l(x_um), l(y_um), l(sum_pa), l(head_c)],
+            Values::Temperature { channels, .. } => vec![l(channels)],
         }
     }
 }
@@ -251,23 +277,21 @@ pub(super) fn samples(
     ];
     check_lengths(topic, n, &header)?;
     check_lengths(topic, n, &values.lengths())?;
-    if let Values::Environment {
-        material_c,
-        material_count,
-        ..
-    } = values
-    {
-        let total: u64 = material_count.values.iter().map(|&c| u64::from(c)).sum();
-        if total != material_c.len() as u64 {
-            return Err(BatchError::MaterialCount {
+    if let Some((values, counts)) = values.concatenated() {
+        let total: u64 = counts.values.iter().map(|&c| u64::from(c)).sum();
+        if total != values.len() as u64 {
+            return Err(BatchError::Concatenated {
                 topic,
+                counts: counts.name,
+                values: values.name,
                 total,
-                len: material_c.len(),
+                len: values.len(),
             });
         }
     }
     let mut out = Vec::with_capacity(n);
-    let mut material = 0usize;
+    // Entries of the concatenated column taken by the samples before.
+    let mut taken = 0usize;
     for i in 0..n {
         let (instrument, v) = match values {
             Values::Position {
@@ -293,8 +317,8 @@ pub(super) fn samples(
                 material_count,
             } => {
                 let k = material_count.values[i] as usize;
-                let m = material_c.values[material..material + k].to_vec();
-                material += k;
+                let m = material_c.values[taken..taken + k].to_vec();
+                taken += k;
                 (
                     Instrument::Interferometer,
                     SampleValues::Environment {
@@ -332,6 +356,15 @@ pub(super) fn samples(
                     head_c: head_c.values[i],
                 },
             ),
+            Values::Temperature { values_c, channels } => {
+                let k = channels.values[i] as usize;
+                let v = values_c.values[taken..taken + k].to_vec();
+                taken += k;
+                (
+                    Instrument::Thermometer,
+                    SampleValues::Temperature { values_c: v },
+                )
+            }
         };
         out.push(Sample {
             instrument,

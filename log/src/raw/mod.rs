@@ -29,13 +29,16 @@ pub const POSITION_TOPIC: &str = "/interferometer/position";
 pub const ENVIRONMENT_TOPIC: &str = "/interferometer/environment";
 pub const CAPBALL_TOPIC: &str = "/capball/sample";
 pub const PSD_TOPIC: &str = "/psd/sample";
+/// The Modbus temperature module's samples (format 3 only: logs of format 2 have none).
+pub const TEMPERATURE_TOPIC: &str = "/temperature";
 
 /// The raw topics with their schema (message) names.
-pub const RAW_TOPICS: [(&str, &str); 4] = [
+pub const RAW_TOPICS: [(&str, &str); 5] = [
     (POSITION_TOPIC, "metrolog.PositionBatch"),
     (ENVIRONMENT_TOPIC, "metrolog.EnvironmentBatch"),
     (CAPBALL_TOPIC, "metrolog.CapballBatch"),
     (PSD_TOPIC, "metrolog.PsdBatch"),
+    (TEMPERATURE_TOPIC, "metrolog.TemperatureBatch"),
 ];
 
 /// The topic of a sample.
@@ -45,8 +48,7 @@ pub fn topic_of(s: &Sample) -> &'static str {
         SampleValues::Environment { .. } => ENVIRONMENT_TOPIC,
         SampleValues::Capball { .. } => CAPBALL_TOPIC,
         SampleValues::Psd { .. } => PSD_TOPIC,
-        // No raw topic yet (not in RAW_TOPICS): the writer leaves these samples out.
-        SampleValues::Temperature { .. } => "/temperature",
+        SampleValues::Temperature { .. } => TEMPERATURE_TOPIC,
     }
 }
 
@@ -113,6 +115,7 @@ impl Builder {
                 self.capball_batches[usize::from(b.calibration.is_none())] += 1;
                 b.encode(buf)
             }
+            TEMPERATURE_TOPIC => v3::TemperatureBatch::from_samples(samples).encode(buf),
             _ => v3::PsdBatch::from_samples(samples).encode(buf),
         };
         self.samples.clear();
@@ -137,10 +140,13 @@ pub enum BatchError {
         len: usize,
         n: usize,
     },
-    /// The material temperature counts do not add up to the material temperatures stored.
-    #[error("{topic} batch: `material_count` adds up to {total}, `material_c` has {len}")]
-    MaterialCount {
+    /// The per-sample counts of a concatenated column (`material_count` of `material_c`,
+    /// `channels` of `values_c`) do not add up to the values stored.
+    #[error("{topic} batch: `{counts}` adds up to {total}, `{values}` has {len}")]
+    Concatenated {
         topic: &'static str,
+        counts: &'static str,
+        values: &'static str,
         total: u64,
         len: usize,
     },
@@ -401,6 +407,11 @@ pub fn descriptor_set() -> Vec<u8> {
                 &[("x_um", d), ("y_um", d), ("sum_pa", d), ("head_c", d)],
                 vec![],
             ),
+            batch(
+                "TemperatureBatch",
+                &[("values_c", d), ("channels", Type::Uint32)],
+                vec![],
+            ),
         ],
         syntax: Some("proto3".into()),
         ..Default::default()
@@ -487,6 +498,12 @@ mod tests {
                     y_um: 3.25,
                     sum_pa: 1e6,
                     head_c: 21.0,
+                },
+            ),
+            (
+                Instrument::Thermometer,
+                SampleValues::Temperature {
+                    values_c: vec![20.1, f64::NAN, -5.2, -0.0, 850.0],
                 },
             ),
         ];
@@ -766,8 +783,10 @@ mod tests {
         let e = v3::Batch::Environment(env).samples().unwrap_err();
         assert_eq!(
             e,
-            BatchError::MaterialCount {
+            BatchError::Concatenated {
                 topic: ENVIRONMENT_TOPIC,
+                counts: "material_count",
+                values: "material_c",
                 total: 3,
                 len: 2
             }

@@ -15,7 +15,9 @@ use super::columns::{
     self, Col, Header, Values, capball_doubles, check_lengths, col, decoded, samples,
 };
 use super::v2::{timestamp, timestamp_ns};
-use super::{BatchError, CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC};
+use super::{
+    BatchError, CAPBALL_TOPIC, ENVIRONMENT_TOPIC, POSITION_TOPIC, PSD_TOPIC, TEMPERATURE_TOPIC,
+};
 
 /// Per-sample columns common to every raw batch. Tag 1 of a batch is never used in format 3
 /// (it is format 2's header; `raw::Batch::decode` tells the formats apart by it).
@@ -150,6 +152,20 @@ pub struct PsdBatch {
     pub sum_pa: Vec<f64>,
     #[prost(double, repeated, tag = "6")]
     pub head_c: Vec<f64>,
+}
+
+/// `/temperature`: the Modbus temperature module's samples (instruments.md §5), °C per
+/// channel in register order (NaN: a sensor fault); `values_c` holds the channels of all
+/// samples one after the other, `channels[i]` of sample `i` (the same in a run: the names are
+/// in the run metadata, `temperature_sensors`).
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct TemperatureBatch {
+    #[prost(message, optional, tag = "2")]
+    pub header: Option<SampleHeader>,
+    #[prost(double, repeated, tag = "3")]
+    pub values_c: Vec<f64>,
+    #[prost(uint32, repeated, tag = "4")]
+    pub channels: Vec<u32>,
 }
 
 /// `x - prev` as the difference column stores it (wrapping: exact for any value).
@@ -300,6 +316,22 @@ impl PsdBatch {
                 b.y_um.push(y_um);
                 b.sum_pa.push(sum_pa);
                 b.head_c.push(head_c);
+            }
+        }
+        b
+    }
+}
+
+impl TemperatureBatch {
+    pub fn from_samples(samples: &[Sample]) -> TemperatureBatch {
+        let mut b = TemperatureBatch {
+            header: Some(SampleHeader::of(samples)),
+            ..Default::default()
+        };
+        for s in samples {
+            if let SampleValues::Temperature { values_c } = &s.values {
+                b.values_c.extend_from_slice(values_c);
+                b.channels.push(values_c.len() as u32);
             }
         }
         b
@@ -479,11 +511,21 @@ pub enum Batch {
     Environment(EnvironmentBatch),
     Capball(CapballBatch),
     Psd(PsdBatch),
+    Temperature(TemperatureBatch),
 }
 
 impl Batch {
     /// Decodes a format-3 message of a raw topic; `Ok(None)` for another topic.
     pub fn decode(topic: &str, data: &[u8]) -> Result<Option<Batch>, BatchError> {
+        use prost::Message;
+        if topic == TEMPERATURE_TOPIC {
+            return TemperatureBatch::decode(data)
+                .map(|b| Some(Batch::Temperature(b)))
+                .map_err(|source| BatchError::Decode {
+                    topic: TEMPERATURE_TOPIC,
+                    source,
+                });
+        }
         let variants = (
             Batch::Position,
             Batch::Environment,
@@ -499,6 +541,7 @@ impl Batch {
             Batch::Environment(_) => ENVIRONMENT_TOPIC,
             Batch::Capball(_) => CAPBALL_TOPIC,
             Batch::Psd(_) => PSD_TOPIC,
+            Batch::Temperature(_) => TEMPERATURE_TOPIC,
         }
     }
 
@@ -508,6 +551,7 @@ impl Batch {
             Batch::Environment(b) => b.header.as_ref(),
             Batch::Capball(b) => b.header.as_ref(),
             Batch::Psd(b) => b.header.as_ref(),
+            Batch::Temperature(b) => b.header.as_ref(),
         }
     }
 
@@ -546,6 +590,7 @@ impl Batch {
             ),
             Batch::Capball(b) => Values::capball(b.doubles(n)?, &b.flags),
             Batch::Psd(b) => Values::psd(&b.x_um, &b.y_um, &b.sum_pa, &b.head_c),
+            Batch::Temperature(b) => Values::temperature(&b.values_c, &b.channels),
         };
         let topic = self.topic();
         samples(topic, n, &h.columns(topic)?, &values)

@@ -16,6 +16,7 @@ use metrolog::cmd::demo::verify::{
     positioning_segment, verification_scenario, write_linuxcnc_table,
 };
 use metrolog::cmd::input::load_positioning;
+use positioning::axis_model::Direction;
 use positioning::compensation::{Remeasured, remeasured};
 use positioning::positioning_data::PositioningData;
 use sim::{Scenario, ScrewComp};
@@ -36,10 +37,24 @@ async fn the_written_table_applied_by_the_axis_leaves_at_most_15_percent_of_e() 
     let tmp = tempfile::tempdir().expect("temp dir");
     let base = Scenario::demo();
     let before = measure(positioning_segment(&base), &tmp.path().join("calibration")).await;
-    let (_, files) = write_linuxcnc_table(&before, &tmp.path().join("comp")).expect("table");
+    let (table, files) = write_linuxcnc_table(&before, &tmp.path().join("comp")).expect("table");
     let text = std::fs::read_to_string(&files[0]).expect("comp file");
     let comp = ScrewComp::from_linuxcnc(&text).expect("LinuxCNC reads the whole file");
     assert_eq!(comp.ignored_lines, 0);
+    // The file as the simulated LinuxCNC reads it holds the corrections the writer meant (its
+    // prediction uses those), to the file's 1 nm.
+    for (k, &p) in table.points_mm.iter().enumerate() {
+        for (dir, want) in [
+            (Direction::Up, table.correction_up_um[k]),
+            (Direction::Down, table.correction_down_um[k]),
+        ] {
+            let got = comp.trim_um(p, dir);
+            assert!(
+                (got - want).abs() < 2e-3,
+                "{p} mm {dir:?}: {got} vs {want} µm"
+            );
+        }
+    }
 
     let after = measure(
         verification_scenario(&base, comp.clone()),

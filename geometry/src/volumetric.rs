@@ -54,6 +54,16 @@ pub enum VolumetricError {
     /// the machine has no linear axis {0}: the volumetric model needs X, Y and Z
     #[error("the machine has no linear axis {0}: the volumetric model needs X, Y and Z")]
     MissingAxis(char),
+    /// machine axis name {0:?} cannot go into a CEC file
+    #[error(
+        "machine axis name {0:?} cannot go into a CEC file: a SINUMERIK machine axis name is letters followed by optional digits, at most 8 characters (AX1, X1); set --axis-names"
+    )]
+    BadAxisName(String),
+    /// {0} is not a finite number
+    #[error(
+        "{0} is not a finite number: no CEC file is written with NaN or infinity; check the component errors and the grid"
+    )]
+    NotFinite(&'static str),
 }
 
 /// A smooth function of an axis position.
@@ -551,7 +561,11 @@ pub const CEC_TABLES_840D: usize = 9;
 
 /// SINUMERIK "interpolatory compensation" (CEC, sag/cross compensation) tables for an 840D sl
 /// and a tool offset not stated: [`siemens_cec_for`] with all nine tables.
-pub fn siemens_cec(points: &[GridPoint], grid: &GridSpec, axis_names: [&str; 3]) -> CecTables {
+pub fn siemens_cec(
+    points: &[GridPoint],
+    grid: &GridSpec,
+    axis_names: [&str; 3],
+) -> Result<CecTables, VolumetricError> {
     siemens_cec_for(
         points,
         grid,
@@ -600,7 +614,12 @@ fn cec_table(points: &[GridPoint], n: [usize; 3], input: usize, out: usize) -> V
 /// tables than nine (828D: eight), the tables with the smallest corrections are left out and
 /// the residual says what that costs. Siemens VCS (volumetric compensation) uses its own
 /// proprietary file format, which we do not know and do not write.
-pub fn siemens_cec_for(points: &[GridPoint], grid: &GridSpec, o: &CecOptions) -> CecTables {
+pub fn siemens_cec_for(
+    points: &[GridPoint],
+    grid: &GridSpec,
+    o: &CecOptions,
+) -> Result<CecTables, VolumetricError> {
+    check_cec_input(points, grid, o)?;
     let n = [grid.ranges[0].2, grid.ranges[1].2, grid.ranges[2].2];
     let xyz = |a: usize| "XYZ".as_bytes()[a] as char;
     let mut all: Vec<(usize, usize, Vec<f64>)> = (0..3)
@@ -688,11 +707,47 @@ pub fn siemens_cec_for(points: &[GridPoint], grid: &GridSpec, o: &CecOptions) ->
             worst = worst.max((sum + points[idx(i, j, k)].error_um[out]).abs());
         }
     }
-    CecTables {
+    Ok(CecTables {
         ini,
         max_separation_residual_um: worst,
         omitted,
+    })
+}
+
+/// What goes into a CEC file is a machine axis name (letters, then optional digits, at most 8:
+/// anything else, such as `]`, `=`, `;`, `)` or a newline, would change the file's syntax) and
+/// finite numbers only.
+fn check_cec_input(
+    points: &[GridPoint],
+    grid: &GridSpec,
+    o: &CecOptions,
+) -> Result<(), VolumetricError> {
+    for name in o.axis_names {
+        let letters = name.bytes().take_while(u8::is_ascii_alphabetic).count();
+        if letters == 0 || name.len() > 8 || !name.bytes().skip(letters).all(|b| b.is_ascii_digit())
+        {
+            return Err(VolumetricError::BadAxisName(name.to_string()));
+        }
     }
+    if !points
+        .iter()
+        .all(|p| p.error_um.iter().all(|v| v.is_finite()))
+    {
+        return Err(VolumetricError::NotFinite("a volumetric error of the grid"));
+    }
+    if !grid
+        .ranges
+        .iter()
+        .all(|r| r.0.is_finite() && r.1.is_finite())
+    {
+        return Err(VolumetricError::NotFinite("a grid range"));
+    }
+    if o.tool_offset_mm
+        .is_some_and(|t| !t.iter().all(|v| v.is_finite()))
+    {
+        return Err(VolumetricError::NotFinite("the tool offset"));
+    }
+    Ok(())
 }
 
 /// Summary of a volumetric grid: largest error magnitude and RMS per direction.

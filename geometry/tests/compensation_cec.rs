@@ -28,7 +28,7 @@ fn numbers(ini: &str, prefix: &str) -> Vec<usize> {
 #[test]
 fn every_table_written_is_enabled() {
     let (pts, g) = grid();
-    let cec = siemens_cec(&pts, &g, ["AX1", "AX2", "AX3"]);
+    let cec = siemens_cec(&pts, &g, ["AX1", "AX2", "AX3"]).expect("CEC tables");
     let tables = numbers(&cec.ini, "$AN_CEC_INPUT_AXIS[");
     assert_eq!(tables, (0..9).collect::<Vec<_>>());
     let enabled: Vec<usize> = cec
@@ -50,7 +50,7 @@ fn sinumerik_828d_gets_at_most_eight_tables_and_the_cost_is_reported() {
         max_tables: CEC_TABLES_828D,
         tool_offset_mm: Some([0.0, 0.0, -150.0]),
     };
-    let cec = siemens_cec_for(&pts, &g, &o);
+    let cec = siemens_cec_for(&pts, &g, &o).expect("CEC tables");
     let tables = numbers(&cec.ini, "$AN_CEC_INPUT_AXIS[");
     assert_eq!(tables, (0..8).collect::<Vec<_>>());
     assert_eq!(numbers(&cec.ini, "$SN_CEC_TABLE_ENABLE[").len(), 8);
@@ -64,7 +64,7 @@ fn sinumerik_828d_gets_at_most_eight_tables_and_the_cost_is_reported() {
     );
     // Only four tables carry corrections: keeping three loses the smallest, and says so.
     let o3 = CecOptions { max_tables: 3, ..o };
-    let cec3 = siemens_cec_for(&pts, &g, &o3);
+    let cec3 = siemens_cec_for(&pts, &g, &o3).expect("CEC tables");
     assert_eq!(numbers(&cec3.ini, "$AN_CEC_INPUT_AXIS[").len(), 3);
     assert!(
         cec3.max_separation_residual_um > 0.5,
@@ -88,4 +88,33 @@ fn sinumerik_828d_gets_at_most_eight_tables_and_the_cost_is_reported() {
         "{:?}",
         cec3.omitted
     );
+}
+
+/// The machine axis names go into `$AN_CEC_INPUT_AXIS[t]=(AX1)`: only letters with optional
+/// digits are written; a name that would change the file's syntax is refused, and so is a grid
+/// holding a non-finite error (no NaN or inf in a controller file).
+#[test]
+fn cec_refuses_names_outside_the_syntax_and_non_finite_values() {
+    let (pts, g) = grid();
+    for bad in [
+        "AX1)",
+        "X]",
+        "X=1",
+        "X;",
+        "X\nM30",
+        "../x",
+        "",
+        "1X",
+        "ABCDEFGH1",
+    ] {
+        let e = siemens_cec(&pts, &g, [bad, "AX2", "AX3"]).expect_err(bad);
+        assert_eq!(e, VolumetricError::BadAxisName(bad.into()), "{bad:?}");
+        assert!(e.to_string().contains("--axis-names"), "{e}");
+    }
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut p = pts.clone();
+        p[3].error_um[1] = bad;
+        let e = siemens_cec(&p, &g, ["AX1", "AX2", "AX3"]).expect_err("non-finite");
+        assert!(matches!(e, VolumetricError::NotFinite(_)), "{e}");
+    }
 }

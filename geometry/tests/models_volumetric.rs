@@ -146,7 +146,7 @@ fn grid_and_compensation_tables() {
     assert_eq!(p.pos_mm, [200.0, 100.0, 100.0]);
     assert!((p.error_um[0] - 4.0).abs() < 1e-6 && (p.error_um[1] - 3.0).abs() < 1e-6);
     assert!((p.error_um[2] + 5.0 / 3.0).abs() < 1e-6);
-    let cec = siemens_cec(&pts, &g, ["AX1", "AX2", "AX3"]);
+    let cec = siemens_cec(&pts, &g, ["AX1", "AX2", "AX3"]).expect("CEC tables");
     assert!(
         cec.max_separation_residual_um < 1e-6,
         "{}",
@@ -165,7 +165,7 @@ fn grid_and_compensation_tables() {
     };
     let m2 = Machine::from_config(&cfg).unwrap();
     let pts = volumetric_grid(&m2, &e, &g).unwrap();
-    let cec = siemens_cec(&pts, &g, ["X1", "Y1", "Z1"]);
+    let cec = siemens_cec(&pts, &g, ["X1", "Y1", "Z1"]).expect("CEC tables");
     assert!(
         cec.max_separation_residual_um > 1.0,
         "{} {:?}",

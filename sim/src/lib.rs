@@ -54,7 +54,10 @@
 //! [`scenario::CapballModel`]: metrology's CapBall model of paper 001, the same geometry the
 //! identification uses) through the sensors' directions, offsets and inverse polynomials to 24-bit codes, and the PSD spot from
 //! straightness polynomials to photocurrents. Slow effects run `time_scale` times faster.
-//! The true values per pose are in [`Record::truth`].
+//! The true values per pose are in [`Record::truth`]. A LinuxCNC comp file loaded into the X
+//! axis ([`Scenario::axis_comp`], [`ScrewComp`]; `metrolog sim --apply-comp`) moves it by the
+//! trim of the direction of motion, as LinuxCNC's motion does: the verification run of a
+//! compensation table.
 //!
 //! Not modelled: the LI-80 over-speed flag (bit 2 is never set). `$ENV` lines have their own
 //! sequence counter, independent of `$POS`.

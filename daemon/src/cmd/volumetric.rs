@@ -105,7 +105,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 max_tables: args.cec_tables.max(1),
                 tool_offset_mm: Some([t.x, t.y, t.z]),
             },
-        );
+        )?;
         std::fs::write(p, &cec.ini).with_context(|| format!("writing {}", p.display()))?;
         for o in &cec.omitted {
             eprintln!("CEC table left out (--cec-tables {}): {o}", args.cec_tables);

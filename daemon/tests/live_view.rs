@@ -196,10 +196,10 @@ fn shown_poses(dom: &str) -> Vec<(String, u32, String, String)> {
     v
 }
 
-/// The operator page rendered by Chromium once it shows pose rows (`tests/js/render_page.cjs`
-/// waits for them through the DevTools protocol); its screenshot is kept.
-fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, String, String)> {
-    let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("live_page_chromium.png");
+/// The operator page rendered by Chromium once `selector` matches (`tests/js/render_page.cjs`
+/// waits through the DevTools protocol): its HTML; the screenshot is kept as `shot`.
+fn render_dom(bin: &Path, modules: &Path, url: &str, selector: &str, shot: &str) -> String {
+    let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(shot);
     let _ = std::fs::remove_file(&shot);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/render_page.cjs");
     let profile = tempfile::tempdir().unwrap();
@@ -207,7 +207,7 @@ fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, Strin
         .arg(script)
         .arg(bin)
         .arg(url)
-        .arg("tr.pose span.value")
+        .arg(selector)
         .arg(&shot)
         .arg(profile.path())
         .env("NODE_PATH", modules)
@@ -225,7 +225,19 @@ fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, Strin
         png.len()
     );
     eprintln!("screenshot kept: {}", shot.display());
-    let shown = shown_poses(&String::from_utf8_lossy(&out.stdout));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The page once it shows pose rows.
+fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, String, String)> {
+    let dom = render_dom(
+        bin,
+        modules,
+        url,
+        "tr.pose span.value",
+        "live_page_chromium.png",
+    );
+    let shown = shown_poses(&dom);
     assert!(!shown.is_empty(), "no pose value on the page");
     shown
 }
@@ -353,4 +365,107 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
     if let Some(shown) = shown {
         check_page(&shown, &log);
     }
+}
+
+/// Temperature rows of the rendered page: (sensor, value as shown).
+fn shown_temperatures(dom: &str) -> Vec<(String, String)> {
+    dom.split("<tr class=\"temp\"")
+        .skip(1)
+        .filter_map(|row| {
+            let row = row.split("</tr>").next().unwrap_or("");
+            Some((
+                attr(row, "data-channel")?.into(),
+                attr(row, "data-value")?.into(),
+            ))
+        })
+        .collect()
+}
+
+/// The page shows the temperature module's channels by the names of `[temperature]`, each a
+/// value of the log's `/temperature` (the page decodes the protobuf batch itself), an open
+/// sensor as a fault. The module is the simulated one (`sim::modbus`).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_shows_the_temperatures() {
+    let (Some(modules), Some(browser)) = (node_modules(), chromium()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (link, logs) = (dir.path().join("temp"), dir.path().join("logs"));
+    let module = sim::modbus::ModbusModule::start(
+        &link,
+        sim::modbus::ModbusModuleConfig {
+            unit: 4,
+            channels: 3,
+            ..Default::default()
+        },
+        std::sync::Arc::new(|t| vec![Some(20.0 + 0.1 * t), Some(-3.5), None]),
+    )
+    .unwrap();
+    let mut toml = format!(
+        "[run]\nmachine = \"m\"\noutput_dir = \"{}\"\n[live]\nlisten = \"127.0.0.1:0\"\n[temperature]\nport = \"{}\"\nunit = 4\npoll_period_s = 0.2\n",
+        logs.display(),
+        link.display()
+    );
+    for name in ["spindle", "air", "open"] {
+        toml += &format!("[[temperature.sensors]]\nname = \"{name}\"\n");
+    }
+    let cfg = dir.path().join("metrolog.toml");
+    std::fs::write(&cfg, toml).unwrap();
+    let mut daemon = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["run", "--config"])
+            .arg(&cfg)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
+    let mut err = Vec::new();
+    let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
+    let url = line
+        .split("page ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap();
+    let dom = render_dom(
+        &browser,
+        &modules,
+        url,
+        "tr.temp td[data-value]",
+        "live_page_temperatures.png",
+    );
+    sigterm(&daemon.0);
+    let status = daemon.0.wait().unwrap();
+    drain(&err_rx, &mut err);
+    assert!(status.success(), "{}", err.join("\n"));
+    module.shutdown().await;
+
+    let shown = shown_temperatures(&dom);
+    let names: Vec<&str> = shown.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["spindle", "air", "open"], "{dom}");
+    assert_eq!(shown[1].1, "-3.50");
+    assert_eq!(shown[2].1, "NaN");
+    // The spindle value shown is one the log holds (to the page's two decimals).
+    let spindle: f64 = shown[0].1.parse().unwrap();
+    let mut logged = Vec::new();
+    for (topic, log_ns, data) in log_messages(&the_log(&logs)) {
+        if let Ok(Some(metrolog_log::topics::LogMessage::Samples(ss))) =
+            metrolog_log::topics::decode_message(&topic, "protobuf", log_ns, &data)
+        {
+            for s in ss {
+                if let drivers::SampleValues::Temperature { values_c } = s.values {
+                    logged.push(values_c[0]);
+                }
+            }
+        }
+    }
+    assert!(!logged.is_empty(), "no /temperature in the log");
+    assert!(
+        logged.iter().any(|v| (v - spindle).abs() <= 0.005 + 1e-9),
+        "{spindle} is not among the logged {logged:?}"
+    );
 }

@@ -191,6 +191,30 @@ fn thermal_fit_and_diagnose_take_a_log() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(text.contains(&format!("{VISITS} samples")), "{text}");
+    // The sensitivities the log was written with: PSD x 0.5 µm/K of the spindle, CapBall ey
+    // -1 µm/K of the air (ex follows the spindle 10 min late: for an exponential rise that is
+    // the spindle itself times e^(600/2400), 3.852 µm/K, without a lag).
+    for (channel, want) in [
+        (
+            "psd_x:",
+            "sensor spindle (rise above 20.50 °C), no lag: +0.500 µm/K",
+        ),
+        (
+            "capball_ey:",
+            "sensor air (rise above 20.11 °C), no lag: -1.000 µm/K",
+        ),
+        (
+            "capball_ex:",
+            "sensor spindle (rise above 20.50 °C), no lag: +3.852 µm/K",
+        ),
+    ] {
+        let block = text
+            .split(channel)
+            .nth(1)
+            .unwrap_or_else(|| panic!("{channel} in {text}"));
+        let block = block.split(":\n").next().unwrap_or(block);
+        assert!(block.contains(want), "{channel} {want:?} in {text}");
+    }
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("\"open\"") && err.contains("pose 1"), "{err}");
     let m: serde_json::Value = serde_json::from_slice(&std::fs::read(&model).unwrap()).unwrap();

@@ -208,11 +208,14 @@ fn thermal_fit_and_diagnose_take_a_log() {
             "sensor spindle (rise above 20.50 °C), no lag: +3.852 µm/K",
         ),
     ] {
-        let block = text
-            .split(channel)
-            .nth(1)
-            .unwrap_or_else(|| panic!("{channel} in {text}"));
-        let block = block.split(":\n").next().unwrap_or(block);
+        // The channel's lines: its header and the indented terms under it.
+        let block: String = text
+            .lines()
+            .skip_while(|l| !l.starts_with(channel))
+            .skip(1)
+            .take_while(|l| l.starts_with("  "))
+            .collect::<Vec<_>>()
+            .join("\n");
         assert!(block.contains(want), "{channel} {want:?} in {text}");
     }
     let err = String::from_utf8_lossy(&out.stderr);

@@ -383,9 +383,13 @@ fn shown_temperatures(dom: &str) -> Vec<(String, String)> {
 
 /// The page shows the temperature module's channels by the names of `[temperature]`, each a
 /// value of the log's `/temperature` (the page decodes the protobuf batch itself), an open
-/// sensor as a fault. The module is the simulated one (`sim::modbus`).
+/// sensor as a fault; Foxglove's client decodes the live `/temperature` batches with the
+/// advertised schema, each byte-identical to one of the log. The module is the simulated one
+/// (`sim::modbus`), with a timeout, an exception and a bad CRC injected: each is counted once
+/// in `/status`, and every other answer is a sample of the log.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_shows_the_temperatures() {
+    use sim::modbus::{ModbusFault, Reply};
     let (Some(modules), Some(browser)) = (node_modules(), chromium()) else {
         return;
     };
@@ -431,6 +435,28 @@ async fn the_page_shows_the_temperatures() {
         .split(' ')
         .next()
         .unwrap();
+    let ws = url
+        .replace("http://", "ws://")
+        .trim_end_matches('/')
+        .to_string();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/live_client.cjs");
+    let mut client = Reaped(
+        Command::new("node")
+            .arg(script)
+            .arg(&ws)
+            .env("NODE_PATH", &modules)
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let client_rx = lines_of(client.0.stdout.take().unwrap());
+    let mut client_out = Vec::new();
+    wait_line(&client_rx, "subscribed", &mut client_out);
+    module.inject([
+        ModbusFault::NoAnswer,
+        ModbusFault::Exception(protocol::modbus::exception::DEVICE_BUSY),
+        ModbusFault::BadCrc,
+    ]);
     let dom = render_dom(
         &browser,
         &modules,
@@ -438,11 +464,51 @@ async fn the_page_shows_the_temperatures() {
         "tr.temp td[data-value]",
         "live_page_temperatures.png",
     );
+    // The faults are behind, and answers after them (at 5 polls a second).
+    let t0 = std::time::Instant::now();
+    while module
+        .answered()
+        .iter()
+        .rev()
+        .take_while(|a| matches!(a.reply, Reply::Registers(_)))
+        .count()
+        < 3
+        || module.answered().len() < 8
+    {
+        assert!(t0.elapsed() < LIMIT, "{:?}", module.answered());
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
     sigterm(&daemon.0);
     let status = daemon.0.wait().unwrap();
     drain(&err_rx, &mut err);
     assert!(status.success(), "{}", err.join("\n"));
+    let answered = module.answered();
     module.shutdown().await;
+    let log = log_messages(&the_log(&logs));
+
+    // Foxglove's client: no problem, /temperature live, each message one of the log's.
+    let result = wait_line(&client_rx, "\"received\"", &mut client_out);
+    assert!(client.0.wait().unwrap().success());
+    let r: Value = serde_json::from_str(&result).unwrap();
+    assert_eq!(r["problems"], serde_json::json!([]), "{}", r["problems"]);
+    let live: Vec<&Value> = r["received"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|m| m["topic"] == "/temperature")
+        .collect();
+    assert!(!live.is_empty(), "no /temperature received live");
+    for m in live {
+        let ns: u64 = m["log_ns"].as_str().unwrap().parse().unwrap();
+        let data = data_encoding::BASE64
+            .decode(m["data"].as_str().unwrap().as_bytes())
+            .unwrap();
+        assert!(
+            log.iter()
+                .any(|(t, n, d)| t == "/temperature" && *n == ns && *d == data),
+            "a /temperature at {ns} received live is not in the log"
+        );
+    }
 
     let shown = shown_temperatures(&dom);
     let names: Vec<&str> = shown.iter().map(|(n, _)| n.as_str()).collect();
@@ -452,7 +518,11 @@ async fn the_page_shows_the_temperatures() {
     // The spindle value shown is one the log holds (to the page's two decimals).
     let spindle: f64 = shown[0].1.parse().unwrap();
     let mut logged = Vec::new();
-    for (topic, log_ns, data) in log_messages(&the_log(&logs)) {
+    let mut last_status = None;
+    for (topic, log_ns, data) in log.iter().cloned() {
+        if topic == "/status" {
+            last_status = Some(serde_json::from_slice::<Value>(&data).unwrap());
+        }
         if let Ok(Some(metrolog_log::topics::LogMessage::Samples(ss))) =
             metrolog_log::topics::decode_message(&topic, "protobuf", log_ns, &data)
         {
@@ -464,6 +534,21 @@ async fn the_page_shows_the_temperatures() {
         }
     }
     assert!(!logged.is_empty(), "no /temperature in the log");
+    // Each fault counted once; every register answer a sample (the last may have come while
+    // the driver stopped), none lost.
+    let c = &last_status.unwrap()["instruments"]["temperature"];
+    for kind in ["timeout", "exception", "bad_crc"] {
+        assert_eq!(c["rejections"][kind], 1, "{kind}: {c}");
+    }
+    let registers = answered
+        .iter()
+        .filter(|a| matches!(a.reply, Reply::Registers(_)))
+        .count();
+    assert!(
+        logged.len() == registers || logged.len() + 1 == registers,
+        "{} samples, {registers} answers",
+        logged.len()
+    );
     assert!(
         logged.iter().any(|v| (v - spindle).abs() <= 0.005 + 1e-9),
         "{spindle} is not among the logged {logged:?}"

@@ -196,10 +196,10 @@ fn shown_poses(dom: &str) -> Vec<(String, u32, String, String)> {
     v
 }
 
-/// The operator page rendered by Chromium once it shows pose rows (`tests/js/render_page.cjs`
-/// waits for them through the DevTools protocol); its screenshot is kept.
-fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, String, String)> {
-    let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("live_page_chromium.png");
+/// The operator page rendered by Chromium once `selector` matches (`tests/js/render_page.cjs`
+/// waits through the DevTools protocol): its HTML; the screenshot is kept as `shot`.
+fn render_dom(bin: &Path, modules: &Path, url: &str, selector: &str, shot: &str) -> String {
+    let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(shot);
     let _ = std::fs::remove_file(&shot);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/render_page.cjs");
     let profile = tempfile::tempdir().unwrap();
@@ -207,7 +207,7 @@ fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, Strin
         .arg(script)
         .arg(bin)
         .arg(url)
-        .arg("tr.pose span.value")
+        .arg(selector)
         .arg(&shot)
         .arg(profile.path())
         .env("NODE_PATH", modules)
@@ -225,7 +225,19 @@ fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, Strin
         png.len()
     );
     eprintln!("screenshot kept: {}", shot.display());
-    let shown = shown_poses(&String::from_utf8_lossy(&out.stdout));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The page once it shows pose rows.
+fn render_page(bin: &Path, modules: &Path, url: &str) -> Vec<(String, u32, String, String)> {
+    let dom = render_dom(
+        bin,
+        modules,
+        url,
+        "tr.pose span.value",
+        "live_page_chromium.png",
+    );
+    let shown = shown_poses(&dom);
     assert!(!shown.is_empty(), "no pose value on the page");
     shown
 }
@@ -353,4 +365,192 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
     if let Some(shown) = shown {
         check_page(&shown, &log);
     }
+}
+
+/// Temperature rows of the rendered page: (sensor, value as shown).
+fn shown_temperatures(dom: &str) -> Vec<(String, String)> {
+    dom.split("<tr class=\"temp\"")
+        .skip(1)
+        .filter_map(|row| {
+            let row = row.split("</tr>").next().unwrap_or("");
+            Some((
+                attr(row, "data-channel")?.into(),
+                attr(row, "data-value")?.into(),
+            ))
+        })
+        .collect()
+}
+
+/// The page shows the temperature module's channels by the names of `[temperature]`, each a
+/// value of the log's `/temperature` (the page decodes the protobuf batch itself), an open
+/// sensor as a fault; Foxglove's client decodes the live `/temperature` batches with the
+/// advertised schema, each byte-identical to one of the log. The module is the simulated one
+/// (`sim::modbus`), with a timeout, an exception and a bad CRC injected: each is counted once
+/// in `/status`, and every other answer is a sample of the log.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_shows_the_temperatures() {
+    use sim::modbus::{ModbusFault, Reply};
+    let (Some(modules), Some(browser)) = (node_modules(), chromium()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (link, logs) = (dir.path().join("temp"), dir.path().join("logs"));
+    let module = sim::modbus::ModbusModule::start(
+        &link,
+        sim::modbus::ModbusModuleConfig {
+            unit: 4,
+            channels: 3,
+            ..Default::default()
+        },
+        std::sync::Arc::new(|t| vec![Some(20.0 + 0.1 * t), Some(-3.5), None]),
+    )
+    .unwrap();
+    let mut toml = format!(
+        "[run]\nmachine = \"m\"\noutput_dir = \"{}\"\n[live]\nlisten = \"127.0.0.1:0\"\n[temperature]\nport = \"{}\"\nunit = 4\npoll_period_s = 0.2\n",
+        logs.display(),
+        link.display()
+    );
+    for name in ["spindle", "air", "open"] {
+        toml += &format!("[[temperature.sensors]]\nname = \"{name}\"\n");
+    }
+    let cfg = dir.path().join("metrolog.toml");
+    std::fs::write(&cfg, toml).unwrap();
+    let mut daemon = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["run", "--config"])
+            .arg(&cfg)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
+    let mut err = Vec::new();
+    let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
+    let url = line
+        .split("page ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap();
+    let ws = url
+        .replace("http://", "ws://")
+        .trim_end_matches('/')
+        .to_string();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js/live_client.cjs");
+    let mut client = Reaped(
+        Command::new("node")
+            .arg(script)
+            .arg(&ws)
+            .env("NODE_PATH", &modules)
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let client_rx = lines_of(client.0.stdout.take().unwrap());
+    let mut client_out = Vec::new();
+    wait_line(&client_rx, "subscribed", &mut client_out);
+    module.inject([
+        ModbusFault::NoAnswer,
+        ModbusFault::Exception(protocol::modbus::exception::DEVICE_BUSY),
+        ModbusFault::BadCrc,
+    ]);
+    let dom = render_dom(
+        &browser,
+        &modules,
+        url,
+        "tr.temp td[data-value]",
+        "live_page_temperatures.png",
+    );
+    // The faults are behind, and answers after them (at 5 polls a second).
+    let t0 = std::time::Instant::now();
+    while module
+        .answered()
+        .iter()
+        .rev()
+        .take_while(|a| matches!(a.reply, Reply::Registers(_)))
+        .count()
+        < 3
+        || module.answered().len() < 8
+    {
+        assert!(t0.elapsed() < LIMIT, "{:?}", module.answered());
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    sigterm(&daemon.0);
+    let status = daemon.0.wait().unwrap();
+    drain(&err_rx, &mut err);
+    assert!(status.success(), "{}", err.join("\n"));
+    let answered = module.answered();
+    module.shutdown().await;
+    let log = log_messages(&the_log(&logs));
+
+    // Foxglove's client: no problem, /temperature live, each message one of the log's.
+    let result = wait_line(&client_rx, "\"received\"", &mut client_out);
+    assert!(client.0.wait().unwrap().success());
+    let r: Value = serde_json::from_str(&result).unwrap();
+    assert_eq!(r["problems"], serde_json::json!([]), "{}", r["problems"]);
+    let live: Vec<&Value> = r["received"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|m| m["topic"] == "/temperature")
+        .collect();
+    assert!(!live.is_empty(), "no /temperature received live");
+    for m in live {
+        let ns: u64 = m["log_ns"].as_str().unwrap().parse().unwrap();
+        let data = data_encoding::BASE64
+            .decode(m["data"].as_str().unwrap().as_bytes())
+            .unwrap();
+        assert!(
+            log.iter()
+                .any(|(t, n, d)| t == "/temperature" && *n == ns && *d == data),
+            "a /temperature at {ns} received live is not in the log"
+        );
+    }
+
+    let shown = shown_temperatures(&dom);
+    let names: Vec<&str> = shown.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["spindle", "air", "open"], "{dom}");
+    assert_eq!(shown[1].1, "-3.50");
+    assert_eq!(shown[2].1, "NaN");
+    // The spindle value shown is one the log holds (to the page's two decimals).
+    let spindle: f64 = shown[0].1.parse().unwrap();
+    let mut logged = Vec::new();
+    let mut last_status = None;
+    for (topic, log_ns, data) in log.iter().cloned() {
+        if topic == "/status" {
+            last_status = Some(serde_json::from_slice::<Value>(&data).unwrap());
+        }
+        if let Ok(Some(metrolog_log::topics::LogMessage::Samples(ss))) =
+            metrolog_log::topics::decode_message(&topic, "protobuf", log_ns, &data)
+        {
+            for s in ss {
+                if let drivers::SampleValues::Temperature { values_c } = s.values {
+                    logged.push(values_c[0]);
+                }
+            }
+        }
+    }
+    assert!(!logged.is_empty(), "no /temperature in the log");
+    // Each fault counted once; every register answer a sample (the last may have come while
+    // the driver stopped), none lost.
+    let c = &last_status.unwrap()["instruments"]["temperature"];
+    for kind in ["timeout", "exception", "bad_crc"] {
+        assert_eq!(c["rejections"][kind], 1, "{kind}: {c}");
+    }
+    let registers = answered
+        .iter()
+        .filter(|a| matches!(a.reply, Reply::Registers(_)))
+        .count();
+    assert!(
+        logged.len() == registers || logged.len() + 1 == registers,
+        "{} samples, {registers} answers",
+        logged.len()
+    );
+    assert!(
+        logged.iter().any(|v| (v - spindle).abs() <= 0.005 + 1e-9),
+        "{spindle} is not among the logged {logged:?}"
+    );
 }

@@ -393,6 +393,27 @@ fn info_and_replay_commands() {
         range(1)
     );
     assert!(text.contains(&want), "{want} not in {text}");
+    // `replay -o` copies the temperatures into the new log.
+    let copy = dir.path().join("copy.mcap");
+    let out = std::process::Command::new(bin)
+        .arg("replay")
+        .arg(&w.path)
+        .arg("-o")
+        .arg(&copy)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = std::process::Command::new(bin)
+        .args(["info", "--json"])
+        .arg(&copy)
+        .output()
+        .unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["topics"]["/temperature"]["samples"], temps.len() as u64);
 
     let out = std::process::Command::new(bin)
         .arg("info")

@@ -234,7 +234,8 @@ impl From<&Counters> for CountersMsg {
 /// `/status`, about once a second: every instrument's counters and the log's own.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct StatusMsg {
-    /// Counters by instrument name (`interferometer`, `capball`, `psd`, `trigger`).
+    /// Counters by instrument name (`interferometer`, `capball`, `psd`, `trigger`,
+    /// `temperature`).
     #[schemars(schema_with = "counters_map")]
     pub instruments: BTreeMap<String, CountersMsg>,
     /// Messages written to this log so far.

@@ -202,14 +202,12 @@ pub fn print_out(text: &str) -> anyhow::Result<()> {
 }
 
 /// A thermal test (`time_s`, temperatures `_c`, optional `spindle_rpm` and displacements `_um`,
-/// see [`thermal::ThermalDataset`]). Only CSV: a run's log carries no thermal topic.
+/// see [`thermal::ThermalDataset`]): a CSV file, or a run's log (its `/temperature` samples and
+/// the pose values of its measuring pose, [`super::thermal::from_log`]).
 pub fn load_thermal(path: &Path) -> anyhow::Result<thermal::ThermalDataset> {
-    anyhow::ensure!(
-        !metrolog_analysis::is_mcap(path),
-        "{}: a thermal test must be a CSV file (`time_s`, temperatures ending `_c`, optionally \
-         `spindle_rpm` and displacements ending `_um`); a run's MCAP log holds no thermal test",
-        path.display()
-    );
+    if metrolog_analysis::is_mcap(path) {
+        return super::thermal::from_log::dataset_from_log(path);
+    }
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     thermal::ThermalDataset::from_csv(&text).with_context(|| {

@@ -319,7 +319,12 @@ async fn start_live(cfg: &Config, log_path: &std::path::Path) -> Option<crate::l
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    match crate::live::LiveView::start(live, &cfg.run.machine, session).await {
+    let sensors = cfg
+        .temperature
+        .iter()
+        .flat_map(|t| t.sensors.iter().map(|s| s.name.clone()))
+        .collect();
+    match crate::live::LiveView::start(live, &cfg.run.machine, session, sensors).await {
         Ok(l) => Some(l),
         Err(e) => {
             tracing::error!("live view not started: {e:#}; the run goes on without it");

@@ -45,6 +45,9 @@ pub struct Hub {
     /// Run identity for `serverInfo`.
     pub session: String,
     pub machine: String,
+    /// The temperature module's channel names (`serverInfo` metadata; the page names the
+    /// `/temperature` values with them).
+    pub temperature_sensors: Vec<String>,
 }
 
 impl Hub {
@@ -59,6 +62,7 @@ impl Hub {
             published: AtomicU64::new(0),
             session,
             machine: machine.to_string(),
+            temperature_sensors: Vec::new(),
         }
     }
 

@@ -45,8 +45,14 @@ pub struct LiveView {
 
 impl LiveView {
     /// Binds `cfg.listen` and starts serving. A non-loopback address is warned about loudly:
-    /// anyone who reaches it can watch the run.
-    pub async fn start(cfg: &LiveConfig, machine: &str, session: String) -> anyhow::Result<Self> {
+    /// anyone who reaches it can watch the run. `temperature_sensors` names the channels of
+    /// `/temperature` for the page.
+    pub async fn start(
+        cfg: &LiveConfig,
+        machine: &str,
+        session: String,
+        temperature_sensors: Vec<String>,
+    ) -> anyhow::Result<Self> {
         let listener = tokio::net::TcpListener::bind(cfg.listen)
             .await
             .with_context(|| {
@@ -62,7 +68,9 @@ impl LiveView {
                 addr.port()
             );
         }
-        let hub = Arc::new(Hub::new(machine, session));
+        let mut hub = Hub::new(machine, session);
+        hub.temperature_sensors = temperature_sensors;
+        let hub = Arc::new(hub);
         let stop = CancellationToken::new();
         let task = tokio::spawn(server::serve(listener, hub.clone(), stop.clone()));
         tracing::info!(
@@ -146,7 +154,9 @@ mod tests {
             listen: "127.0.0.1:0".parse().unwrap(),
             raw_hz: 10,
         };
-        let view = LiveView::start(&cfg, "m", "s".into()).await.unwrap();
+        let view = LiveView::start(&cfg, "m", "s".into(), Vec::new())
+            .await
+            .unwrap();
         let sock = tokio::net::TcpSocket::new_v4().unwrap();
         sock.set_recv_buffer_size(4096).unwrap();
         let mut c = sock.connect(view.addr()).await.unwrap();

@@ -24,13 +24,15 @@ pub fn channel_id(index: usize) -> u64 {
     index as u64 + 1
 }
 
-pub fn server_info(machine: &str, session: &str) -> String {
+/// `temperature_sensors`: the temperature module's channel names, in `/temperature`'s
+/// channel order, comma-separated in the metadata (empty without a module).
+pub fn server_info(machine: &str, session: &str, temperature_sensors: &[String]) -> String {
     json!({
         "op": "serverInfo",
         "name": concat!("metrolog ", env!("CARGO_PKG_VERSION")),
         "capabilities": [],
         "supportedEncodings": [],
-        "metadata": { "machine": machine },
+        "metadata": { "machine": machine, "temperature_sensors": temperature_sensors.join(",") },
         "sessionId": session,
     })
     .to_string()

@@ -9,7 +9,7 @@ use crate::cmd::input::{load_thermal, print_out};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Thermal test (CSV: `time_s`, temperatures `_c`, displacements `_um`, optional
-    /// `spindle_rpm`).
+    /// `spindle_rpm`), or a run's log (.mcap: `/temperature` and the measuring pose's values).
     pub input: PathBuf,
     /// Print the diagnosis as JSON instead of text.
     #[arg(long)]

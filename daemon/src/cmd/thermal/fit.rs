@@ -10,7 +10,7 @@ use crate::cmd::input::{load_thermal, print_out, write_output};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Thermal test (CSV: `time_s`, temperatures `_c`, displacements `_um`, optional
-    /// `spindle_rpm`).
+    /// `spindle_rpm`), or a run's log (.mcap: `/temperature` and the measuring pose's values).
     pub input: PathBuf,
     /// Where to write the model (JSON).
     #[arg(short = 'o', long = "out", value_name = "MODEL.json")]

@@ -13,7 +13,8 @@ use crate::cmd::input::{load_thermal, print_out};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Thermal test (CSV: `time_s`, temperatures `_c`, displacements `_um`).
+    /// Thermal test (CSV: `time_s`, temperatures `_c`, displacements `_um`), or a run's log
+    /// (.mcap: `/temperature` and the measuring pose's values).
     pub input: PathBuf,
     /// The five probe channels of the spindle test, in the order X1,X2,Y1,Y2,Z (column names,
     /// with or without `_um`); X1/Y1 near the spindle nose, X2/Y2 further along the mandrel.

@@ -5,6 +5,7 @@
 
 pub mod diagnose;
 pub mod fit;
+pub mod from_log;
 pub mod iso230_3;
 pub mod predict;
 

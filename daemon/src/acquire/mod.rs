@@ -19,6 +19,7 @@
 pub mod config;
 pub mod counts;
 pub mod pipeline;
+pub mod preflight;
 pub mod recorder;
 pub mod run_log;
 pub mod service;

@@ -46,8 +46,11 @@ pub fn init_tracing_with_default(default: &str) {
                 .try_init();
             return;
         }
+        // Colour codes only for a person at a terminal, never in a file or a pipe.
+        use std::io::IsTerminal as _;
         let _ = tracing_subscriber::fmt()
             .with_env_filter(filter)
+            .with_ansi(std::io::stderr().is_terminal())
             .with_writer(std::io::stderr)
             .with_target(false)
             .try_init();

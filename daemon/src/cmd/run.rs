@@ -9,12 +9,14 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
-use drivers::{DriverEvent, HostClock};
+use drivers::{DriverEvent, HostClock, Instrument};
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
 use crate::acquire::config::{Config, TriggerConfig};
-use crate::acquire::pipeline::{self, Outcome, Pipeline, PipelineConfig, Status, StopReason};
+use crate::acquire::pipeline::{
+    self, ConnectPolicy, Outcome, Pipeline, PipelineConfig, Status, StopReason,
+};
 use crate::acquire::service::{self, Notifier};
 
 #[derive(Debug, clap::Args)]
@@ -22,17 +24,26 @@ pub struct Args {
     /// The configuration file (see deploy/metrolog.toml for every key).
     #[arg(long, short, value_name = "FILE")]
     pub config: PathBuf,
-    /// Only check the configuration and say what would run.
+    /// Only check the configuration and its devices and say what would run (every mistake
+    /// at once; exit 78 when there is one).
     #[arg(long)]
     pub check: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     service::init_tracing();
-    let cfg = Config::load(&args.config)?;
+    // The same checks as --check: a missing port or one given twice stops the start (78).
+    let cfg = Config::load_checked(&args.config)?;
+    let notes = cfg.notes();
     if args.check {
+        for n in &notes {
+            println!("note: {n}");
+        }
         println!("{}: valid; {}", cfg.path.display(), describe(&cfg));
         return Ok(());
+    }
+    for n in &notes {
+        tracing::warn!("{n}");
     }
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -61,6 +72,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             st.summary()
         );
         return Err(crate::exit::LogWriteFailed(why).into());
+    }
+    if report.outcome.reason == StopReason::NothingConnected {
+        notifier.status(&st.summary());
+        let why = st.nothing_connected.clone().unwrap_or_default();
+        return Err(crate::exit::NothingConnected(format!(
+            "nothing connected {why}; plug the instruments in (or fix their ports), then start the service again"
+        ))
+        .into());
     }
     tracing::info!(
         "run ended ({}); log {}; {}; queue at most {} of {}; pose latency at most {:.1} ms",
@@ -111,6 +130,31 @@ pub fn describe(cfg: &Config) -> String {
     )
 }
 
+/// The "nothing connected" alarm of a config: `[run] connect_timeout_s`, waiting when a device
+/// is `hotplug`.
+fn connect_policy(cfg: &Config) -> ConnectPolicy {
+    let mut ports = Vec::new();
+    if let Some(c) = &cfg.interferometer {
+        ports.push((Instrument::Interferometer, c.port.clone()));
+    }
+    if let Some(c) = &cfg.capball {
+        ports.push((Instrument::Capball, c.driver.port.clone()));
+    }
+    if let Some(c) = &cfg.psd {
+        ports.push((Instrument::Psd, c.port.clone()));
+    }
+    match &cfg.trigger {
+        Some(TriggerConfig::Slcan(s)) => ports.push((Instrument::Trigger, s.port.clone())),
+        Some(TriggerConfig::SocketCan(s)) => ports.push((Instrument::Trigger, s.interface.clone())),
+        None => {}
+    }
+    ConnectPolicy {
+        timeout: Duration::from_secs(cfg.run.connect_timeout_s),
+        wait: cfg.ports.iter().any(|p| p.hotplug),
+        ports,
+    }
+}
+
 /// How an acquisition is run (the service and the demo differ only here).
 pub struct Acquire {
     pub notifier: Notifier,
@@ -141,6 +185,7 @@ impl RunReport {
             (StopReason::Cancelled, _) => "stopped".into(),
             (StopReason::DriversGone, _) => "every driver ended".into(),
             (StopReason::LogFailed, _) => "the log could not be written".into(),
+            (StopReason::NothingConnected, _) => "nothing connected".into(),
         }
     }
 }
@@ -169,6 +214,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
             instruments: cfg.instruments(),
             stop_at_program_end: cfg.run.stop_at_program_end,
             keep_poses: opts.keep_poses,
+            connect: Some(connect_policy(cfg)),
         },
         clock,
         Box::new(recorder),

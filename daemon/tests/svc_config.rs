@@ -428,3 +428,37 @@ fn output_dir_that_is_a_file_is_refused_when_checked() {
     let e = Config::load_checked(&cfg).unwrap_err().to_string();
     assert!(e.contains(":3:") && e.contains("is not a directory"), "{e}");
 }
+
+#[test]
+fn storage_policy_is_read_and_its_mistakes_reported_together() {
+    let c = parse(GOOD).unwrap();
+    // Absent: nothing is deleted, the warning stays on (5 GB).
+    assert_eq!(c.storage.keep, None);
+    assert_eq!(c.storage.min_free_bytes, None);
+    assert_eq!(c.storage.warn_free_bytes, 5_000_000_000);
+    let c = parse(&format!(
+        "{GOOD}[storage]\nkeep_days = 30\nmin_free_gb = 2.5\nwarn_free_gb = 10\n"
+    ))
+    .unwrap();
+    assert_eq!(
+        c.storage.keep,
+        Some(std::time::Duration::from_secs(30 * 86_400))
+    );
+    assert_eq!(c.storage.min_free_bytes, Some(2_500_000_000));
+    assert_eq!(c.storage.warn_free_bytes, 10_000_000_000);
+    let text = format!("{GOOD}[storage]\nkeep_days = 0\nmin_free_gb = -1\nwarn_free_gb = nan\n");
+    let e = parse(&text).unwrap_err();
+    let each: Vec<String> = e.each().iter().map(|e| e.to_string()).collect();
+    assert_eq!(each.len(), 3, "{e}");
+    for (msg, key) in each
+        .iter()
+        .zip(["keep_days", "min_free_gb", "warn_free_gb"])
+    {
+        let line = line_of(&text, key);
+        assert!(
+            msg.starts_with(&format!("/etc/metrolog/metrolog.toml:{line}:"))
+                && msg.contains(&format!("{key} = ")),
+            "{msg}"
+        );
+    }
+}

@@ -474,3 +474,59 @@ fn nothing_connected_with_hotplug_raises_the_alarm_and_waits() {
         "{states:?}"
     );
 }
+
+/// Before a run starts, `[storage]` retention deletes runs older than `keep_days` (not other
+/// files, not newer runs) and the low-space warning is given.
+#[test]
+fn retention_and_the_low_space_warning_come_before_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("logs");
+    std::fs::create_dir_all(&logs).unwrap();
+    let old = logs.join("metrolog-m-20200101T000000Z.mcap");
+    let recent = logs.join("metrolog-m-20260101T000000Z.mcap");
+    let other = logs.join("notes.txt");
+    for p in [&old, &recent, &other] {
+        std::fs::write(p, b"x").unwrap();
+    }
+    let ten_days = std::time::Duration::from_secs(10 * 86_400);
+    for p in [&old, &other] {
+        std::fs::File::options()
+            .write(true)
+            .open(p)
+            .unwrap()
+            .set_modified(std::time::SystemTime::now() - ten_days)
+            .unwrap();
+    }
+    let cfg = nothing_answers(dir.path(), false);
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    // A warning threshold no disk reaches: the warning must come.
+    std::fs::write(
+        &cfg,
+        format!("{text}[storage]\nkeep_days = 7\nwarn_free_gb = 1000000\n"),
+    )
+    .unwrap();
+    let (code, err) = run_binary(&["run", "--config", cfg.to_str().unwrap()]);
+    assert_eq!(
+        code,
+        Some(metrolog::exit::NOTHING_CONNECTED as i32),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!("retention: deleted {}", old.display())),
+        "{err}"
+    );
+    assert!(err.contains("low disk space:"), "{err}");
+    assert!(!old.exists() && recent.exists() && other.exists());
+    // The new run's log is there beside the recent one.
+    let runs = std::fs::read_dir(&logs)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .ends_with(".mcap")
+        })
+        .count();
+    assert_eq!(runs, 2);
+}

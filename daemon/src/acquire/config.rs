@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 
 use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use serde::Deserialize;
+
+use super::storage::{self, StoragePolicy};
 use toml::Spanned;
 
 /// Defaults, shared with the example config `deploy/metrolog.toml`. The data-sheet limits the
@@ -132,6 +134,16 @@ struct RawConfig {
     psd: Option<Spanned<RawPsd>>,
     trigger: Option<Spanned<RawTrigger>>,
     live: Option<Spanned<RawLive>>,
+    storage: Option<Spanned<RawStorage>>,
+}
+
+/// `[storage]`: retention and the low-space warning (acquire::storage).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStorage {
+    keep_days: Option<Spanned<f64>>,
+    min_free_gb: Option<Spanned<f64>>,
+    warn_free_gb: Option<Spanned<f64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -225,6 +237,8 @@ pub struct Config {
     pub live: Option<LiveConfig>,
     /// Every device the config names, where it is written (for the port checks).
     pub ports: Vec<PortSpec>,
+    /// `[storage]`: retention and the low-space warning (defaults when absent).
+    pub storage: StoragePolicy,
 }
 
 /// A device a config names (a serial port, or a SocketCAN interface), and where.
@@ -495,6 +509,7 @@ impl Ctx<'_> {
             Some(s) => errs.keep(self.validate_trigger(s)).map(Some),
         };
         let live = self.section(&mut errs, raw.live, |r| self.validate_live(r));
+        let storage = self.section(&mut errs, raw.storage, |r| self.validate_storage(r));
         let ports = self.ports.take();
         errs.0.extend(self.port_checks(&ports));
         let (Some(run), Some(detector), Some(interferometer), Some(capball), Some(psd)) =
@@ -502,7 +517,7 @@ impl Ctx<'_> {
         else {
             return Err(errs.into_error());
         };
-        let (Some(trigger), Some(live)) = (trigger, live) else {
+        let (Some(trigger), Some(live), Some(storage)) = (trigger, live, storage) else {
             return Err(errs.into_error());
         };
         errs.result(Some(Config {
@@ -516,6 +531,7 @@ impl Ctx<'_> {
             trigger,
             live,
             ports,
+            storage: storage.unwrap_or_default(),
         }))
     }
 
@@ -919,6 +935,59 @@ impl Ctx<'_> {
                 transform,
             },
             transform_file,
+        })
+    }
+}
+
+/// `[storage]`: the retention policy and the low-space warning.
+impl Ctx<'_> {
+    /// A number of `what` within `lo..=hi`, or the key's mistake.
+    fn bounded(
+        &self,
+        v: &Spanned<f64>,
+        key: &str,
+        (lo, hi): (f64, f64),
+        what: &str,
+    ) -> Result<f64, ConfigError> {
+        let x = *v.get_ref();
+        if !(x.is_finite() && (lo..=hi).contains(&x)) {
+            return Err(self.err(
+                v.span(),
+                format!("{key} = {x} is outside {lo} to {hi} ({what})"),
+            ));
+        }
+        Ok(x)
+    }
+
+    fn validate_storage(&self, r: RawStorage) -> Result<StoragePolicy, ConfigError> {
+        let mut errs = Errors::default();
+        let gb = |v: &Spanned<f64>, key| {
+            self.bounded(v, key, (0.0, 1e6), "GB of free space")
+                .map(|x| (x * storage::GB) as u64)
+        };
+        let keep = errs.keep(r.keep_days.as_ref().map_or(Ok(None), |v| {
+            self.bounded(v, "keep_days", (0.01, 36_500.0), "days a run is kept")
+                .map(|d| Some(std::time::Duration::from_secs_f64(d * 86_400.0)))
+        }));
+        let min_free = errs.keep(
+            r.min_free_gb
+                .as_ref()
+                .map_or(Ok(None), |v| gb(v, "min_free_gb").map(Some)),
+        );
+        let default_warn = StoragePolicy::default().warn_free_bytes;
+        let warn = errs.keep(
+            r.warn_free_gb
+                .as_ref()
+                .map_or(Ok(default_warn), |v| gb(v, "warn_free_gb")),
+        );
+        let (Some(keep), Some(min_free_bytes), Some(warn_free_bytes)) = (keep, min_free, warn)
+        else {
+            return Err(errs.into_error());
+        };
+        Ok(StoragePolicy {
+            keep,
+            min_free_bytes,
+            warn_free_bytes,
         })
     }
 }

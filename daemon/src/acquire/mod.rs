@@ -24,3 +24,4 @@ pub mod recorder;
 pub mod run_log;
 pub mod service;
 pub mod sink;
+pub mod storage;

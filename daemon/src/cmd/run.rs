@@ -18,6 +18,7 @@ use crate::acquire::pipeline::{
     self, ConnectPolicy, Outcome, Pipeline, PipelineConfig, Status, StopReason,
 };
 use crate::acquire::service::{self, Notifier};
+use crate::acquire::storage;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -196,11 +197,23 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
+    // Retention and the low-space warning before the new log takes any space.
+    if cfg.run.output_dir.is_dir() {
+        storage::apply_and_report(&cfg.storage, &cfg.run.output_dir, None, &storage::Statvfs);
+    }
     let mut recorder = crate::acquire::run_log::open_log(cfg, &clock)
         .map_err(|e| crate::exit::LogCreateFailed(format!("{e:#}")))?;
     let log_path = recorder.path().to_path_buf();
     tracing::info!("logging to {}", log_path.display());
     let live = start_live(cfg, &log_path).await;
+    let storage_cancel = CancellationToken::new();
+    tokio::spawn(storage::watch(
+        cfg.storage.clone(),
+        cfg.run.output_dir.clone(),
+        log_path.clone(),
+        storage_cancel.clone(),
+    ));
+    let _stop_storage = storage_cancel.drop_guard();
     if let Some(l) = &live {
         recorder.set_tap(l.tap());
     }

@@ -13,6 +13,10 @@
 //!
 //! A connected instrument that stops delivering samples while a program runs is what a hung
 //! driver or a wedged USB stack looks like; there a restart is the right cure, so the pet stops.
+//!
+//! Idle is not silent: when no device has been connected for `[run] connect_timeout_s`, the
+//! pipeline raises the "nothing connected" alarm (an ERROR line, `STATUS=NOTHING CONNECTED …`)
+//! and, unless a device is `hotplug`, ends the run with exit 69 (README, "Nothing connected").
 
 use std::sync::Once;
 use std::time::Duration;

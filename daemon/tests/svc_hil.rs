@@ -724,3 +724,71 @@ async fn interferometer_unplug_loses_the_datum_and_the_analysis_refuses_the_run(
     );
     println!("interferometer poses: {statuses:?}\nanalyze positioning: {err}");
 }
+
+/// Retention on a real small file system (a 4 MiB tmpfs; root only): three old runs of 1 MiB
+/// leave about 1 MB free; with `min_free_gb = 0.0025` the start deletes the oldest two (free
+/// space read by statvfs after each) and keeps the newest, before the new run's log is created.
+#[test]
+fn retention_frees_a_small_file_system_oldest_run_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("logs");
+    std::fs::create_dir_all(&logs).unwrap();
+    let _fs = match SmallFs::mount(&logs, "4m") {
+        Ok(fs) => fs,
+        Err(why) => {
+            println!("SKIPPED the retention test: cannot mount a small tmpfs ({why}); run as root");
+            return;
+        }
+    };
+    let now = std::time::SystemTime::now();
+    let names = [
+        "metrolog-m-1.mcap",
+        "metrolog-m-2.mcap",
+        "metrolog-m-3.mcap",
+    ];
+    for (k, name) in names.iter().enumerate() {
+        let p = logs.join(name);
+        std::fs::write(&p, vec![7u8; 1 << 20]).unwrap();
+        let age = Duration::from_secs(86_400 * (3 - k as u64));
+        std::fs::File::options()
+            .write(true)
+            .open(&p)
+            .unwrap()
+            .set_modified(now - age)
+            .unwrap();
+    }
+    let cfg = dir.path().join("m.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[run]\nmachine = \"m\"\noutput_dir = {:?}\nconnect_timeout_s = 1\n[storage]\nmin_free_gb = 0.0025\nwarn_free_gb = 0\n[interferometer]\nport = \"/dev/null\"\n",
+            logs.display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(metrolog::exit::NOTHING_CONNECTED as i32),
+        "{err}"
+    );
+    let deleted: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("retention: deleted"))
+        .collect();
+    assert_eq!(deleted.len(), 2, "{err}");
+    assert!(
+        deleted[0].contains(names[0]) && deleted[1].contains(names[1]),
+        "{err}"
+    );
+    assert!(!logs.join(names[0]).exists() && !logs.join(names[1]).exists());
+    assert!(logs.join(names[2]).exists());
+    let s = nix::sys::statvfs::statvfs(&logs).unwrap();
+    let free = s.blocks_available() as u64 * s.fragment_size() as u64;
+    assert!(free >= 2_000_000, "{free}");
+}

@@ -1,6 +1,6 @@
 //! The log directory's policy (`[storage]`, README "Disk space"): a retention rule (runs older
 //! than `keep_days` deleted; the oldest runs deleted while less than `min_free_gb` is free)
-//! applied before a run starts and once a minute while it runs, never to the run being written;
+//! applied before a run starts and every 10 s while it runs, never to the run being written;
 //! and a warning when less than `warn_free_gb` is free.
 //!
 //! A run is a file `metrolog-*.mcap` directly in `output_dir` (the names the log writer gives);
@@ -16,8 +16,9 @@ pub const GB: f64 = 1e9;
 /// Default of `[storage] warn_free_gb`: about 6 h of a run at the highest rates (0.75 GB/h).
 pub const DEFAULT_WARN_FREE_GB: f64 = 5.0;
 
-/// How often the policy is applied while a run is written.
-pub const CHECK_PERIOD: Duration = Duration::from_secs(60);
+/// How often the policy is applied while a run is written (a full-rate run writes about 2 MB
+/// in that time; a check reads the directory and `statvfs`).
+pub const CHECK_PERIOD: Duration = Duration::from_secs(10);
 
 /// `[storage]`: what may be deleted, and when to warn.
 #[derive(Debug, Clone, PartialEq)]
@@ -170,62 +171,87 @@ pub fn low_space(policy: &StoragePolicy, dir: &Path, free_bytes: u64) -> Option<
     ))
 }
 
-/// Apply the policy and report what it did (INFO per deleted run, WARN when space is low).
-/// Returns whether the space is low. Errors are reported, never fatal: the run goes on.
+/// Apply the policy and report each deleted run (INFO); returns the low-space warning, if
+/// any. Errors are reported, never fatal: the run goes on.
 pub fn apply_and_report(
     policy: &StoragePolicy,
     dir: &Path,
     current: Option<&Path>,
     free: &dyn FreeSpace,
-) -> bool {
+) -> Option<String> {
     match apply(policy, dir, current, SystemTime::now(), free) {
         Ok(a) => {
             for (p, why) in &a.deleted {
                 tracing::info!("retention: deleted {} ({why})", p.display());
             }
-            match low_space(policy, dir, a.free_bytes) {
-                Some(w) => {
-                    tracing::warn!("{w}");
-                    true
-                }
-                None => false,
-            }
+            low_space(policy, dir, a.free_bytes)
         }
         Err(e) => {
             tracing::warn!("retention in {} failed: {e}", dir.display());
-            false
+            None
         }
     }
 }
 
-/// While `cancel` is not cancelled: apply the policy every [`CHECK_PERIOD`] (never to
-/// `current`); warn when the space gets low, and once more when it has recovered.
-pub async fn watch(
-    policy: StoragePolicy,
-    dir: PathBuf,
-    current: PathBuf,
-    cancel: tokio_util::sync::CancellationToken,
-) {
+/// Checks between two repeats of the low-space warning during a run (10 min at the period).
+const WARN_EVERY: u32 = 60;
+
+/// Where and how often [`watch`] applies the policy during a run.
+pub struct Watch {
+    pub policy: StoragePolicy,
+    pub dir: PathBuf,
+    /// The run being written: never deleted.
+    pub current: PathBuf,
+    pub free: std::sync::Arc<dyn FreeSpace + Send + Sync>,
+    pub period: Duration,
+}
+
+impl Watch {
+    /// The service's: the file system's free space, every [`CHECK_PERIOD`].
+    pub fn service(policy: StoragePolicy, dir: PathBuf, current: PathBuf) -> Watch {
+        Watch {
+            policy,
+            dir,
+            current,
+            free: std::sync::Arc::new(Statvfs),
+            period: CHECK_PERIOD,
+        }
+    }
+}
+
+/// While `cancel` is not cancelled: apply the policy every period (never to the current run);
+/// warn when the space gets low and every [`WARN_EVERY`] checks while it stays low, and say
+/// once when it has recovered.
+pub async fn watch(w: Watch, cancel: tokio_util::sync::CancellationToken) {
+    let w = std::sync::Arc::new(w);
     let mut low = false;
-    let mut tick = tokio::time::interval(CHECK_PERIOD);
+    let mut low_checks = 0u32;
+    let mut tick = tokio::time::interval(w.period);
     tick.tick().await;
     loop {
         tokio::select! {
             _ = cancel.cancelled() => return,
             _ = tick.tick() => {}
         }
-        let (p, d, c) = (policy.clone(), dir.clone(), current.clone());
-        let was_low = low;
-        let now_low = tokio::task::spawn_blocking(move || {
-            // Warn on every check while low: each WARN line is a minute apart.
-            apply_and_report(&p, &d, Some(&c), &Statvfs)
+        let w2 = w.clone();
+        let warning = tokio::task::spawn_blocking(move || {
+            apply_and_report(&w2.policy, &w2.dir, Some(&w2.current), w2.free.as_ref())
         })
         .await
-        .unwrap_or(was_low);
-        if was_low && !now_low {
+        .unwrap_or(None);
+        let now_low = warning.is_some();
+        if let Some(text) = warning {
+            if low_checks % WARN_EVERY == 0 {
+                tracing::warn!("{text}");
+            }
+            low_checks += 1;
+        } else {
+            low_checks = 0;
+        }
+        if low && !now_low {
             tracing::info!(
-                "disk space in {} is above warn_free_gb again",
-                dir.display()
+                "disk space in {} is above the warning again",
+                w.dir.display()
             );
         }
         low = now_low;
@@ -271,6 +297,51 @@ mod tests {
             .collect();
         v.sort();
         v
+    }
+
+    /// During a run: as the current run grows, the oldest runs go to keep `min_free`, the
+    /// current one never (waited for by condition, not by time).
+    #[tokio::test]
+    async fn during_a_run_the_oldest_runs_make_room_as_the_current_one_grows() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().to_path_buf();
+        let now = SystemTime::now();
+        run(&d, "metrolog-a.mcap", 300, now, 3.0);
+        run(&d, "metrolog-b.mcap", 300, now, 2.0);
+        let current = run(&d, "metrolog-c.mcap", 100, now, 0.0);
+        let policy = StoragePolicy {
+            keep: None,
+            min_free_bytes: Some(400),
+            warn_free_bytes: 0,
+        };
+        // 1200 − 700 = 500 free: nothing to delete yet.
+        let cancel = tokio_util::sync::CancellationToken::new();
+        let task = tokio::spawn(watch(
+            Watch {
+                policy,
+                dir: d.clone(),
+                current: current.clone(),
+                free: std::sync::Arc::new(Capacity(1200)),
+                period: Duration::from_millis(5),
+            },
+            cancel.clone(),
+        ));
+        // The run grows by 200 bytes: 300 free, so the oldest (a) must go, and only it.
+        std::fs::write(&current, vec![0u8; 300]).unwrap();
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        while d.join("metrolog-a.mcap").exists() {
+            assert!(std::time::Instant::now() < deadline, "a was never deleted");
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        // Grows again, past what deleting b can make up: b goes, the current run stays.
+        std::fs::write(&current, vec![0u8; 1000]).unwrap();
+        while d.join("metrolog-b.mcap").exists() {
+            assert!(std::time::Instant::now() < deadline, "b was never deleted");
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        cancel.cancel();
+        task.await.unwrap();
+        assert_eq!(names(&d), ["metrolog-c.mcap"]);
     }
 
     #[test]

@@ -199,7 +199,11 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
     // Retention and the low-space warning before the new log takes any space.
     if cfg.run.output_dir.is_dir() {
-        storage::apply_and_report(&cfg.storage, &cfg.run.output_dir, None, &storage::Statvfs);
+        let low =
+            storage::apply_and_report(&cfg.storage, &cfg.run.output_dir, None, &storage::Statvfs);
+        if let Some(w) = low {
+            tracing::warn!("{w}");
+        }
     }
     let mut recorder = crate::acquire::run_log::open_log(cfg, &clock)
         .map_err(|e| crate::exit::LogCreateFailed(format!("{e:#}")))?;
@@ -208,9 +212,11 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let live = start_live(cfg, &log_path).await;
     let storage_cancel = CancellationToken::new();
     tokio::spawn(storage::watch(
-        cfg.storage.clone(),
-        cfg.run.output_dir.clone(),
-        log_path.clone(),
+        storage::Watch::service(
+            cfg.storage.clone(),
+            cfg.run.output_dir.clone(),
+            log_path.clone(),
+        ),
         storage_cancel.clone(),
     ));
     let _stop_storage = storage_cancel.drop_guard();

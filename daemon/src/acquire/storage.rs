@@ -241,7 +241,7 @@ pub async fn watch(w: Watch, cancel: tokio_util::sync::CancellationToken) {
         .unwrap_or(None);
         let now_low = warning.is_some();
         if let Some(text) = warning {
-            if low_checks % WARN_EVERY == 0 {
+            if low_checks.is_multiple_of(WARN_EVERY) {
                 tracing::warn!("{text}");
             }
             low_checks += 1;

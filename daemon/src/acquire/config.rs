@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 
 use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use serde::Deserialize;
+use toml::Spanned;
 
 use super::storage::{self, StoragePolicy};
-use toml::Spanned;
 
 /// Defaults, shared with the example config `deploy/metrolog.toml`. The data-sheet limits the
 /// values are checked against (rate ranges, PSD-2 bauds and line size, CAN identifiers) and the

@@ -476,7 +476,7 @@ fn nothing_connected_with_hotplug_raises_the_alarm_and_waits() {
 }
 
 /// Before a run starts, `[storage]` retention deletes runs older than `keep_days` (not other
-/// files, not newer runs) and the low-space warning is given.
+/// files, not newer runs) and the low-space warning is given, in the journal and `STATUS=`.
 #[test]
 fn retention_and_the_low_space_warning_come_before_the_run() {
     let dir = tempfile::tempdir().unwrap();
@@ -505,7 +505,11 @@ fn retention_and_the_low_space_warning_come_before_the_run() {
         format!("{text}[storage]\nkeep_days = 7\nwarn_free_gb = 1000000\n"),
     )
     .unwrap();
-    let (code, err) = run_binary(&["run", "--config", cfg.to_str().unwrap()]);
+    let mut n = start_notified(&cfg, dir.path());
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut n.child.stderr.take().unwrap(), &mut err).unwrap();
+    let code = n.child.wait().unwrap().code();
+    let states = n.states();
     assert_eq!(
         code,
         Some(metrolog::exit::NOTHING_CONNECTED as i32),
@@ -516,6 +520,13 @@ fn retention_and_the_low_space_warning_come_before_the_run() {
         "{err}"
     );
     assert!(err.contains("low disk space:"), "{err}");
+    // systemd's STATUS= says it too, from the first status line on.
+    assert!(
+        states
+            .iter()
+            .any(|s| s.contains("STATUS=") && s.contains("LOW DISK ")),
+        "{states:?}"
+    );
     assert!(!old.exists() && recent.exists() && other.exists());
     // The new run's log is there beside the recent one.
     let runs = std::fs::read_dir(&logs)

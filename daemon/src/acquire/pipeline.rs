@@ -108,6 +108,8 @@ pub struct Status {
     pub log_failed: Option<String>,
     /// The "nothing connected" alarm while it holds: what was waited for and how long.
     pub nothing_connected: Option<String>,
+    /// The low-disk alarm while it holds (`[storage] warn_free_gb`): the free space.
+    pub low_disk: Option<String>,
 }
 
 impl Status {
@@ -142,6 +144,9 @@ impl Status {
         };
         if let Some(n) = &self.nothing_connected {
             failed.push_str(&format!("NOTHING CONNECTED {n}; "));
+        }
+        if let Some(d) = &self.low_disk {
+            failed.push_str(&format!("LOW DISK {d}; "));
         }
         format!(
             "{failed}poses {} ({} ok), samples {}, faults {}, lost {}, connected: {}",
@@ -204,6 +209,8 @@ pub struct PipelineConfig {
     pub keep_poses: bool,
     /// The "nothing connected" alarm (None: never raised).
     pub connect: Option<ConnectPolicy>,
+    /// The low-disk alarm the storage check keeps (None: none shown).
+    pub disk_alarm: Option<super::storage::DiskAlarm>,
 }
 
 /// The pipeline: the sink and the run's state beside it (one per run).
@@ -399,6 +406,9 @@ impl RunState {
         self.status.uptime_s = self.started.elapsed().as_secs_f64();
         self.status.queue_len = queue_len;
         self.status.queue_max = self.status.queue_max.max(queue_len);
+        if let Some(a) = &self.cfg.disk_alarm {
+            self.status.low_disk = a.lock().ok().and_then(|a| a.clone());
+        }
         let mut st = self.status.clone();
         st.poses = counts.poses_total();
         st.poses_ok = counts.poses_ok();
@@ -672,6 +682,7 @@ mod tests {
                 stop_at_program_end,
                 keep_poses: true,
                 connect: None,
+                disk_alarm: None,
             },
             HostClock::new(),
             Box::new(sink),
@@ -825,6 +836,24 @@ mod tests {
         assert!(p.status(0).nothing_connected.is_none());
         p.state.check_connected(t0 + Duration::from_secs(600));
         assert!(p.state.status.nothing_connected.is_none());
+    }
+
+    #[test]
+    fn the_low_disk_alarm_shows_in_the_status_line_while_it_holds() {
+        let mut p = pipeline(Scripted::default(), false);
+        let alarm = super::super::storage::DiskAlarm::default();
+        p.state.cfg.disk_alarm = Some(alarm.clone());
+        assert!(p.status(0).summary().starts_with("poses 0"));
+        *alarm.lock().unwrap() = Some("1.23 GB free".into());
+        assert!(
+            p.status(0)
+                .summary()
+                .starts_with("LOW DISK 1.23 GB free; poses 0"),
+            "{}",
+            p.status(0).summary()
+        );
+        *alarm.lock().unwrap() = None;
+        assert!(p.status(0).low_disk.is_none());
     }
 
     #[test]

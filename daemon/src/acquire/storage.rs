@@ -172,18 +172,20 @@ pub fn low_space(policy: &StoragePolicy, dir: &Path, free_bytes: u64) -> Option<
 }
 
 /// Apply the policy and report each deleted run (INFO); returns the low-space warning, if
-/// any. Errors are reported, never fatal: the run goes on.
+/// any, and sets `alarm`. Errors are reported, never fatal: the run goes on.
 pub fn apply_and_report(
     policy: &StoragePolicy,
     dir: &Path,
     current: Option<&Path>,
     free: &dyn FreeSpace,
+    alarm: &DiskAlarm,
 ) -> Option<String> {
     match apply(policy, dir, current, SystemTime::now(), free) {
         Ok(a) => {
             for (p, why) in &a.deleted {
                 tracing::info!("retention: deleted {} ({why})", p.display());
             }
+            set_alarm(alarm, policy, dir, a.free_bytes);
             low_space(policy, dir, a.free_bytes)
         }
         Err(e) => {
@@ -196,6 +198,19 @@ pub fn apply_and_report(
 /// Checks between two repeats of the low-space warning during a run (10 min at the period).
 const WARN_EVERY: u32 = 60;
 
+/// The low-space state as systemd's `STATUS=` shows it (`LOW DISK 1.23 GB free`), shared
+/// with the pipeline; `None` while there is room.
+pub type DiskAlarm = std::sync::Arc<std::sync::Mutex<Option<String>>>;
+
+/// Set `alarm` from the free bytes under `policy`.
+pub fn set_alarm(alarm: &DiskAlarm, policy: &StoragePolicy, dir: &Path, free_bytes: u64) {
+    let text = low_space(policy, dir, free_bytes)
+        .map(|_| format!("{:.2} GB free", free_bytes as f64 / GB));
+    if let Ok(mut a) = alarm.lock() {
+        *a = text;
+    }
+}
+
 /// Where and how often [`watch`] applies the policy during a run.
 pub struct Watch {
     pub policy: StoragePolicy,
@@ -204,17 +219,25 @@ pub struct Watch {
     pub current: PathBuf,
     pub free: std::sync::Arc<dyn FreeSpace + Send + Sync>,
     pub period: Duration,
+    /// Set while the space is low (for `STATUS=`).
+    pub alarm: DiskAlarm,
 }
 
 impl Watch {
     /// The service's: the file system's free space, every [`CHECK_PERIOD`].
-    pub fn service(policy: StoragePolicy, dir: PathBuf, current: PathBuf) -> Watch {
+    pub fn service(
+        policy: StoragePolicy,
+        dir: PathBuf,
+        current: PathBuf,
+        alarm: DiskAlarm,
+    ) -> Watch {
         Watch {
             policy,
             dir,
             current,
             free: std::sync::Arc::new(Statvfs),
             period: CHECK_PERIOD,
+            alarm,
         }
     }
 }
@@ -235,7 +258,13 @@ pub async fn watch(w: Watch, cancel: tokio_util::sync::CancellationToken) {
         }
         let w2 = w.clone();
         let warning = tokio::task::spawn_blocking(move || {
-            apply_and_report(&w2.policy, &w2.dir, Some(&w2.current), w2.free.as_ref())
+            apply_and_report(
+                &w2.policy,
+                &w2.dir,
+                Some(&w2.current),
+                w2.free.as_ref(),
+                &w2.alarm,
+            )
         })
         .await
         .unwrap_or(None);
@@ -323,6 +352,7 @@ mod tests {
                 current: current.clone(),
                 free: std::sync::Arc::new(Capacity(1200)),
                 period: Duration::from_millis(5),
+                alarm: DiskAlarm::default(),
             },
             cancel.clone(),
         ));

@@ -198,9 +198,15 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
     // Retention and the low-space warning before the new log takes any space.
+    let disk_alarm = storage::DiskAlarm::default();
     if cfg.run.output_dir.is_dir() {
-        let low =
-            storage::apply_and_report(&cfg.storage, &cfg.run.output_dir, None, &storage::Statvfs);
+        let low = storage::apply_and_report(
+            &cfg.storage,
+            &cfg.run.output_dir,
+            None,
+            &storage::Statvfs,
+            &disk_alarm,
+        );
         if let Some(w) = low {
             tracing::warn!("{w}");
         }
@@ -216,6 +222,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
             cfg.storage.clone(),
             cfg.run.output_dir.clone(),
             log_path.clone(),
+            disk_alarm.clone(),
         ),
         storage_cancel.clone(),
     ));
@@ -234,6 +241,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
             stop_at_program_end: cfg.run.stop_at_program_end,
             keep_poses: opts.keep_poses,
             connect: Some(connect_policy(cfg)),
+            disk_alarm: Some(disk_alarm),
         },
         clock,
         Box::new(recorder),

@@ -792,3 +792,53 @@ fn retention_frees_a_small_file_system_oldest_run_first() {
     let free = s.blocks_available() as u64 * s.fragment_size() as u64;
     assert!(free >= 2_000_000, "{free}");
 }
+
+/// A full disk with nothing retention may delete: the start exits 73 with what to do and
+/// leaves no empty log behind (a 1 MiB tmpfs filled by another file; root only).
+#[test]
+fn a_full_disk_refuses_the_start_without_an_empty_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("logs");
+    std::fs::create_dir_all(&logs).unwrap();
+    let _fs = match SmallFs::mount(&logs, "1m") {
+        Ok(fs) => fs,
+        Err(why) => {
+            println!(
+                "SKIPPED the full-disk start test: cannot mount a small tmpfs ({why}); run as root"
+            );
+            return;
+        }
+    };
+    // Fill it (the write stops at ENOSPC).
+    let filler = logs.join("other-data.bin");
+    let _ = std::fs::write(&filler, vec![1u8; 2 << 20]);
+    let cfg = dir.path().join("m.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[run]\nmachine = \"m\"\noutput_dir = {:?}\n[interferometer]\nport = \"/dev/null\"\n",
+            logs.display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(metrolog::exit::CANT_CREATE as i32),
+        "{err}"
+    );
+    assert!(
+        err.contains("a run needs at least 256 KiB to start"),
+        "{err}"
+    );
+    let names: Vec<String> = std::fs::read_dir(&logs)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["other-data.bin"]);
+}

@@ -16,6 +16,25 @@ pub const GB: f64 = 1e9;
 /// Default of `[storage] warn_free_gb`: about 6 h of a run at the highest rates (0.75 GB/h).
 pub const DEFAULT_WARN_FREE_GB: f64 = 5.0;
 
+/// Below this much free space a run does not start (exit 73) rather than leave an empty log
+/// file on a full disk at every start.
+pub const START_MIN_FREE_BYTES: u64 = 256 * 1024;
+
+/// Whether a run can start in `dir` after retention: `Err` with what to do when the disk is
+/// (nearly) full. A directory whose free space cannot be read is let through (the log's
+/// creation then says what is wrong).
+pub fn room_to_start(dir: &Path, free: &dyn FreeSpace) -> Result<(), String> {
+    match free.free_bytes(dir) {
+        Ok(b) if b < START_MIN_FREE_BYTES => Err(format!(
+            "only {} KiB free in {}; a run needs at least {} KiB to start: free space (older runs are the metrolog-*.mcap files there) or set [storage] min_free_gb so that they are deleted for the next",
+            b / 1024,
+            dir.display(),
+            START_MIN_FREE_BYTES / 1024
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// How often the policy is applied while a run is written (a full-rate run writes about 2 MB
 /// in that time; a check reads the directory and `statvfs`).
 pub const CHECK_PERIOD: Duration = Duration::from_secs(10);

@@ -210,6 +210,8 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
         if let Some(w) = low {
             tracing::warn!("{w}");
         }
+        storage::room_to_start(&cfg.run.output_dir, &storage::Statvfs)
+            .map_err(crate::exit::LogCreateFailed)?;
     }
     let mut recorder = crate::acquire::run_log::open_log(cfg, &clock)
         .map_err(|e| crate::exit::LogCreateFailed(format!("{e:#}")))?;

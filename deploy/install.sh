@@ -64,12 +64,15 @@ else
     usermod -a -G dialout metrolog
 fi
 install -d -m 0750 -o metrolog -g metrolog /var/lib/metrolog
+echo "   operators read the logs through the group metrolog: usermod -a -G metrolog,systemd-journal USER"
 
 echo "== reloading udev and systemd"
 udevadm control --reload || echo "   (udev not running; rules apply at next boot)"
 udevadm trigger --subsystem-match=tty || true
 systemctl daemon-reload
 systemd-analyze verify /etc/systemd/system/metrolog.service || echo "   systemd-analyze verify reported the problems above"
+# The same checks the service makes at every start: every mistake at once, missing ports
+# (unless hotplug = true), a port given twice, unreadable files.
 /usr/local/bin/metrolog run --config /etc/metrolog/metrolog.toml --check \
     || echo "   fix /etc/metrolog/metrolog.toml before starting the service"
 systemctl enable metrolog.service

@@ -110,6 +110,7 @@ pub fn positioning_from_contents(
     let datum_x_mm = datum_x_mm(log, opts)?;
     let time_scale = time_scale(log)?;
     let visits = visits(&traj, lo, hi, datum_x_mm);
+    refuse_lost_datum(log, &traj, &visits, &values)?;
     let targets = measured_targets(&traj, &visits, &values);
     if targets.len() < 2 {
         return Err(no_data(
@@ -189,6 +190,50 @@ pub fn positioning_from_contents(
     };
     data.validate()?;
     Ok(data)
+}
+
+/// A run whose interferometer lost its datum (beam interrupted, reconnect or restart: pose
+/// values `datum_lost`) holds lengths against two zeros; its deviations after the loss are
+/// meaningless (a reconnect re-zeroes the LI-80 wherever the axis stands). The run is refused
+/// with the pose where it happened and the range before it, rather than evaluated with the
+/// poses after it silently missing.
+fn refuse_lost_datum(
+    log: &LogContents,
+    traj: &[TrajectoryRow],
+    visits: &[(usize, Direction)],
+    values: &BTreeMap<u32, &PoseMsg>,
+) -> Result<(), AnalysisError> {
+    let lost: Vec<u32> = visits
+        .iter()
+        .map(|(i, _)| traj[*i].pose)
+        .filter(|pose| {
+            values
+                .get(pose)
+                .is_some_and(|p| p.status == types::PoseStatus::DatumLost)
+        })
+        .collect();
+    let Some(&first) = lost.first() else {
+        return Ok(());
+    };
+    let start = visits.first().map_or(first, |(i, _)| traj[*i].pose);
+    let before = if first > start + 1 {
+        format!(
+            "evaluate the poses measured before it with --poses {start}-{}, or ",
+            first - 1
+        )
+    } else {
+        String::new()
+    };
+    Err(no_data(
+        log,
+        format!(
+            "the interferometer lost its datum at pose {first} ({} pose value(s) of the run are datum_lost): the lengths after it are measured from another zero and cannot be compared with the ones before",
+            lost.len()
+        ),
+        &format!(
+            "{before}re-reference the interferometer (DATUM at the home position) and measure the run again"
+        ),
+    ))
 }
 
 /// What the report's header reads from a log: the sensor (the positions are the
@@ -416,6 +461,38 @@ mod tests {
             .into(),
             ..LogContents::default()
         }
+    }
+
+    #[test]
+    fn a_run_whose_datum_was_lost_is_refused_with_the_pose_and_the_range_before() {
+        // Up 10, 20, 30, back to 0, then up again; the datum is lost from pose 5 on (as after
+        // a reconnect the LI-80 reads about 0 wherever the axis stands).
+        let xs = [10.0, 20.0, 30.0, 0.0, 10.0, 20.0, 30.0];
+        let mut l = log(&xs, |no, x| Some(if no < 5 { x * 1000.0 } else { 0.0045 }));
+        for p in l.poses.iter_mut().filter(|p| p.msg.pose >= 5) {
+            p.msg.status = PoseStatus::DatumLost;
+            p.msg.mean.clear();
+        }
+        let e = positioning_from_contents(&l, &PositioningOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("lost its datum at pose 5 (3 pose value(s)"),
+            "{e}"
+        );
+        assert!(e.contains("--poses 1-4"), "{e}");
+        // The poses before it are a run of their own.
+        let d = positioning_from_contents(
+            &l,
+            &PositioningOptions {
+                poses: Some((1, 4)),
+                ..PositioningOptions::default()
+            },
+        )
+        .unwrap();
+        // 10, 20, 30 and the return to 0, all on the run's first zero.
+        assert_eq!(d.readings.len(), 4);
+        assert!(d.readings.iter().all(|r| r.deviation_um.abs() < 1e-9));
     }
 
     #[test]

@@ -13,6 +13,9 @@ pub const OK: u8 = 0;
 pub const FAILURE: u8 = 1;
 /// The command line is wrong (clap's own code for usage errors).
 pub const USAGE: u8 = 2;
+/// EX_UNAVAILABLE: no device was connected for `[run] connect_timeout_s` and none is
+/// `hotplug` (README, "Nothing connected"): the kit is unplugged, off, or on other ports.
+pub const NOTHING_CONNECTED: u8 = 69;
 /// EX_SOFTWARE: the pipeline thread panicked (a bug; the log's prefix stays readable).
 pub const SOFTWARE: u8 = 70;
 /// EX_CANTCREAT: the run's log could not be created (output directory missing and not
@@ -25,10 +28,14 @@ pub const IO_ERROR: u8 = 74;
 pub const CONFIG: u8 = 78;
 
 /// Every code the binary exits with, with its meaning (for the README and the unit test).
-pub const ALL: [(u8, &str); 7] = [
+pub const ALL: [(u8, &str); 8] = [
     (OK, "finished"),
     (FAILURE, "runtime failure"),
     (USAGE, "command-line usage error"),
+    (
+        NOTHING_CONNECTED,
+        "no device connected within connect_timeout_s",
+    ),
     (SOFTWARE, "internal error (pipeline thread panicked)"),
     (CANT_CREATE, "the log file could not be created"),
     (
@@ -39,9 +46,10 @@ pub const ALL: [(u8, &str); 7] = [
 ];
 
 /// Codes after which restarting the same unit cannot help until an operator acts (fix the
-/// config or the unit's command line, free disk space, fix permissions): systemd must not
-/// restart on them, or a bad config would be retried `StartLimitBurst` times for nothing.
-pub const NO_RESTART: [u8; 4] = [USAGE, CANT_CREATE, IO_ERROR, CONFIG];
+/// config or the unit's command line, free disk space, fix permissions, plug the kit in):
+/// systemd must not restart on them, or a bad config would be retried `StartLimitBurst` times
+/// for nothing (and an unplugged kit would leave a new empty log every minute).
+pub const NO_RESTART: [u8; 5] = [USAGE, NOTHING_CONNECTED, CANT_CREATE, IO_ERROR, CONFIG];
 
 /// The run's log could not be created: exits [`CANT_CREATE`].
 #[derive(Debug, thiserror::Error)]
@@ -58,6 +66,11 @@ pub struct LogWriteFailed(pub String);
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
 pub struct OutputWriteFailed(pub String);
+
+/// No device connected within the configured time: exits [`NOTHING_CONNECTED`].
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct NothingConnected(pub String);
 
 /// The pipeline thread panicked: exits [`SOFTWARE`].
 #[derive(Debug, thiserror::Error)]
@@ -78,6 +91,9 @@ pub fn code_for(e: &anyhow::Error) -> u8 {
         }
         if cause.is::<PipelinePanicked>() {
             return SOFTWARE;
+        }
+        if cause.is::<NothingConnected>() {
+            return NOTHING_CONNECTED;
         }
     }
     FAILURE
@@ -104,6 +120,10 @@ mod tests {
             CANT_CREATE
         );
         assert_eq!(code_for(&anyhow::Error::new(PipelinePanicked)), SOFTWARE);
+        assert_eq!(
+            code_for(&anyhow::Error::new(NothingConnected("x".into()))),
+            NOTHING_CONNECTED
+        );
         assert_eq!(
             code_for(&anyhow::Error::new(OutputWriteFailed("x".into()))),
             IO_ERROR

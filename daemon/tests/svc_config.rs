@@ -81,8 +81,14 @@ fn good_config_loads_with_the_values_written() {
 fn example_config_in_deploy_is_valid() {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/metrolog.toml");
     let text = std::fs::read_to_string(&p).unwrap();
-    // The example points at files relative to /etc/metrolog; check it from a copy beside them.
+    // Installed alone (install.sh copies only this file to /etc/metrolog), devices checked.
     let dir = tempfile::tempdir().unwrap();
+    let installed = dir.path().join("metrolog.toml");
+    std::fs::write(&installed, &text).unwrap();
+    let c = Config::load_checked(&installed).unwrap();
+    assert_eq!(c.instruments().len(), 5);
+    assert_eq!(c.run.connect_timeout_s, 60);
+    // Its files, once uncommented, are read relative to it.
     std::fs::write(
         dir.path().join("poses.csv"),
         "pose,x_mm,y_mm,z_mm\n1,0,0,0\n2,100,0,0\n",
@@ -93,12 +99,16 @@ fn example_config_in_deploy_is_valid() {
         "1,0,0,0\n0,1,0,0\n0,0,1,0\n0,0,0,1\n",
     )
     .unwrap();
-    let c = Config::parse(&dir.path().join("metrolog.toml"), &text).unwrap();
+    let text = text
+        .replace("# trajectory = ", "trajectory = ")
+        .replace("# transform = ", "transform = ");
+    let c = Config::parse(&installed, &text).unwrap();
     assert_eq!(c.run.trajectory.as_ref().unwrap().rows.len(), 2);
     assert_eq!(c.instruments().len(), 5);
     let t = c.temperature.as_ref().unwrap();
     assert_eq!((t.unit, t.sensors.len()), (1, 3));
     assert_eq!(t.sensors[0].location, "spindle housing, front bearing");
+    assert!(c.capball.unwrap().transform_file.is_some());
 }
 
 #[test]
@@ -184,6 +194,11 @@ fn impossible_values_are_rejected() {
             "machine = \"mill-01\"",
             "machine = \"mill 01/a\"",
             "machine",
+        ),
+        (
+            "stop_at_program_end = false",
+            "stop_at_program_end = false\nconnect_timeout_s = 0",
+            "connect_timeout_s",
         ),
         (
             "slcan = \"/dev/metrolog-slcan\"",
@@ -288,4 +303,166 @@ fn the_live_view_is_off_by_default_and_its_mistakes_are_reported() {
     }
     let (_, msg) = error(&format!("{GOOD}[live]\nraw_hz = 5\n"));
     assert!(msg.contains("listen"), "{msg}");
+}
+
+/// Every mistake of a file comes in one error, each with its own line, in the file's order:
+/// one `--check` is enough to fix them all.
+#[test]
+fn every_mistake_is_reported_in_one_pass() {
+    let text = GOOD
+        .replace("machine = \"mill-01\"", "machine = \"mill 01\"")
+        .replace("stop_at", "trajectory = \"no-such.csv\"\nstop_at")
+        .replace("rate_hz = 1000\nalpha", "rate_hz = 20000\nalpha")
+        .replace("alpha_um_per_m_k = 11.7", "alpha_um_per_m_k = 1.17e-5x")
+        .replace("baud = 921600", "baud = 1234")
+        .replace("can_id = 0x181", "can_id = 0x800");
+    // 1.17e-5x is no TOML: that one stops the reader, so keep the value valid here.
+    let text = text.replace("1.17e-5x", "1000.0");
+    let e = parse(&text).unwrap_err();
+    let each: Vec<String> = e.each().iter().map(|e| e.to_string()).collect();
+    let want = [
+        ("mill 01", "must be a non-empty name"),
+        ("no-such.csv", "cannot be read"),
+        ("rate_hz = 20000", "outside what the LI-80 supports"),
+        ("alpha_um_per_m_k", "not a plausible expansion coefficient"),
+        ("baud = 1234", "not a baud rate the PSD-2 supports"),
+        ("can_id = 0x800", "not a CAN 2.0A"),
+    ];
+    assert_eq!(each.len(), want.len(), "{e}");
+    for ((needle, what), msg) in want.iter().zip(&each) {
+        let line = line_of(&text, needle);
+        assert!(
+            msg.starts_with(&format!("/etc/metrolog/metrolog.toml:{line}:")),
+            "{needle}: {msg}"
+        );
+        assert!(msg.contains(what), "{msg}");
+    }
+    assert!(
+        e.to_string().starts_with("6 problems in the config:"),
+        "{e}"
+    );
+    assert_eq!(e.line(), Some(line_of(&text, "mill 01")));
+}
+
+#[test]
+fn one_port_given_to_two_instruments_is_refused() {
+    let text = GOOD.replace("/dev/metrolog-cb3", "/dev/metrolog-li80");
+    let (line, msg) = error(&text);
+    assert_eq!(line, line_of(&text, "[capball]") + 1);
+    assert!(
+        msg.contains("[capball] port = \"/dev/metrolog-li80\" is already [interferometer] port"),
+        "{msg}"
+    );
+}
+
+/// A config whose ports are this temporary directory's paths.
+fn with_ports(dir: &Path, extra: &str) -> PathBuf {
+    let text = GOOD
+        .replace("/dev/metrolog-li80\"", &format!("/dev/null\"\n{extra}"))
+        .replace("/dev/metrolog-", &format!("{}/", dir.display()))
+        .replace("/var/lib/metrolog", &dir.join("logs").display().to_string());
+    let p = dir.join("metrolog.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn a_port_that_does_not_exist_is_an_error_unless_hotplug() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = with_ports(dir.path(), "");
+    // Parsing alone does not look at the devices.
+    assert!(Config::load(&cfg).is_ok());
+    let e = Config::load_checked(&cfg).unwrap_err();
+    let each: Vec<String> = e.each().iter().map(|e| e.to_string()).collect();
+    // cb3, psd2, slcan are missing; /dev/null is a device.
+    assert_eq!(each.len(), 3, "{e}");
+    let cb3 = dir.path().join("cb3");
+    assert!(
+        each[0].contains(&format!(
+            "[capball] port = {:?} does not exist",
+            cb3.display().to_string()
+        )),
+        "{}",
+        each[0]
+    );
+    assert!(each.iter().all(|m| m.contains("hotplug = true")), "{e}");
+
+    // hotplug on each: no error; the absence is a note.
+    let text = std::fs::read_to_string(&cfg)
+        .unwrap()
+        .replace(
+            "rate_hz = 1000\npoly",
+            "hotplug = true\nrate_hz = 1000\npoly",
+        )
+        .replace("baud = ", "hotplug = true\nbaud = ")
+        .replace("can_id = ", "hotplug = true\ncan_id = ");
+    std::fs::write(&cfg, text).unwrap();
+    let c = Config::load_checked(&cfg).unwrap();
+    let notes = c.notes();
+    assert_eq!(notes.len(), 3, "{notes:?}");
+    assert!(
+        notes[0].contains("does not exist now (hotplug = true"),
+        "{notes:?}"
+    );
+}
+
+#[test]
+fn port_and_value_mistakes_come_together() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = with_ports(dir.path(), "");
+    let text = std::fs::read_to_string(&cfg)
+        .unwrap()
+        .replace("samples = 150", "samples = 2");
+    std::fs::write(&cfg, text).unwrap();
+    let e = Config::load_checked(&cfg).unwrap_err();
+    assert_eq!(e.each().len(), 4, "{e}");
+    assert!(e.to_string().contains("samples = 2 is impossible"), "{e}");
+}
+
+#[test]
+fn output_dir_that_is_a_file_is_refused_when_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("logs"), "").unwrap();
+    let cfg = dir.path().join("m.toml");
+    std::fs::write(
+        &cfg,
+        "[run]\nmachine = \"m\"\noutput_dir = \"logs\"\n[interferometer]\nport = \"/dev/null\"\n",
+    )
+    .unwrap();
+    let e = Config::load_checked(&cfg).unwrap_err().to_string();
+    assert!(e.contains(":3:") && e.contains("is not a directory"), "{e}");
+}
+
+#[test]
+fn storage_policy_is_read_and_its_mistakes_reported_together() {
+    let c = parse(GOOD).unwrap();
+    // Absent: nothing is deleted, the warning stays on (5 GB).
+    assert_eq!(c.storage.keep, None);
+    assert_eq!(c.storage.min_free_bytes, None);
+    assert_eq!(c.storage.warn_free_bytes, 5_000_000_000);
+    let c = parse(&format!(
+        "{GOOD}[storage]\nkeep_days = 30\nmin_free_gb = 2.5\nwarn_free_gb = 10\n"
+    ))
+    .unwrap();
+    assert_eq!(
+        c.storage.keep,
+        Some(std::time::Duration::from_secs(30 * 86_400))
+    );
+    assert_eq!(c.storage.min_free_bytes, Some(2_500_000_000));
+    assert_eq!(c.storage.warn_free_bytes, 10_000_000_000);
+    let text = format!("{GOOD}[storage]\nkeep_days = 0\nmin_free_gb = -1\nwarn_free_gb = nan\n");
+    let e = parse(&text).unwrap_err();
+    let each: Vec<String> = e.each().iter().map(|e| e.to_string()).collect();
+    assert_eq!(each.len(), 3, "{e}");
+    for (msg, key) in each
+        .iter()
+        .zip(["keep_days", "min_free_gb", "warn_free_gb"])
+    {
+        let line = line_of(&text, key);
+        assert!(
+            msg.starts_with(&format!("/etc/metrolog/metrolog.toml:{line}:"))
+                && msg.contains(&format!("{key} = ")),
+            "{msg}"
+        );
+    }
 }

@@ -643,3 +643,202 @@ async fn full_disk_stops_the_run_with_exit_74_and_a_readable_log() {
         );
     }
 }
+
+/// The LI-80 unplugged for 0.4 s during pose 2 of the ISO 230-2 run: after the reconnect its
+/// lengths are from another zero, so no later interferometer pose value is `ok` (they are
+/// `datum_lost`), every `ok` value is next to the simulation's truth (checked by the
+/// independent Python reader), and `metrolog analyze positioning` refuses the run, naming the
+/// pose, instead of computing R and A from two zeros.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn interferometer_unplug_loses_the_datum_and_the_analysis_refuses_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let ports = dir.path().join("ports");
+    let logs = dir.path().join("logs");
+    std::fs::create_dir_all(&ports).unwrap();
+    let mut sc = scenario();
+    sc.faults.unplugs = vec![Unplug {
+        device: Device::Interferometer,
+        at_s: 0.75,
+        duration_s: 0.4,
+    }];
+    let sim = sim::Sim::start(sc, &ports).unwrap();
+    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, true).unwrap();
+    let cfg = dir.path().join("metrolog.toml");
+    std::fs::write(&cfg, toml).unwrap();
+    let mut child = start_daemon(&cfg);
+    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
+    let status = wait_exit(&mut child, limit).await;
+    let stderr = child.wait_with_output_stderr();
+    assert!(
+        status.success(),
+        "metrolog run failed ({status}):\n{stderr}"
+    );
+    let record = sim.record();
+    sim.shutdown().await;
+    let log = the_log(&logs);
+
+    let contents = metrolog_analysis::LogContents::read(&log).unwrap();
+    let li: Vec<&metrolog_log::topics::PoseMsg> = contents
+        .poses
+        .iter()
+        .map(|p| &p.msg)
+        .filter(|p| p.instrument == types::Instrument::Interferometer)
+        .collect();
+    let statuses: Vec<(u32, &str)> = li.iter().map(|p| (p.pose, p.status.name())).collect();
+    let first_lost = li
+        .iter()
+        .filter(|p| p.status == types::PoseStatus::DatumLost)
+        .map(|p| p.pose)
+        .min()
+        .unwrap_or_else(|| panic!("no datum_lost pose after the unplug: {statuses:?}"));
+    // While the LI-80 is away its poses are `device_away` (the reconnect can take seconds on a
+    // loaded machine); from the reconnect on, `datum_lost`. Never `ok` again after the unplug.
+    let first_not_ok = li
+        .iter()
+        .filter(|p| p.status != types::PoseStatus::Ok)
+        .map(|p| p.pose)
+        .min()
+        .unwrap();
+    assert!(first_not_ok <= 3, "{statuses:?}");
+    assert!(
+        li.iter()
+            .all(|p| p.status != types::PoseStatus::Ok || p.pose < first_not_ok),
+        "an ok value after the unplug: {statuses:?}"
+    );
+    if python_ok() {
+        let r = read_log(&log);
+        let (_, wrong) = check_poses(r["poses"].as_array().unwrap(), &record);
+        assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    }
+
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["analyze", "positioning"])
+        .arg(&log)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains(&format!("lost its datum at pose {first_lost}")),
+        "{err}"
+    );
+    println!("interferometer poses: {statuses:?}\nanalyze positioning: {err}");
+}
+
+/// Retention on a real small file system (a 4 MiB tmpfs; root only): three old runs of 1 MiB
+/// leave about 1 MB free; with `min_free_gb = 0.0025` the start deletes the oldest two (free
+/// space read by statvfs after each) and keeps the newest, before the new run's log is created.
+#[test]
+fn retention_frees_a_small_file_system_oldest_run_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("logs");
+    std::fs::create_dir_all(&logs).unwrap();
+    let _fs = match SmallFs::mount(&logs, "4m") {
+        Ok(fs) => fs,
+        Err(why) => {
+            println!("SKIPPED the retention test: cannot mount a small tmpfs ({why}); run as root");
+            return;
+        }
+    };
+    let now = std::time::SystemTime::now();
+    let names = [
+        "metrolog-m-1.mcap",
+        "metrolog-m-2.mcap",
+        "metrolog-m-3.mcap",
+    ];
+    for (k, name) in names.iter().enumerate() {
+        let p = logs.join(name);
+        std::fs::write(&p, vec![7u8; 1 << 20]).unwrap();
+        let age = Duration::from_secs(86_400 * (3 - k as u64));
+        std::fs::File::options()
+            .write(true)
+            .open(&p)
+            .unwrap()
+            .set_modified(now - age)
+            .unwrap();
+    }
+    let cfg = dir.path().join("m.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[run]\nmachine = \"m\"\noutput_dir = {:?}\nconnect_timeout_s = 1\n[storage]\nmin_free_gb = 0.0025\nwarn_free_gb = 0\n[interferometer]\nport = \"/dev/null\"\n",
+            logs.display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(metrolog::exit::NOTHING_CONNECTED as i32),
+        "{err}"
+    );
+    let deleted: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("retention: deleted"))
+        .collect();
+    assert_eq!(deleted.len(), 2, "{err}");
+    assert!(
+        deleted[0].contains(names[0]) && deleted[1].contains(names[1]),
+        "{err}"
+    );
+    assert!(!logs.join(names[0]).exists() && !logs.join(names[1]).exists());
+    assert!(logs.join(names[2]).exists());
+    let s = nix::sys::statvfs::statvfs(&logs).unwrap();
+    let free = s.blocks_available() as u64 * s.fragment_size() as u64;
+    assert!(free >= 2_000_000, "{free}");
+}
+
+/// A full disk with nothing retention may delete: the start exits 73 with what to do and
+/// leaves no empty log behind (a 1 MiB tmpfs filled by another file; root only).
+#[test]
+fn a_full_disk_refuses_the_start_without_an_empty_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("logs");
+    std::fs::create_dir_all(&logs).unwrap();
+    let _fs = match SmallFs::mount(&logs, "1m") {
+        Ok(fs) => fs,
+        Err(why) => {
+            println!(
+                "SKIPPED the full-disk start test: cannot mount a small tmpfs ({why}); run as root"
+            );
+            return;
+        }
+    };
+    // Fill it (the write stops at ENOSPC).
+    let filler = logs.join("other-data.bin");
+    let _ = std::fs::write(&filler, vec![1u8; 2 << 20]);
+    let cfg = dir.path().join("m.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[run]\nmachine = \"m\"\noutput_dir = {:?}\n[interferometer]\nport = \"/dev/null\"\n",
+            logs.display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(metrolog::exit::CANT_CREATE as i32),
+        "{err}"
+    );
+    assert!(
+        err.contains("a run needs at least 256 KiB to start"),
+        "{err}"
+    );
+    let names: Vec<String> = std::fs::read_dir(&logs)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["other-data.bin"]);
+}

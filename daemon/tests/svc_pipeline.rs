@@ -151,6 +151,8 @@ fn pipeline(seen: &Arc<Mutex<Seen>>, stop_at_program_end: bool) -> Pipeline {
             ],
             stop_at_program_end,
             keep_poses: true,
+            connect: None,
+            disk_alarm: None,
         },
         HostClock::new(),
         Box::new(Counting(DetectOnly::new(engine), seen.clone())),

@@ -13,6 +13,8 @@ use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use serde::Deserialize;
 use toml::Spanned;
 
+use super::storage::{self, StoragePolicy};
+
 /// Defaults, shared with the example config `deploy/metrolog.toml`. The data-sheet limits the
 /// values are checked against (rate ranges, PSD-2 bauds and line size, CAN identifiers) and the
 /// data-sheet defaults (α of steel, the CB-3's nominal sensitivity, the PSD-2's baud) are
@@ -22,6 +24,12 @@ pub const DEFAULT_LI80_RATE_HZ: u32 = 1000;
 pub const DEFAULT_CB3_RATE_HZ: u32 = 1000;
 pub const DEFAULT_PSD_RATE_HZ: u32 = 100;
 pub const DEFAULT_PSD_MIN_SUM_PA: f64 = 100_000.0;
+
+/// Default of `[run] connect_timeout_s`: how long no device may be connected before the
+/// service says so loudly (README, "Nothing connected").
+pub const DEFAULT_CONNECT_TIMEOUT_S: u64 = 60;
+/// Accepted range of `[run] connect_timeout_s` (from 1 s, for tests, to a day).
+pub const CONNECT_TIMEOUT_S: (u64, u64) = (1, 86_400);
 
 /// The steady test needs a variance of successive differences (metrolog-detect): 3 at least.
 pub const DETECTOR_SAMPLES: (usize, usize) = (3, 1_000_000);
@@ -43,14 +51,72 @@ pub enum ConfigError {
         column: usize,
         message: String,
     },
+    /// More than one mistake: every one found in one pass, in the order of the file.
+    #[error("{} problems in the config:\n{}", .0.len(), list_errors(.0))]
+    Several(Vec<ConfigError>),
+}
+
+fn list_errors(errors: &[ConfigError]) -> String {
+    let lines: Vec<String> = errors.iter().map(|e| format!("  {e}")).collect();
+    lines.join("\n")
 }
 
 impl ConfigError {
-    /// Line (1-based) of an [`ConfigError::Invalid`].
+    /// Line (1-based) of an [`ConfigError::Invalid`] (of the first, for several).
     pub fn line(&self) -> Option<usize> {
         match self {
             ConfigError::Invalid { line, .. } => Some(*line),
             ConfigError::Read { .. } => None,
+            ConfigError::Several(v) => v.first().and_then(ConfigError::line),
+        }
+    }
+
+    /// Each single mistake (one for every variant but [`ConfigError::Several`]).
+    pub fn each(&self) -> Vec<&ConfigError> {
+        match self {
+            ConfigError::Several(v) => v.iter().flat_map(ConfigError::each).collect(),
+            e => vec![e],
+        }
+    }
+}
+
+/// The mistakes found so far while validating: each key is checked even after another failed,
+/// so one `--check` names every mistake of the file.
+#[derive(Debug, Default)]
+struct Errors(Vec<ConfigError>);
+
+impl Errors {
+    /// The value of a key that passed, or `None` with its mistake kept.
+    fn keep<T>(&mut self, r: Result<T, ConfigError>) -> Option<T> {
+        match r {
+            Ok(v) => Some(v),
+            Err(ConfigError::Several(v)) => {
+                self.0.extend(v);
+                None
+            }
+            Err(e) => {
+                self.0.push(e);
+                None
+            }
+        }
+    }
+
+    /// All mistakes as one error, in the order of the file (call when one was kept).
+    fn into_error(mut self) -> ConfigError {
+        self.0.sort_by_key(|e| e.line().unwrap_or(0));
+        if self.0.len() == 1
+            && let Some(e) = self.0.pop()
+        {
+            return e;
+        }
+        ConfigError::Several(self.0)
+    }
+
+    /// `Ok(v)` when no mistake was kept.
+    fn result<T>(self, v: Option<T>) -> Result<T, ConfigError> {
+        match v {
+            Some(v) if self.0.is_empty() => Ok(v),
+            _ => Err(self.into_error()),
         }
     }
 }
@@ -69,6 +135,16 @@ struct RawConfig {
     trigger: Option<Spanned<RawTrigger>>,
     live: Option<Spanned<RawLive>>,
     temperature: Option<Spanned<RawTemperature>>,
+    storage: Option<Spanned<RawStorage>>,
+}
+
+/// `[storage]`: retention and the low-space warning (acquire::storage).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStorage {
+    keep_days: Option<Spanned<f64>>,
+    min_free_gb: Option<Spanned<f64>>,
+    warn_free_gb: Option<Spanned<f64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -80,6 +156,7 @@ struct RawRun {
     #[serde(default)]
     stop_at_program_end: bool,
     time_scale: Option<Spanned<f64>>,
+    connect_timeout_s: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -94,6 +171,9 @@ struct RawInterferometer {
     port: Spanned<String>,
     rate_hz: Option<Spanned<i64>>,
     alpha_um_per_m_k: Option<Spanned<f64>>,
+    /// The device may be absent at start (plugged in for each test): the service waits.
+    #[serde(default)]
+    hotplug: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -103,6 +183,9 @@ struct RawCapball {
     rate_hz: Option<Spanned<i64>>,
     poly: Option<Spanned<Vec<Vec<f64>>>>,
     transform: Option<Spanned<String>>,
+    /// The device may be absent at start (plugged in for each test): the service waits.
+    #[serde(default)]
+    hotplug: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -112,6 +195,9 @@ struct RawPsd {
     baud: Option<Spanned<i64>>,
     rate_hz: Option<Spanned<i64>>,
     min_sum_pa: Option<Spanned<f64>>,
+    /// The device may be absent at start (plugged in for each test): the service waits.
+    #[serde(default)]
+    hotplug: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -120,6 +206,9 @@ struct RawTrigger {
     slcan: Option<Spanned<String>>,
     socketcan: Option<Spanned<String>>,
     can_id: Option<Spanned<i64>>,
+    /// The device may be absent at start (plugged in for each test): the service waits.
+    #[serde(default)]
+    hotplug: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -149,6 +238,25 @@ pub struct Config {
     pub live: Option<LiveConfig>,
     /// The Modbus RTU temperature module (`[temperature]`): docs/instruments.md §5.
     pub temperature: Option<drivers::ModbusTempConfig>,
+    /// Every device the config names, where it is written (for the port checks).
+    pub ports: Vec<PortSpec>,
+    /// `[storage]`: retention and the low-space warning (defaults when absent).
+    pub storage: StoragePolicy,
+}
+
+/// A device a config names (a serial port, or a SocketCAN interface), and where.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PortSpec {
+    /// Section and key, e.g. `[interferometer] port`.
+    pub key: String,
+    /// The device path (or interface name) as written.
+    pub path: String,
+    /// A network interface (SocketCAN), not a device file.
+    pub interface: bool,
+    /// `hotplug = true`: the device may be absent at start; the service waits for it.
+    pub hotplug: bool,
+    pub line: usize,
+    pub column: usize,
 }
 
 /// Default of `[live] raw_hz`: raw batches per second and raw topic sent to the live view.
@@ -173,6 +281,9 @@ pub struct RunConfig {
     /// For simulated runs only: how many times faster than real time the simulator's slow
     /// effects (drift, environment) run; the analyses multiply times by it. 1 on a machine.
     pub time_scale: f64,
+    /// Seconds with no device connected after which the service says so loudly (and, when
+    /// no device is `hotplug`, ends with [`crate::exit::NOTHING_CONNECTED`]).
+    pub connect_timeout_s: u64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -213,14 +324,46 @@ impl Config {
         Config::parse(path, &text)
     }
 
-    /// Validate config text; `path` names it in errors and anchors its relative paths.
+    /// Validate config text; `path` names it in errors and anchors its relative paths. The
+    /// devices are not looked at (see [`Config::load_checked`]), except that two keys naming
+    /// the same port are refused.
     pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
-        let ctx = Ctx { path, text };
+        Config::parse_with(path, text, false)
+    }
+
+    /// [`Config::load`], and the devices checked as the service will find them: every port
+    /// exists (unless `hotplug = true`), is a device, and no two keys name the same one
+    /// (also through a udev symlink); `output_dir` is a directory if it exists. All
+    /// mistakes, of the file and of the devices, come in one error. What is not a mistake
+    /// but worth a line (a `hotplug` device absent now, a port this user cannot open) is in
+    /// [`Config::notes`].
+    pub fn load_checked(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Config::parse_with(path, &text, true)
+    }
+
+    /// [`Config::parse`], with the devices checked when `devices` ([`Config::load_checked`]).
+    pub fn parse_with(path: &Path, text: &str, devices: bool) -> Result<Config, ConfigError> {
+        let ctx = Ctx {
+            path,
+            text,
+            devices,
+            ports: Default::default(),
+        };
         let raw: RawConfig = toml::from_str(text).map_err(|e| {
             let span = e.span().unwrap_or(0..0);
             ctx.err(span, first_sentence(e.message()))
         })?;
         ctx.validate(raw)
+    }
+
+    /// Lines worth reading before a run that are not mistakes: a `hotplug` device absent now,
+    /// a port this user may not open (the service's user may).
+    pub fn notes(&self) -> Vec<String> {
+        super::preflight::port_notes(&self.ports)
     }
 
     /// The instruments configured, in a fixed order.
@@ -253,6 +396,10 @@ fn first_sentence(m: &str) -> String {
 struct Ctx<'a> {
     path: &'a Path,
     text: &'a str,
+    /// Check the devices and directories as they are now ([`Config::load_checked`]).
+    devices: bool,
+    /// The ports named so far, for the checks across sections.
+    ports: std::cell::RefCell<Vec<PortSpec>>,
 }
 
 impl Ctx<'_> {
@@ -264,6 +411,39 @@ impl Ctx<'_> {
             column,
             message: message.into(),
         }
+    }
+
+    /// The port mistakes: the same device named twice, and (when checking devices) one that
+    /// is missing and not `hotplug`, or not a device.
+    fn port_checks(&self, ports: &[PortSpec]) -> Vec<ConfigError> {
+        let mut found = super::preflight::shared_ports(ports);
+        if self.devices {
+            found.extend(super::preflight::missing_ports(ports));
+        }
+        found
+            .into_iter()
+            .map(|(p, message)| ConfigError::Invalid {
+                path: self.path.to_path_buf(),
+                line: p.line,
+                column: p.column,
+                message,
+            })
+            .collect()
+    }
+
+    fn validate_connect_timeout(&self, t: Option<Spanned<i64>>) -> Result<u64, ConfigError> {
+        let Some(t) = t else {
+            return Ok(DEFAULT_CONNECT_TIMEOUT_S);
+        };
+        let v = *t.get_ref();
+        let (lo, hi) = CONNECT_TIMEOUT_S;
+        if v < lo as i64 || v > hi as i64 {
+            return Err(self.err(
+                t.span(),
+                format!("connect_timeout_s = {v} is outside {lo} to {hi} s (how long the service waits for a first device before saying nothing is connected)"),
+            ));
+        }
+        Ok(v as u64)
     }
 
     /// A path in the config, relative to the config file's directory.
@@ -295,69 +475,64 @@ impl Ctx<'_> {
         Ok(x as u32)
     }
 
-    fn port(&self, v: Spanned<String>) -> Result<String, ConfigError> {
+    /// A device path; kept (with its place and `hotplug`) for the port checks.
+    fn port(
+        &self,
+        v: Spanned<String>,
+        key: &str,
+        hotplug: bool,
+        interface: bool,
+    ) -> Result<String, ConfigError> {
         if v.get_ref().trim().is_empty() {
             return Err(self.err(
                 v.span(),
                 "port is empty; give the device path, e.g. /dev/metrolog-li80",
             ));
         }
+        let (line, column) = line_col(self.text, v.span().start);
+        self.ports.borrow_mut().push(PortSpec {
+            key: key.to_string(),
+            path: v.get_ref().clone(),
+            interface,
+            hotplug,
+            line,
+            column,
+        });
         Ok(v.into_inner())
     }
 
     fn validate(&self, raw: RawConfig) -> Result<Config, ConfigError> {
-        let run = self.validate_run(raw.run.into_inner())?;
-
-        let detector = match raw.detector.and_then(|d| d.into_inner().samples) {
-            None => DetectorConfig {
-                samples: DEFAULT_DETECTOR_SAMPLES,
-            },
-            Some(s) => {
-                let n = *s.get_ref();
-                let (lo, hi) = DETECTOR_SAMPLES;
-                if n < lo as i64 || n > hi as i64 {
-                    return Err(self.err(
-                        s.span(),
-                        format!("samples = {n} is impossible; a steady value averages {lo} to {hi} samples"),
-                    ));
-                }
-                DetectorConfig {
-                    samples: n as usize,
-                }
-            }
-        };
-
-        let interferometer = match raw.interferometer {
-            None => None,
-            Some(s) => Some(self.validate_interferometer(s.into_inner())?),
-        };
-
-        let capball = match raw.capball {
-            None => None,
-            Some(s) => Some(self.validate_capball(s.into_inner())?),
-        };
-
-        let psd = match raw.psd {
-            None => None,
-            Some(s) => Some(self.validate_psd(s.into_inner())?),
-        };
-
+        let mut errs = Errors::default();
+        let run = errs.keep(self.validate_run(raw.run.into_inner()));
+        let detector = errs.keep(self.validate_detector(raw.detector));
+        let interferometer = self.section(&mut errs, raw.interferometer, |r| {
+            self.validate_interferometer(r)
+        });
+        let capball = self.section(&mut errs, raw.capball, |r| self.validate_capball(r));
+        let psd = self.section(&mut errs, raw.psd, |r| self.validate_psd(r));
         let trigger = match raw.trigger {
-            None => None,
-            Some(s) => Some(self.validate_trigger(s)?),
+            None => Some(None),
+            Some(s) => errs.keep(self.validate_trigger(s)).map(Some),
         };
-
-        let live = match raw.live {
-            None => None,
-            Some(s) => Some(self.validate_live(s.into_inner())?),
-        };
-
+        let live = self.section(&mut errs, raw.live, |r| self.validate_live(r));
+        let storage = self.section(&mut errs, raw.storage, |r| self.validate_storage(r));
         let temperature = match raw.temperature {
-            None => None,
-            Some(s) => Some(self.validate_temperature(s)?),
+            None => Some(None),
+            Some(s) => errs.keep(self.validate_temperature(s)).map(Some),
         };
-
-        Ok(Config {
+        let ports = self.ports.take();
+        errs.0.extend(self.port_checks(&ports));
+        let (Some(run), Some(detector), Some(interferometer), Some(capball), Some(psd)) =
+            (run, detector, interferometer, capball, psd)
+        else {
+            return Err(errs.into_error());
+        };
+        let (Some(trigger), Some(live), Some(storage), Some(temperature)) =
+            (trigger, live, storage, temperature)
+        else {
+            return Err(errs.into_error());
+        };
+        errs.result(Some(Config {
             path: self.path.to_path_buf(),
             text: self.text.to_string(),
             run,
@@ -368,11 +543,51 @@ impl Ctx<'_> {
             trigger,
             live,
             temperature,
+            ports,
+            storage: storage.unwrap_or_default(),
+        }))
+    }
+
+    /// An optional section: `Some(None)` when absent, `None` when it has a mistake (kept).
+    fn section<R, T>(
+        &self,
+        errs: &mut Errors,
+        raw: Option<Spanned<R>>,
+        validate: impl FnOnce(R) -> Result<T, ConfigError>,
+    ) -> Option<Option<T>> {
+        match raw {
+            None => Some(None),
+            Some(s) => errs.keep(validate(s.into_inner())).map(Some),
+        }
+    }
+
+    fn validate_detector(
+        &self,
+        raw: Option<Spanned<RawDetector>>,
+    ) -> Result<DetectorConfig, ConfigError> {
+        let Some(s) = raw.and_then(|d| d.into_inner().samples) else {
+            return Ok(DetectorConfig {
+                samples: DEFAULT_DETECTOR_SAMPLES,
+            });
+        };
+        let n = *s.get_ref();
+        let (lo, hi) = DETECTOR_SAMPLES;
+        if n < lo as i64 || n > hi as i64 {
+            return Err(self.err(
+                s.span(),
+                format!(
+                    "samples = {n} is impossible; a steady value averages {lo} to {hi} samples"
+                ),
+            ));
+        }
+        Ok(DetectorConfig {
+            samples: n as usize,
         })
     }
 
     fn validate_live(&self, r: RawLive) -> Result<LiveConfig, ConfigError> {
-        let listen = r.listen.get_ref().trim().parse().map_err(|_| {
+        let mut errs = Errors::default();
+        let listen = errs.keep(r.listen.get_ref().trim().parse().map_err(|_| {
             self.err(
                 r.listen.span(),
                 format!(
@@ -380,132 +595,174 @@ impl Ctx<'_> {
                     r.listen.get_ref()
                 ),
             )
-        })?;
-        let raw_hz = match r.raw_hz {
-            None => DEFAULT_LIVE_RAW_HZ,
-            Some(v) if (0..=100).contains(v.get_ref()) => *v.get_ref() as u32,
-            Some(v) => {
-                return Err(self.err(
-                    v.span(),
-                    format!(
-                        "raw_hz = {} is outside 0 to 100 (raw batches per second and topic; the log holds 100)",
-                        v.get_ref()
-                    ),
-                ));
-            }
+        }));
+        let raw_hz = errs.keep(match r.raw_hz {
+            None => Ok(DEFAULT_LIVE_RAW_HZ),
+            Some(v) if (0..=100).contains(v.get_ref()) => Ok(*v.get_ref() as u32),
+            Some(v) => Err(self.err(
+                v.span(),
+                format!(
+                    "raw_hz = {} is outside 0 to 100 (raw batches per second and topic; the log holds 100)",
+                    v.get_ref()
+                ),
+            )),
+        });
+        errs.result(
+            listen
+                .zip(raw_hz)
+                .map(|(listen, raw_hz)| LiveConfig { listen, raw_hz }),
+        )
+    }
+
+    fn validate_alpha(&self, a: Option<Spanned<f64>>) -> Result<f64, ConfigError> {
+        let Some(a) = a else {
+            return Ok(protocol::convert::ALPHA_STEEL_UM_PER_M_K);
         };
-        Ok(LiveConfig { listen, raw_hz })
+        let x = *a.get_ref();
+        // Machine-tool materials lie within about -1 (invar, Zerodur) to 30 (aluminium,
+        // polymer concrete is lower); 100 leaves room and still catches a value typed in the
+        // wrong unit (e.g. 1/K: 1.17e-5).
+        if !x.is_finite() || x.abs() > 100.0 {
+            return Err(self.err(
+                a.span(),
+                format!("alpha_um_per_m_k = {x} is not a plausible expansion coefficient; give it in µm/(m·K), e.g. 11.7 for steel"),
+            ));
+        }
+        Ok(x)
     }
 
     fn validate_interferometer(
         &self,
         r: RawInterferometer,
     ) -> Result<drivers::Li80Config, ConfigError> {
-        let rate_hz = self.rate(
+        let mut errs = Errors::default();
+        let rate_hz = errs.keep(self.rate(
             r.rate_hz,
             DEFAULT_LI80_RATE_HZ,
             protocol::li80::RATE_HZ,
             "LI-80",
-        )?;
-        let alpha = match r.alpha_um_per_m_k {
-            None => protocol::convert::ALPHA_STEEL_UM_PER_M_K,
-            Some(a) => {
-                let x = *a.get_ref();
-                // Machine-tool materials lie within about -1 (invar, Zerodur) to 30
-                // (aluminium, polymer concrete is lower); 100 leaves room and still
-                // catches a value typed in the wrong unit (e.g. 1/K: 1.17e-5).
-                if !x.is_finite() || x.abs() > 100.0 {
-                    return Err(self.err(
-                        a.span(),
-                        format!("alpha_um_per_m_k = {x} is not a plausible expansion coefficient; give it in µm/(m·K), e.g. 11.7 for steel"),
-                    ));
-                }
-                x
-            }
+        ));
+        let alpha = errs.keep(self.validate_alpha(r.alpha_um_per_m_k));
+        let port = errs.keep(self.port(r.port, "[interferometer] port", r.hotplug, false));
+        let (Some(rate_hz), Some(alpha_um_per_m_k), Some(port)) = (rate_hz, alpha, port) else {
+            return Err(errs.into_error());
         };
         Ok(drivers::Li80Config {
-            port: self.port(r.port)?,
+            port,
             rate_hz,
-            alpha_um_per_m_k: alpha,
+            alpha_um_per_m_k,
         })
     }
 
-    fn validate_psd(&self, r: RawPsd) -> Result<drivers::PsdConfig, ConfigError> {
-        let baud = match r.baud {
-            None => protocol::psd::DEFAULT_BAUD,
-            Some(b) => {
-                let x = *b.get_ref();
-                if !protocol::psd::BAUDS.iter().any(|&p| p as i64 == x) {
-                    return Err(self.err(
-                        b.span(),
-                        format!(
-                            "baud = {x} is not a baud rate the PSD-2 supports ({:?})",
-                            protocol::psd::BAUDS
-                        ),
-                    ));
-                }
-                x as u32
-            }
+    fn validate_baud(&self, b: Option<Spanned<i64>>) -> Result<u32, ConfigError> {
+        let Some(b) = b else {
+            return Ok(protocol::psd::DEFAULT_BAUD);
         };
+        let x = *b.get_ref();
+        if !protocol::psd::BAUDS.iter().any(|&p| p as i64 == x) {
+            return Err(self.err(
+                b.span(),
+                format!(
+                    "baud = {x} is not a baud rate the PSD-2 supports ({:?})",
+                    protocol::psd::BAUDS
+                ),
+            ));
+        }
+        Ok(x as u32)
+    }
+
+    fn validate_min_sum(&self, m: Option<Spanned<f64>>) -> Result<f64, ConfigError> {
+        let Some(m) = m else {
+            return Ok(DEFAULT_PSD_MIN_SUM_PA);
+        };
+        let x = *m.get_ref();
+        if !x.is_finite() || x < 0.0 {
+            return Err(self.err(
+                m.span(),
+                format!("min_sum_pa = {x} is impossible; a photocurrent threshold is a finite number of pA ≥ 0"),
+            ));
+        }
+        Ok(x)
+    }
+
+    fn validate_psd(&self, r: RawPsd) -> Result<drivers::PsdConfig, ConfigError> {
+        let mut errs = Errors::default();
+        let baud = errs.keep(self.validate_baud(r.baud));
         let rate_span = r.rate_hz.as_ref().map(|v| v.span()).unwrap_or(0..0);
-        let rate_hz = self.rate(
+        let rate_hz = errs.keep(self.rate(
             r.rate_hz,
             DEFAULT_PSD_RATE_HZ,
             protocol::psd::RATE_HZ,
             "PSD-2",
-        )?;
-        let max_lines = baud / protocol::psd::LINE_BITS;
-        if rate_hz > max_lines {
-            return Err(self.err(
-                rate_span,
-                format!("rate_hz = {rate_hz} is more than a {baud} baud link carries (about {max_lines} lines/s); lower rate_hz or raise baud"),
-            ));
-        }
-        let min_sum_pa = match r.min_sum_pa {
-            None => DEFAULT_PSD_MIN_SUM_PA,
-            Some(m) => {
-                let x = *m.get_ref();
-                if !x.is_finite() || x < 0.0 {
-                    return Err(self.err(
-                        m.span(),
-                        format!("min_sum_pa = {x} is impossible; a photocurrent threshold is a finite number of pA ≥ 0"),
-                    ));
-                }
-                x
+        ));
+        if let (Some(baud), Some(rate_hz)) = (baud, rate_hz) {
+            let max_lines = baud / protocol::psd::LINE_BITS;
+            if rate_hz > max_lines {
+                errs.keep::<()>(Err(self.err(
+                    rate_span,
+                    format!("rate_hz = {rate_hz} is more than a {baud} baud link carries (about {max_lines} lines/s); lower rate_hz or raise baud"),
+                )));
             }
+        }
+        let min_sum_pa = errs.keep(self.validate_min_sum(r.min_sum_pa));
+        let port = errs.keep(self.port(r.port, "[psd] port", r.hotplug, false));
+        let (Some(baud), Some(rate_hz), Some(min_sum_pa), Some(port)) =
+            (baud, rate_hz, min_sum_pa, port)
+        else {
+            return Err(errs.into_error());
         };
-        Ok(drivers::PsdConfig {
-            port: self.port(r.port)?,
+        errs.result(Some(drivers::PsdConfig {
+            port,
             baud,
             rate_hz,
             min_sum_pa,
             // Not part of the config file (yet): no error map, no head correction.
             error_map: None,
             head: None,
-        })
+        }))
+    }
+
+    fn validate_can_id(&self, c: Option<Spanned<i64>>) -> Result<u32, ConfigError> {
+        let Some(c) = c else {
+            return Ok(protocol::can::DEFAULT_CAN_ID);
+        };
+        let x = *c.get_ref();
+        if !(0..=i64::from(protocol::can::STANDARD_ID_MAX)).contains(&x) {
+            return Err(self.err(
+                c.span(),
+                format!("can_id = {x:#x} is not a CAN 2.0A (11-bit) identifier; it must be 0x000 to 0x7FF"),
+            ));
+        }
+        Ok(x as u32)
     }
 
     fn validate_trigger(&self, s: Spanned<RawTrigger>) -> Result<TriggerConfig, ConfigError> {
         let span = s.span();
         let r = s.into_inner();
-        let can_id = match r.can_id {
-            None => protocol::can::DEFAULT_CAN_ID,
-            Some(c) => {
-                let x = *c.get_ref();
-                if !(0..=i64::from(protocol::can::STANDARD_ID_MAX)).contains(&x) {
-                    return Err(self.err(
-                        c.span(),
-                        format!("can_id = {x:#x} is not a CAN 2.0A (11-bit) identifier; it must be 0x000 to 0x7FF"),
-                    ));
-                }
-                x as u32
-            }
+        let mut errs = Errors::default();
+        let can_id = errs.keep(self.validate_can_id(r.can_id));
+        let link = errs.keep(self.trigger_link(span, r.slcan, r.socketcan, r.hotplug));
+        let (Some(can_id), Some(link)) = (can_id, link) else {
+            return Err(errs.into_error());
         };
-        match (r.slcan, r.socketcan) {
-            (Some(p), None) => Ok(TriggerConfig::Slcan(drivers::SlcanConfig {
-                port: self.port(p)?,
-                can_id,
-            })),
+        Ok(match link {
+            Ok(port) => TriggerConfig::Slcan(drivers::SlcanConfig { port, can_id }),
+            Err(interface) => {
+                TriggerConfig::SocketCan(drivers::SocketCanConfig { interface, can_id })
+            }
+        })
+    }
+
+    /// The trigger's link: `Ok(serial port)` for SLCAN, `Err(interface)` for SocketCAN.
+    fn trigger_link(
+        &self,
+        span: Range<usize>,
+        slcan: Option<Spanned<String>>,
+        socketcan: Option<Spanned<String>>,
+        hotplug: bool,
+    ) -> Result<Result<String, String>, ConfigError> {
+        match (slcan, socketcan) {
+            (Some(p), None) => Ok(Ok(self.port(p, "[trigger] slcan", hotplug, false)?)),
             (None, Some(i)) => {
                 let name = i.get_ref();
                 // Linux interface names are at most 15 bytes (IFNAMSIZ - 1).
@@ -517,10 +774,7 @@ impl Ctx<'_> {
                         ),
                     ));
                 }
-                Ok(TriggerConfig::SocketCan(drivers::SocketCanConfig {
-                    interface: i.into_inner(),
-                    can_id,
-                }))
+                Ok(Err(self.port(i, "[trigger] socketcan", hotplug, true)?))
             }
             (Some(_), Some(s)) => Err(self.err(
                 s.span(),
@@ -533,124 +787,220 @@ impl Ctx<'_> {
         }
     }
 
-    fn validate_run(&self, r: RawRun) -> Result<RunConfig, ConfigError> {
-        let machine = r.machine.get_ref();
+    fn validate_machine(&self, m: Spanned<String>) -> Result<String, ConfigError> {
+        let machine = m.get_ref();
         if machine.is_empty()
             || !machine
                 .chars()
                 .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
         {
             return Err(self.err(
-                r.machine.span(),
+                m.span(),
                 format!("machine = {machine:?} must be a non-empty name of letters, digits, '-', '_' or '.' (it names the log files)"),
             ));
         }
-        if r.output_dir.get_ref().trim().is_empty() {
+        Ok(m.into_inner())
+    }
+
+    fn validate_output_dir(&self, d: Spanned<String>) -> Result<PathBuf, ConfigError> {
+        if d.get_ref().trim().is_empty() {
             return Err(self.err(
-                r.output_dir.span(),
+                d.span(),
                 "output_dir is empty; give the directory the logs go to",
             ));
         }
-        let output_dir = self.resolve(r.output_dir.get_ref());
-        let trajectory = match r.trajectory {
-            None => None,
-            Some(t) => {
-                let path = self.resolve(t.get_ref());
-                let text = std::fs::read_to_string(&path).map_err(|e| {
-                    self.err(
-                        t.span(),
-                        format!("trajectory file {} cannot be read: {e}", path.display()),
-                    )
-                })?;
-                let rows = parse_trajectory(&text).map_err(|m| {
-                    self.err(t.span(), format!("trajectory file {}: {m}", path.display()))
-                })?;
-                Some(Trajectory { path, text, rows })
-            }
+        let dir = self.resolve(d.get_ref());
+        if self.devices && dir.exists() && !dir.is_dir() {
+            return Err(self.err(
+                d.span(),
+                format!(
+                    "output_dir {} is not a directory; give the directory the logs go to",
+                    dir.display()
+                ),
+            ));
+        }
+        Ok(dir)
+    }
+
+    fn validate_trajectory(
+        &self,
+        t: Option<Spanned<String>>,
+    ) -> Result<Option<Trajectory>, ConfigError> {
+        let Some(t) = t else { return Ok(None) };
+        let path = self.resolve(t.get_ref());
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            self.err(
+                t.span(),
+                format!("trajectory file {} cannot be read: {e}", path.display()),
+            )
+        })?;
+        let rows = parse_trajectory(&text)
+            .map_err(|m| self.err(t.span(), format!("trajectory file {}: {m}", path.display())))?;
+        Ok(Some(Trajectory { path, text, rows }))
+    }
+
+    fn validate_time_scale(&self, t: Option<Spanned<f64>>) -> Result<f64, ConfigError> {
+        let Some(t) = t else { return Ok(1.0) };
+        let v = *t.get_ref();
+        if !(v.is_finite() && v > 0.0) {
+            return Err(self.err(
+                t.span(),
+                format!("time_scale = {v} must be a positive number (1 on a real machine)"),
+            ));
+        }
+        Ok(v)
+    }
+
+    fn validate_run(&self, r: RawRun) -> Result<RunConfig, ConfigError> {
+        let mut errs = Errors::default();
+        let machine = errs.keep(self.validate_machine(r.machine));
+        let output_dir = errs.keep(self.validate_output_dir(r.output_dir));
+        let trajectory = errs.keep(self.validate_trajectory(r.trajectory));
+        let time_scale = errs.keep(self.validate_time_scale(r.time_scale));
+        let connect_timeout_s = errs.keep(self.validate_connect_timeout(r.connect_timeout_s));
+        let (Some(machine), Some(output_dir), Some(trajectory), Some(time_scale)) =
+            (machine, output_dir, trajectory, time_scale)
+        else {
+            return Err(errs.into_error());
         };
-        let time_scale = match r.time_scale {
-            None => 1.0,
-            Some(t) => {
-                let v = *t.get_ref();
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(self.err(
-                        t.span(),
-                        format!("time_scale = {v} must be a positive number (1 on a real machine)"),
-                    ));
-                }
-                v
-            }
-        };
-        Ok(RunConfig {
-            machine: r.machine.into_inner(),
+        errs.result(connect_timeout_s.map(|connect_timeout_s| RunConfig {
+            machine,
             output_dir,
             trajectory,
             stop_at_program_end: r.stop_at_program_end,
             time_scale,
-        })
+            connect_timeout_s,
+        }))
+    }
+
+    fn validate_poly(
+        &self,
+        p: Option<Spanned<Vec<Vec<f64>>>>,
+    ) -> Result<[[f64; 3]; 3], ConfigError> {
+        let Some(p) = p else {
+            return Ok([protocol::convert::CapBallPoly::NOMINAL.c; 3]);
+        };
+        let v = p.get_ref();
+        let shape_ok = v.len() == 3 && v.iter().all(|row| row.len() == 3);
+        if !shape_ok {
+            return Err(self.err(
+                p.span(),
+                "poly must be three rows (one per channel) of three coefficients [c1, c2, c3]",
+            ));
+        }
+        if v.iter().flatten().any(|c| !c.is_finite()) {
+            return Err(self.err(
+                p.span(),
+                "poly has a coefficient that is not a finite number",
+            ));
+        }
+        if v.iter().any(|row| row[0] == 0.0) {
+            return Err(self.err(
+                p.span(),
+                "poly has a channel with c1 = 0, which reads every distance as zero; nominal c1 is 10 µm/V",
+            ));
+        }
+        let mut out = [[0.0; 3]; 3];
+        for (o, row) in out.iter_mut().zip(v) {
+            o.copy_from_slice(row);
+        }
+        Ok(out)
+    }
+
+    /// The CapBall transform (identity when absent) and the file as read.
+    fn validate_transform(&self, t: Option<Spanned<String>>) -> Result<Transform, ConfigError> {
+        let Some(t) = t else {
+            return Ok((identity4(), None));
+        };
+        let path = self.resolve(t.get_ref());
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            self.err(
+                t.span(),
+                format!("transform file {} cannot be read: {e}", path.display()),
+            )
+        })?;
+        let m = parse_transform(&text)
+            .map_err(|m| self.err(t.span(), format!("transform file {}: {m}", path.display())))?;
+        Ok((m, Some((path, text))))
     }
 
     fn validate_capball(&self, r: RawCapball) -> Result<CapballConfig, ConfigError> {
-        let rate_hz = self.rate(
+        let mut errs = Errors::default();
+        let rate_hz = errs.keep(self.rate(
             r.rate_hz,
             DEFAULT_CB3_RATE_HZ,
             protocol::cb3::RATE_HZ,
             "CB-3",
-        )?;
-        let poly = match r.poly {
-            None => [protocol::convert::CapBallPoly::NOMINAL.c; 3],
-            Some(p) => {
-                let v = p.get_ref();
-                let shape_ok = v.len() == 3 && v.iter().all(|row| row.len() == 3);
-                if !shape_ok {
-                    return Err(self.err(
-                        p.span(),
-                        "poly must be three rows (one per channel) of three coefficients [c1, c2, c3]",
-                    ));
-                }
-                if v.iter().flatten().any(|c| !c.is_finite()) {
-                    return Err(self.err(
-                        p.span(),
-                        "poly has a coefficient that is not a finite number",
-                    ));
-                }
-                if v.iter().any(|row| row[0] == 0.0) {
-                    return Err(self.err(
-                        p.span(),
-                        "poly has a channel with c1 = 0, which reads every distance as zero; nominal c1 is 10 µm/V",
-                    ));
-                }
-                let mut out = [[0.0; 3]; 3];
-                for (o, row) in out.iter_mut().zip(v) {
-                    o.copy_from_slice(row);
-                }
-                out
-            }
-        };
-        let (transform, transform_file) = match r.transform {
-            None => (identity4(), None),
-            Some(t) => {
-                let path = self.resolve(t.get_ref());
-                let text = std::fs::read_to_string(&path).map_err(|e| {
-                    self.err(
-                        t.span(),
-                        format!("transform file {} cannot be read: {e}", path.display()),
-                    )
-                })?;
-                let m = parse_transform(&text).map_err(|m| {
-                    self.err(t.span(), format!("transform file {}: {m}", path.display()))
-                })?;
-                (m, Some((path, text)))
-            }
+        ));
+        let poly = errs.keep(self.validate_poly(r.poly));
+        let transform = errs.keep(self.validate_transform(r.transform));
+        let port = errs.keep(self.port(r.port, "[capball] port", r.hotplug, false));
+        let (Some(rate_hz), Some(poly), Some((transform, transform_file)), Some(port)) =
+            (rate_hz, poly, transform, port)
+        else {
+            return Err(errs.into_error());
         };
         Ok(CapballConfig {
             driver: drivers::Cb3Config {
-                port: self.port(r.port)?,
+                port,
                 rate_hz,
                 poly,
                 transform,
             },
             transform_file,
+        })
+    }
+}
+
+/// `[storage]`: the retention policy and the low-space warning.
+impl Ctx<'_> {
+    /// A number of `what` within `lo..=hi`, or the key's mistake.
+    fn bounded(
+        &self,
+        v: &Spanned<f64>,
+        key: &str,
+        (lo, hi): (f64, f64),
+        what: &str,
+    ) -> Result<f64, ConfigError> {
+        let x = *v.get_ref();
+        if !(x.is_finite() && (lo..=hi).contains(&x)) {
+            return Err(self.err(
+                v.span(),
+                format!("{key} = {x} is outside {lo} to {hi} ({what})"),
+            ));
+        }
+        Ok(x)
+    }
+
+    fn validate_storage(&self, r: RawStorage) -> Result<StoragePolicy, ConfigError> {
+        let mut errs = Errors::default();
+        let gb = |v: &Spanned<f64>, key| {
+            self.bounded(v, key, (0.0, 1e6), "GB of free space")
+                .map(|x| (x * storage::GB) as u64)
+        };
+        let keep = errs.keep(r.keep_days.as_ref().map_or(Ok(None), |v| {
+            self.bounded(v, "keep_days", (0.01, 36_500.0), "days a run is kept")
+                .map(|d| Some(std::time::Duration::from_secs_f64(d * 86_400.0)))
+        }));
+        let min_free = errs.keep(
+            r.min_free_gb
+                .as_ref()
+                .map_or(Ok(None), |v| gb(v, "min_free_gb").map(Some)),
+        );
+        let default_warn = StoragePolicy::default().warn_free_bytes;
+        let warn = errs.keep(
+            r.warn_free_gb
+                .as_ref()
+                .map_or(Ok(default_warn), |v| gb(v, "warn_free_gb")),
+        );
+        let (Some(keep), Some(min_free_bytes), Some(warn_free_bytes)) = (keep, min_free, warn)
+        else {
+            return Err(errs.into_error());
+        };
+        Ok(StoragePolicy {
+            keep,
+            min_free_bytes,
+            warn_free_bytes,
         })
     }
 }
@@ -680,6 +1030,9 @@ struct RawTemperature {
     timeout_s: Option<Spanned<f64>>,
     silence_s: Option<Spanned<f64>>,
     sensors: Option<Spanned<Vec<Spanned<RawSensor>>>>,
+    /// The device may be absent at start: the service waits.
+    #[serde(default)]
+    hotplug: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -725,7 +1078,7 @@ impl Ctx<'_> {
         let unit = self.temperature_unit(r.unit)?;
         let start_register = self.temperature_start(r.start_register, sensors.len())?;
         let cfg = drivers::ModbusTempConfig {
-            port: self.port(r.port)?,
+            port: self.port(r.port, "[temperature] port", r.hotplug, false)?,
             baud,
             parity: r.parity.map_or(d.parity, Spanned::into_inner),
             unit,
@@ -952,6 +1305,9 @@ impl Ctx<'_> {
         })
     }
 }
+
+/// A CapBall transform and the file it was read from (path, text), if any.
+type Transform = ([[f64; 4]; 4], Option<(PathBuf, String)>);
 
 fn identity4() -> [[f64; 4]; 4] {
     let mut m = [[0.0; 4]; 4];

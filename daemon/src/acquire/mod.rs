@@ -19,7 +19,9 @@
 pub mod config;
 pub mod counts;
 pub mod pipeline;
+pub mod preflight;
 pub mod recorder;
 pub mod run_log;
 pub mod service;
 pub mod sink;
+pub mod storage;

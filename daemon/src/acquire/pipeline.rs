@@ -106,6 +106,10 @@ pub struct Status {
     /// Why the log could not be written, once it failed (the run then stops: see
     /// [`StopReason::LogFailed`]).
     pub log_failed: Option<String>,
+    /// The "nothing connected" alarm while it holds: what was waited for and how long.
+    pub nothing_connected: Option<String>,
+    /// The low-disk alarm while it holds (`[storage] warn_free_gb`): the free space.
+    pub low_disk: Option<String>,
 }
 
 impl Status {
@@ -134,10 +138,16 @@ impl Status {
             .filter(|(_, s)| s.connected)
             .map(|(i, _)| i.name())
             .collect();
-        let failed = match &self.log_failed {
+        let mut failed = match &self.log_failed {
             Some(e) => format!("LOG WRITE FAILED, run stopped ({e}); "),
             None => String::new(),
         };
+        if let Some(n) = &self.nothing_connected {
+            failed.push_str(&format!("NOTHING CONNECTED {n}; "));
+        }
+        if let Some(d) = &self.low_disk {
+            failed.push_str(&format!("LOW DISK {d}; "));
+        }
         format!(
             "{failed}poses {} ({} ok), samples {}, faults {}, lost {}, connected: {}",
             self.poses,
@@ -166,6 +176,19 @@ pub enum StopReason {
     /// The log could not be written (disk full, I/O error): the run stops rather than go on
     /// acquiring what it cannot keep. The file's prefix stays readable.
     LogFailed,
+    /// No device was connected for the [`ConnectPolicy`]'s time, and none is `hotplug`.
+    NothingConnected,
+}
+
+/// What to do when no device is connected (README, "Nothing connected").
+#[derive(Debug, Clone)]
+pub struct ConnectPolicy {
+    /// How long no device may be connected (from the start, or since the last one went).
+    pub timeout: Duration,
+    /// Some device is `hotplug`: raise the alarm and wait; otherwise end the run.
+    pub wait: bool,
+    /// Each device's port, named in the alarm.
+    pub ports: Vec<(Instrument, String)>,
 }
 
 /// What the pipeline hands back at the end.
@@ -184,6 +207,10 @@ pub struct PipelineConfig {
     pub stop_at_program_end: bool,
     /// Keep every pose value in the outcome (demo, tests).
     pub keep_poses: bool,
+    /// The "nothing connected" alarm (None: never raised).
+    pub connect: Option<ConnectPolicy>,
+    /// The low-disk alarm the storage check keeps (None: none shown).
+    pub disk_alarm: Option<super::storage::DiskAlarm>,
 }
 
 /// The pipeline: the sink and the run's state beside it (one per run).
@@ -201,6 +228,8 @@ struct RunState {
     status: Status,
     started: Instant,
     last_sample: Option<Instant>,
+    /// Since when no device is connected (None while one is).
+    nothing_since: Option<Instant>,
     poses: Vec<PoseMsg>,
     stop: Option<StopReason>,
 }
@@ -259,6 +288,7 @@ impl RunState {
                 st.connected = true;
                 st.port = port;
                 st.identity = identity;
+                self.connected_again(instrument);
             }
             DriverEvent::Disconnected {
                 instrument, port, ..
@@ -266,6 +296,9 @@ impl RunState {
                 let st = self.slot(instrument);
                 st.connected = false;
                 st.port = port;
+                if self.status.instruments.values().all(|s| !s.connected) {
+                    self.nothing_since = Some(Instant::now());
+                }
             }
             DriverEvent::Error {
                 instrument, error, ..
@@ -277,6 +310,64 @@ impl RunState {
             DriverEvent::Counters { instrument, .. } => {
                 self.slot(instrument);
             }
+        }
+    }
+
+    /// A device connected: the "nothing connected" alarm ends.
+    fn connected_again(&mut self, instrument: Instrument) {
+        self.nothing_since = None;
+        if self.status.nothing_connected.take().is_some() {
+            tracing::info!(
+                "{} connected: the \"nothing connected\" alarm is over",
+                instrument.name()
+            );
+        }
+    }
+
+    /// The "nothing connected" alarm, checked once a second with the time `now`: raised (an
+    /// ERROR line, the STATUS prefix) once no device has been connected for the policy's
+    /// time; the run stops there unless the policy waits.
+    fn check_connected(&mut self, now: Instant) {
+        let (Some(policy), Some(since)) = (&self.cfg.connect, self.nothing_since) else {
+            return;
+        };
+        let waited = now.saturating_duration_since(since);
+        if waited < policy.timeout {
+            return;
+        }
+        let secs = waited.as_secs();
+        let first = self.status.nothing_connected.is_none();
+        let ports: Vec<String> = policy
+            .ports
+            .iter()
+            .map(|(i, p)| {
+                match &self
+                    .status
+                    .instruments
+                    .get(i)
+                    .and_then(|s| s.last_error.clone())
+                {
+                    Some(e) => format!("{} on {p} ({e})", i.name()),
+                    None => format!("{} on {p}", i.name()),
+                }
+            })
+            .collect();
+        let what = ports.join(", ");
+        self.status.nothing_connected = Some(format!("for {secs} s: {what}"));
+        if !first {
+            return;
+        }
+        let advice = "check that the devices are plugged in and powered, and that the ports in the config are theirs";
+        if policy.wait {
+            tracing::error!(
+                "nothing connected for {secs} s: no device answered ({what}); {advice}; waiting for them (hotplug)"
+            );
+        } else {
+            tracing::error!(
+                "nothing connected for {secs} s: no device answered ({what}); {advice}; ending the run (exit {})",
+                crate::exit::NOTHING_CONNECTED
+            );
+            self.stop = Some(StopReason::NothingConnected);
         }
     }
 
@@ -315,6 +406,9 @@ impl RunState {
         self.status.uptime_s = self.started.elapsed().as_secs_f64();
         self.status.queue_len = queue_len;
         self.status.queue_max = self.status.queue_max.max(queue_len);
+        if let Some(a) = &self.cfg.disk_alarm {
+            self.status.low_disk = a.lock().ok().and_then(|a| a.clone());
+        }
         let mut st = self.status.clone();
         st.poses = counts.poses_total();
         st.poses_ok = counts.poses_ok();
@@ -364,6 +458,7 @@ impl Pipeline {
                 },
                 started: Instant::now(),
                 last_sample: None,
+                nothing_since: Some(Instant::now()),
                 poses: Vec::new(),
                 stop: None,
             },
@@ -392,6 +487,7 @@ impl Pipeline {
 
     /// The once-a-second work: the sink's status record and flush.
     fn tick(&mut self, queue_len: usize) -> Status {
+        self.state.check_connected(Instant::now());
         let now = self.state.clock.now_ns();
         let r = self.sink.tick(now);
         self.state.sink_result(r);
@@ -585,6 +681,8 @@ mod tests {
                 instruments: vec![Instrument::Interferometer, Instrument::Trigger],
                 stop_at_program_end,
                 keep_poses: true,
+                connect: None,
+                disk_alarm: None,
             },
             HostClock::new(),
             Box::new(sink),
@@ -700,6 +798,82 @@ mod tests {
             Some("no data for 2.0 s while streaming")
         );
         assert!(st.summary().ends_with("connected: psd"));
+    }
+
+    fn with_policy(wait: bool) -> Pipeline {
+        let mut p = pipeline(Scripted::default(), false);
+        p.state.cfg.connect = Some(ConnectPolicy {
+            timeout: Duration::from_secs(60),
+            wait,
+            ports: vec![(Instrument::Interferometer, "/dev/li80".into())],
+        });
+        p
+    }
+
+    #[test]
+    fn nothing_connected_raises_the_alarm_after_the_timeout_and_stops_unless_waiting() {
+        let t0 = Instant::now();
+        let mut p = with_policy(false);
+        // Not yet: the time is the pipeline's start plus 59 s at most.
+        p.state.check_connected(t0);
+        assert!(p.state.status.nothing_connected.is_none() && p.state.stop.is_none());
+        p.state.check_connected(t0 + Duration::from_secs(61));
+        let alarm = p.status(0).nothing_connected.clone().unwrap();
+        assert!(alarm.contains("interferometer on /dev/li80"), "{alarm}");
+        assert!(p.status(0).summary().starts_with("NOTHING CONNECTED for 6"));
+        assert_eq!(p.state.stop, Some(StopReason::NothingConnected));
+
+        // hotplug: the same alarm, and the run goes on; a connection ends it.
+        let mut p = with_policy(true);
+        p.state.check_connected(t0 + Duration::from_secs(61));
+        assert!(p.state.status.nothing_connected.is_some());
+        assert_eq!(p.state.stop, None);
+        p.handle(DriverEvent::Connected {
+            instrument: Instrument::Interferometer,
+            port: "/dev/li80".into(),
+            identity: "LI-80".into(),
+        });
+        assert!(p.status(0).nothing_connected.is_none());
+        p.state.check_connected(t0 + Duration::from_secs(600));
+        assert!(p.state.status.nothing_connected.is_none());
+    }
+
+    #[test]
+    fn the_low_disk_alarm_shows_in_the_status_line_while_it_holds() {
+        let mut p = pipeline(Scripted::default(), false);
+        let alarm = super::super::storage::DiskAlarm::default();
+        p.state.cfg.disk_alarm = Some(alarm.clone());
+        assert!(p.status(0).summary().starts_with("poses 0"));
+        *alarm.lock().unwrap() = Some("1.23 GB free".into());
+        assert!(
+            p.status(0)
+                .summary()
+                .starts_with("LOW DISK 1.23 GB free; poses 0"),
+            "{}",
+            p.status(0).summary()
+        );
+        *alarm.lock().unwrap() = None;
+        assert!(p.status(0).low_disk.is_none());
+    }
+
+    #[test]
+    fn the_timeout_counts_from_the_last_device_gone() {
+        let mut p = with_policy(false);
+        p.handle(DriverEvent::Connected {
+            instrument: Instrument::Interferometer,
+            port: "/dev/li80".into(),
+            identity: "LI-80".into(),
+        });
+        p.handle(DriverEvent::Disconnected {
+            instrument: Instrument::Interferometer,
+            port: "/dev/li80".into(),
+            reason: DriverError::EndOfFile,
+        });
+        let gone = p.state.nothing_since.unwrap();
+        p.state.check_connected(gone + Duration::from_secs(59));
+        assert_eq!(p.state.stop, None);
+        p.state.check_connected(gone + Duration::from_secs(60));
+        assert_eq!(p.state.stop, Some(StopReason::NothingConnected));
     }
 
     #[test]

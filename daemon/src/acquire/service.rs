@@ -13,6 +13,10 @@
 //!
 //! A connected instrument that stops delivering samples while a program runs is what a hung
 //! driver or a wedged USB stack looks like; there a restart is the right cure, so the pet stops.
+//!
+//! Idle is not silent: when no device has been connected for `[run] connect_timeout_s`, the
+//! pipeline raises the "nothing connected" alarm (an ERROR line, `STATUS=NOTHING CONNECTED …`)
+//! and, unless a device is `hotplug`, ends the run with exit 69 (README, "Nothing connected").
 
 use std::sync::Once;
 use std::time::Duration;
@@ -46,8 +50,11 @@ pub fn init_tracing_with_default(default: &str) {
                 .try_init();
             return;
         }
+        // Colour codes only for a person at a terminal, never in a file or a pipe.
+        use std::io::IsTerminal as _;
         let _ = tracing_subscriber::fmt()
             .with_env_filter(filter)
+            .with_ansi(std::io::stderr().is_terminal())
             .with_writer(std::io::stderr)
             .with_target(false)
             .try_init();

@@ -9,30 +9,42 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
-use drivers::{DriverEvent, HostClock};
+use drivers::{DriverEvent, HostClock, Instrument};
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
 use crate::acquire::config::{Config, TriggerConfig};
-use crate::acquire::pipeline::{self, Outcome, Pipeline, PipelineConfig, Status, StopReason};
+use crate::acquire::pipeline::{
+    self, ConnectPolicy, Outcome, Pipeline, PipelineConfig, Status, StopReason,
+};
 use crate::acquire::service::{self, Notifier};
+use crate::acquire::storage;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The configuration file (see deploy/metrolog.toml for every key).
     #[arg(long, short, value_name = "FILE")]
     pub config: PathBuf,
-    /// Only check the configuration and say what would run.
+    /// Only check the configuration and its devices and say what would run (every mistake
+    /// at once; exit 78 when there is one).
     #[arg(long)]
     pub check: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     service::init_tracing();
-    let cfg = Config::load(&args.config)?;
+    // The same checks as --check: a missing port or one given twice stops the start (78).
+    let cfg = Config::load_checked(&args.config)?;
+    let notes = cfg.notes();
     if args.check {
+        for n in &notes {
+            println!("note: {n}");
+        }
         println!("{}: valid; {}", cfg.path.display(), describe(&cfg));
         return Ok(());
+    }
+    for n in &notes {
+        tracing::warn!("{n}");
     }
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -61,6 +73,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             st.summary()
         );
         return Err(crate::exit::LogWriteFailed(why).into());
+    }
+    if report.outcome.reason == StopReason::NothingConnected {
+        notifier.status(&st.summary());
+        let why = st.nothing_connected.clone().unwrap_or_default();
+        return Err(crate::exit::NothingConnected(format!(
+            "nothing connected {why}; plug the instruments in (or fix their ports), then start the service again"
+        ))
+        .into());
     }
     tracing::info!(
         "run ended ({}); log {}; {}; queue at most {} of {}; pose latency at most {:.1} ms",
@@ -120,6 +140,31 @@ pub fn describe(cfg: &Config) -> String {
     )
 }
 
+/// The "nothing connected" alarm of a config: `[run] connect_timeout_s`, waiting when a device
+/// is `hotplug`.
+fn connect_policy(cfg: &Config) -> ConnectPolicy {
+    let mut ports = Vec::new();
+    if let Some(c) = &cfg.interferometer {
+        ports.push((Instrument::Interferometer, c.port.clone()));
+    }
+    if let Some(c) = &cfg.capball {
+        ports.push((Instrument::Capball, c.driver.port.clone()));
+    }
+    if let Some(c) = &cfg.psd {
+        ports.push((Instrument::Psd, c.port.clone()));
+    }
+    match &cfg.trigger {
+        Some(TriggerConfig::Slcan(s)) => ports.push((Instrument::Trigger, s.port.clone())),
+        Some(TriggerConfig::SocketCan(s)) => ports.push((Instrument::Trigger, s.interface.clone())),
+        None => {}
+    }
+    ConnectPolicy {
+        timeout: Duration::from_secs(cfg.run.connect_timeout_s),
+        wait: cfg.ports.iter().any(|p| p.hotplug),
+        ports,
+    }
+}
+
 /// How an acquisition is run (the service and the demo differ only here).
 pub struct Acquire {
     pub notifier: Notifier,
@@ -150,6 +195,7 @@ impl RunReport {
             (StopReason::Cancelled, _) => "stopped".into(),
             (StopReason::DriversGone, _) => "every driver ended".into(),
             (StopReason::LogFailed, _) => "the log could not be written".into(),
+            (StopReason::NothingConnected, _) => "nothing connected".into(),
         }
     }
 }
@@ -160,11 +206,38 @@ const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let clock = HostClock::new();
+    // Retention and the low-space warning before the new log takes any space.
+    let disk_alarm = storage::DiskAlarm::default();
+    if cfg.run.output_dir.is_dir() {
+        let low = storage::apply_and_report(
+            &cfg.storage,
+            &cfg.run.output_dir,
+            None,
+            &storage::Statvfs,
+            &disk_alarm,
+        );
+        if let Some(w) = low {
+            tracing::warn!("{w}");
+        }
+        storage::room_to_start(&cfg.run.output_dir, &storage::Statvfs)
+            .map_err(crate::exit::LogCreateFailed)?;
+    }
     let mut recorder = crate::acquire::run_log::open_log(cfg, &clock)
         .map_err(|e| crate::exit::LogCreateFailed(format!("{e:#}")))?;
     let log_path = recorder.path().to_path_buf();
     tracing::info!("logging to {}", log_path.display());
     let live = start_live(cfg, &log_path).await;
+    let storage_cancel = CancellationToken::new();
+    tokio::spawn(storage::watch(
+        storage::Watch::service(
+            cfg.storage.clone(),
+            cfg.run.output_dir.clone(),
+            log_path.clone(),
+            disk_alarm.clone(),
+        ),
+        storage_cancel.clone(),
+    ));
+    let _stop_storage = storage_cancel.drop_guard();
     if let Some(l) = &live {
         recorder.set_tap(l.tap());
     }
@@ -178,6 +251,8 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
             instruments: cfg.instruments(),
             stop_at_program_end: cfg.run.stop_at_program_end,
             keep_poses: opts.keep_poses,
+            connect: Some(connect_policy(cfg)),
+            disk_alarm: Some(disk_alarm),
         },
         clock,
         Box::new(recorder),

@@ -303,9 +303,26 @@ fn note_alternatives(f: &mut Finding) {
 fn input_notes(data: &PositioningData) -> Vec<String> {
     let mut notes: Vec<String> = data.units().note().into_iter().collect();
     let missing = data.missing();
+    let damage = data
+        .metadata
+        .get(positioning::positioning_data::LOG_DAMAGE_KEY);
+    if let Some(d) = damage {
+        notes.insert(
+            0,
+            format!(
+                "BUILT ON PART OF THE RUN: the log is damaged: {d}; the diagnosis uses the \
+                 readings before the damage only"
+            ),
+        );
+    }
     if !missing.is_empty() {
+        let why = if damage.is_some() {
+            "lost with the damaged part of the log, or a beam interruption"
+        } else {
+            "beam interruption?"
+        };
         notes.push(format!(
-            "{} reading(s) missing (beam interruption?): {}; the diagnosis uses the others",
+            "{} reading(s) missing ({why}): {}; the diagnosis uses the others",
             missing.len(),
             missing
                 .iter()

@@ -333,9 +333,9 @@ impl Budget {
         for (k, q) in f.intermediates.iter().enumerate() {
             let visible = n_in + k;
             let e = Expr::compile(&q.expr, &|n| names[..visible].iter().position(|m| *m == n))
-                .map_err(|source| UncertaintyError::Expr {
+                .map_err(|error| UncertaintyError::Expr {
                     quantity: q.name.clone(),
-                    source,
+                    error,
                 })?;
             intermediate_exprs.push(e);
         }
@@ -343,9 +343,9 @@ impl Budget {
         let mut output_exprs = Vec::new();
         for q in &f.outputs {
             let e = Expr::compile(&q.expr, &|n| names[..visible].iter().position(|m| *m == n))
-                .map_err(|source| UncertaintyError::Expr {
+                .map_err(|error| UncertaintyError::Expr {
                     quantity: q.name.clone(),
-                    source,
+                    error,
                 })?;
             output_exprs.push(e);
         }

@@ -142,7 +142,7 @@ fn check(o: &PlanOptions) -> Result<(), PlanError> {
     let coordinate = |x: f64| x.is_finite() && x.abs() <= MAX_COORDINATE_MM;
     if !(coordinate(o.from_mm) && coordinate(o.to_mm)) {
         return Err(PlanError::Bad(format!(
-            "--from {} and --to {} must be positions within ±{MAX_COORDINATE_MM} mm",
+            "--from {:?} and --to {:?} must be positions within ±{MAX_COORDINATE_MM} mm",
             o.from_mm, o.to_mm
         )));
     }

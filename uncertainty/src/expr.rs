@@ -449,7 +449,7 @@ mod tests {
         assert!(r(&"-".repeat(50_000)).message.contains("deeper"));
         let pw = vec!["2"; 50_000].join("^");
         assert!(r(&pw).message.contains("deeper"));
-        let calls = format!("{}1{}", "sin(".repeat(20_000), ")".repeat(20_000));
+        let calls = format!("{}1{}", "sin(".repeat(10_000), ")".repeat(10_000));
         assert!(r(&calls).message.contains("deeper"));
         // At the limit it compiles and evaluates.
         assert_eq!(ev(&vec!["1"; 255].join("+"), &[]), 255.0);

@@ -36,7 +36,7 @@ pub fn trajectory(data: &[u8]) {
 pub fn mcap_file(path: &Path) {
     let mut messages = 0u64;
     let starts_mcap = std::fs::read(path)
-        .map(|d| d.starts_with(&mcap::MAGIC))
+        .map(|d| d.starts_with(mcap::MAGIC))
         .unwrap_or(false);
     let read = crate::reader::read_log(path, |item| {
         if let crate::reader::LogItem::Message { .. } = item {

@@ -273,6 +273,18 @@ const CASES: &[Case] = &[
     ),
     case("diagnose {c}/positioning-flat.csv", 0, &[]),
     case("report {c}/positioning-flat.csv -o {o}/report.html", 0, &[]),
+    #[cfg(feature = "plot")]
+    case(
+        "diagnose {c}/positioning-flat.csv --plot {o}/diagnosis.svg",
+        0,
+        &[],
+    ),
+    #[cfg(feature = "plot")]
+    case(
+        "analyze positioning {c}/positioning-flat.csv --plot {o}/run.svg",
+        0,
+        &[],
+    ),
 ];
 
 /// A NaN or an infinity written as a number ("NaN", "inf", "-inf", "Infinity").
@@ -519,6 +531,14 @@ fn a_log_with_a_chunk_removed_is_reported_damaged() {
     );
     let (o, _, _t) = run_case(&format!("replay {d}"), 0, &["damaged"]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("missing"));
+    // An analysis says the log is damaged and that its result is built on part of the run.
+    let o = metrolog(&expand(&format!("analyze positioning {d}"), tmp.path()));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("is damaged") && err.contains("part of the run") && err.contains("missing"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
 }
 
 /// The bytes of an MCAP file with its second chunk (and the message indexes after it)

@@ -142,7 +142,11 @@ pub fn capball_text(d: &CapballDiagnosis) -> String {
             "Residual RMS ({}) {} µm; white noise {} µm",
             res.run,
             xyz_or(res.rms_um, 3, "the run's residuals are not finite"),
-            xyz_or(res.noise_um, 3, "too few successive poses to difference"),
+            xyz_or(
+                res.noise_um,
+                3,
+                "the pose-to-pose differences give no finite value"
+            ),
         );
     }
     if let Some(p) = &r.extended_model {

@@ -290,7 +290,8 @@ pub fn identify_subset(
             .into());
         }
         let j = DMatrix::from_fn(3 * n, keep.len(), |r, c| full[(r, keep[c])]);
-        let svd = j.clone().svd(true, true);
+        let svd = geometry::linalg::svd(j.clone(), true, true)
+            .ok_or(CapballError::Undecomposable("identification Jacobian"))?;
         let sv = &svd.singular_values;
         let (imax, imin) = (sv.imax(), sv.imin());
         let condition = if sv[imin] > 0.0 {

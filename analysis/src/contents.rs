@@ -100,6 +100,18 @@ impl LogContents {
         Ok(c)
     }
 
+    /// Where the log is damaged and how much of it was read, when it is (a torn or corrupt
+    /// file, records missing from a cleanly closed one); `None` for an intact log.
+    pub fn damage(&self) -> Option<String> {
+        let s = &self.summary;
+        s.error.as_ref().map(|e| {
+            format!(
+                "{e} ({} messages read, {} of {} bytes)",
+                s.messages, s.bytes_read, s.file_bytes
+            )
+        })
+    }
+
     /// One record of the log into the contents.
     fn take(&mut self, item: metrolog_log::LogItem<'_>) {
         let c = self;

@@ -2,6 +2,8 @@
 
 use std::fmt::Write as _;
 
+use crate::export::{result_or, xyz_or};
+
 use diagnose::axis::Diagnosis;
 use diagnose::capball::CapballDiagnosis;
 
@@ -18,8 +20,12 @@ pub fn positioning_text(d: &Diagnosis) -> String {
     if r.findings.is_empty() {
         let _ = writeln!(
             s,
-            "No finding: the baseline explains the data (noise {:.3} µm).",
-            d.model.noise_um
+            "No finding: the baseline explains the data (noise {} µm).",
+            result_or(
+                d.model.noise_um,
+                3,
+                "the residuals do not give a finite scatter"
+            )
         );
     }
     for (k, f) in r.findings.iter().enumerate() {
@@ -133,14 +139,14 @@ pub fn capball_text(d: &CapballDiagnosis) -> String {
     for res in &r.residuals {
         let _ = writeln!(
             s,
-            "Residual RMS ({}) x {:.3} y {:.3} z {:.3} µm; white noise x {:.3} y {:.3} z {:.3} µm",
+            "Residual RMS ({}) {} µm; white noise {} µm",
             res.run,
-            res.rms_um[0],
-            res.rms_um[1],
-            res.rms_um[2],
-            res.noise_um[0],
-            res.noise_um[1],
-            res.noise_um[2]
+            xyz_or(res.rms_um, 3, "the run's residuals are not finite"),
+            xyz_or(
+                res.noise_um,
+                3,
+                "the pose-to-pose differences give no finite value"
+            ),
         );
     }
     if let Some(p) = &r.extended_model {

@@ -19,6 +19,30 @@ pub fn num(v: f64, decimals: usize) -> String {
     }
 }
 
+/// A result for people: [`num`] of a finite value; a NaN or an infinity is never printed as a
+/// result but as "not determined (why)".
+pub fn result_or(v: f64, decimals: usize, why: &str) -> String {
+    if v.is_finite() {
+        num(v, decimals)
+    } else {
+        format!("not determined ({why})")
+    }
+}
+
+/// "x 1.000 y 2.000 z 3.000" of three results, or "not determined (why)" when any is not finite.
+pub fn xyz_or(v: [f64; 3], decimals: usize, why: &str) -> String {
+    if v.iter().all(|x| x.is_finite()) {
+        format!(
+            "x {} y {} z {}",
+            num(v[0], decimals),
+            num(v[1], decimals),
+            num(v[2], decimals)
+        )
+    } else {
+        format!("not determined ({why})")
+    }
+}
+
 fn opt(v: Option<f64>, decimals: usize) -> String {
     v.map(|v| num(v, decimals)).unwrap_or_else(|| "—".into())
 }

@@ -756,6 +756,15 @@ pub fn positioning_html(
         "<h1>Positioning accuracy and repeatability, axis {}</h1>",
         esc(an.axis.as_deref().unwrap_or("?"))
     );
+    // A report built on a damaged log says so before any result.
+    if let Some(d) = &an.log_damage {
+        let _ = write!(
+            s,
+            "<p class=\"lower\"><b>Built on part of the run:</b> the log is damaged: {}; the \
+             results use the readings before the damage only.</p>",
+            esc(d)
+        );
+    }
     s.push_str(&header_table(data, an, standards, h));
     s.push_str("<h2>Results</h2>");
     s.push_str(&standards_tables(standards));

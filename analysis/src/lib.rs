@@ -14,6 +14,8 @@ pub mod capball;
 mod contents;
 pub mod diagnosis_text;
 pub mod export;
+#[doc(hidden)]
+pub mod fuzzcheck;
 pub mod html_report;
 pub mod identify_text;
 #[cfg(feature = "plot")]

@@ -180,6 +180,9 @@ pub fn positioning_from_contents(
         metadata.insert("alpha_um_per_m_k".into(), a.to_string());
     }
     header_metadata(log, &mut metadata);
+    if let Some(d) = log.damage() {
+        metadata.insert(::positioning::positioning_data::LOG_DAMAGE_KEY.into(), d);
+    }
     let data = PositioningData {
         axis: Some("X".into()),
         alpha_um_per_m_k: alpha,

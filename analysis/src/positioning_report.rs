@@ -31,6 +31,9 @@ pub struct PositioningAnalysis {
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub conformance: Vec<ResultConformance>,
     pub notes: Vec<String>,
+    /// Where the log the data came from is damaged: the results are built on part of the run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub log_damage: Option<String>,
 }
 
 /// What measured the positions, from the dataset's metadata: `sensor` (a log's positions are
@@ -187,10 +190,19 @@ pub fn analyze_positioning_given(
         })
         .collect();
     let mut notes = Vec::new();
+    let log_damage = data
+        .metadata
+        .get(positioning::positioning_data::LOG_DAMAGE_KEY)
+        .cloned();
     if !missing.is_empty() {
+        let why = if log_damage.is_some() {
+            "lost with the damaged part of the log, or a beam interruption"
+        } else {
+            "beam interruption?"
+        };
         notes.push(format!(
-            "{} reading(s) missing (beam interruption?); the statistics of those targets use \
-             the remaining cycles",
+            "{} reading(s) missing ({why}); the statistics of those targets use the remaining \
+             cycles",
             missing.len()
         ));
     }
@@ -230,6 +242,7 @@ pub fn analyze_positioning_given(
         uncertainty,
         conformance: Vec::new(),
         notes,
+        log_damage,
     }
 }
 
@@ -241,7 +254,9 @@ thread_local! {
 
 fn f(v: Option<f64>, w: usize) -> String {
     let p = DECIMALS.with(|d| d.get());
-    match v {
+    // A value that is not finite (a ratio over a zero scatter) is not determined: "—", as a
+    // value that could not be computed at all.
+    match v.filter(|v| v.is_finite()) {
         Some(v) => format!("{v:>w$.p$}"),
         None => format!("{:>w$}", "—"),
     }
@@ -272,6 +287,13 @@ pub fn render_text(an: &PositioningAnalysis) -> String {
         an.n_cycles,
         an.n_targets
     );
+    if let Some(d) = &an.log_damage {
+        let _ = writeln!(
+            s,
+            "BUILT ON PART OF THE RUN: the log is damaged: {d}; what follows uses the readings \
+             before the damage only"
+        );
+    }
     if !an.missing.is_empty() {
         let list: Vec<String> = an
             .missing
@@ -520,9 +542,10 @@ fn render_drift_direction(s: &mut String, an: &PositioningAnalysis, dd: &drift::
         );
     }
     if let Some(r) = dd.mean_ratio {
+        let r = crate::export::result_or(r, 2, "the drift-free differences do not scatter");
         let _ = writeln!(
             s,
-            "  mean classic s / mean drift-free s_diff = {r:.2} (≈ 0.71 = 1/√2 without drift: a difference of two readings scatters √2 times more)"
+            "  mean classic s / mean drift-free s_diff = {r} (≈ 0.71 = 1/√2 without drift: a difference of two readings scatters √2 times more)"
         );
     }
 }

@@ -171,11 +171,10 @@ fn capball_section(log: &LogContents, s: &mut String) {
                             id.fixed.join(", ")
                         );
                     }
-                    let r = id.residual_rms_um;
                     let _ = writeln!(
                         s,
-                        "  residual RMS x {:.3} y {:.3} z {:.3} µm",
-                        r[0], r[1], r[2]
+                        "  residual RMS {} µm",
+                        crate::export::xyz_or(id.residual_rms_um, 3, "residuals not finite")
                     );
                 }
             }

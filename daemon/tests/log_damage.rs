@@ -46,6 +46,15 @@ fn truncated_logs_give_their_intact_prefix() {
             full.len() * (i - 4) / (n_cuts - 4) - 1
         };
         std::fs::write(&cut_path, &full[..at]).unwrap();
+        if at < 8 {
+            // Inside the magic: not an MCAP file at all, refused before any reading.
+            let e = inspect(&cut_path).unwrap_err();
+            assert!(
+                format!("{e:#}").contains("not an MCAP log"),
+                "cut at {at}: {e:#}"
+            );
+            continue;
+        }
         let (got, s) = log_common::messages(&cut_path);
         assert!(!s.clean_close, "cut at {at} reported clean");
         assert!(s.error.is_some());

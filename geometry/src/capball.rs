@@ -97,6 +97,11 @@ pub enum CapballError {
     /// CapBall dataset: {0}
     #[error("CapBall dataset: {0}")]
     Dataset(String),
+    /// the {0} cannot be decomposed (values far outside a machine's range make the SVD diverge): check the dataset's poses and values
+    #[error(
+        "the {0} cannot be decomposed (values far outside a machine's range make the SVD diverge): check the dataset's poses and values"
+    )]
+    Undecomposable(&'static str),
 }
 
 /// The eight link errors (see the module table).
@@ -545,7 +550,8 @@ impl CapballSetup {
         let mut qtb = b.clone();
         qr.q_tr_mul(&mut qtb);
         let qtb14 = qtb.rows(0, N_PARAMS).into_owned();
-        let svd = r.svd(true, true);
+        let svd = crate::linalg::svd(r, true, true)
+            .ok_or(CapballError::Undecomposable("identification Jacobian"))?;
         let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
             return Err(CapballError::Singular {
                 condition: f64::INFINITY,
@@ -756,7 +762,8 @@ pub fn calibrate_sensor_frame(
     }
     let hm = DMatrix::from_fn(4, n, |r, c| if r < 3 { programmed_um[c][r] } else { 1.0 });
     let hs = DMatrix::from_fn(4, n, |r, c| if r < 3 { readings_um[c][r] } else { 1.0 });
-    let svd = hs.clone().svd(true, true);
+    let svd = crate::linalg::svd(hs.clone(), true, true)
+        .ok_or(CapballError::Undecomposable("sensor readings' matrix"))?;
     let (sv_min, sv_max) = (svd.singular_values.min(), svd.singular_values.max());
     if sv_min <= sv_max * 1e-10 {
         return Err(CapballError::CalibrationPoints(n));
@@ -816,8 +823,6 @@ pub struct CapballRecord {
     pub e_um: [f64; 3],
 }
 
-/// Parse a CapBall dataset (CSV text). Lines starting with `#` are comments; columns in any
-/// order; unknown columns are ignored.
 /// The physical range of a CapBall dataset column: past it a number is a damaged file or a
 /// unit mistake (an angle of 10¹⁶⁰° made the identification's SVD loop forever).
 fn dataset_range(name: &str) -> (f64, f64, &'static str) {
@@ -833,6 +838,8 @@ fn dataset_range(name: &str) -> (f64, f64, &'static str) {
     }
 }
 
+/// Parse a CapBall dataset (CSV text). Lines starting with `#` are comments; columns in any
+/// order; unknown columns are ignored.
 pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
     let err = |m: String| CapballError::Dataset(m);
     let mut rdr = csv::ReaderBuilder::new()

@@ -30,16 +30,25 @@ pub fn trajectory(data: &[u8]) {
     }
 }
 
-/// The MCAP reader on a (possibly damaged) file: never panics, never fails on what is inside
-/// the file (damage is reported in the summary), never claims more bytes than the file has.
+/// The MCAP reader on a (possibly damaged) file: never panics, refuses exactly the files that
+/// do not start with the MCAP magic, never fails on what is inside an MCAP file (damage is
+/// reported in the summary), never claims more bytes than the file has.
 pub fn mcap_file(path: &Path) {
     let mut messages = 0u64;
-    let summary = crate::reader::read_log(path, |item| {
+    let starts_mcap = std::fs::read(path)
+        .map(|d| d.starts_with(mcap::MAGIC))
+        .unwrap_or(false);
+    let read = crate::reader::read_log(path, |item| {
         if let crate::reader::LogItem::Message { .. } = item {
             messages += 1;
         }
-    })
-    .unwrap_or_else(|e| panic!("a readable file is an Err: {e}"));
+    });
+    let summary = match read {
+        Err(crate::LogError::NotMcap { .. }) if !starts_mcap => return,
+        Err(e) => panic!("a readable file is an Err: {e}"),
+        Ok(_) if !starts_mcap => panic!("a file without the MCAP magic was read"),
+        Ok(s) => s,
+    };
     assert_eq!(summary.messages, messages);
     assert!(
         summary.bytes_read <= summary.file_bytes,

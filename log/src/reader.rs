@@ -59,6 +59,9 @@ pub struct ReadSummary {
     /// Why reading stopped early (None when the whole file was read).
     pub error: Option<String>,
     pub messages: u64,
+    /// Messages the file's summary section counts (its statistics record) that were not read:
+    /// a chunk removed or overwritten in a file that otherwise closes cleanly.
+    pub missing_messages: u64,
     pub first_log_ns: Option<u64>,
     pub last_log_ns: Option<u64>,
 }
@@ -70,6 +73,50 @@ fn ends_with_magic(file: &mut File) -> bool {
     file.seek(SeekFrom::End(-8)).is_ok()
         && file.read_exact(&mut tail).is_ok()
         && tail == mcap::MAGIC
+}
+
+/// Refuses what is not an MCAP file before any reading: a FIFO or device (opening one for
+/// reading would wait for a writer forever), a directory, an empty file, and a file that does
+/// not start with the MCAP magic (a CSV, random bytes). Leaves `file` at its start.
+fn check_is_mcap(path: &Path, file: &mut File, file_bytes: u64) -> Result<(), LogError> {
+    use std::io::{Seek, SeekFrom};
+    let not = |reason: &str| LogError::NotMcap {
+        path: path.to_path_buf(),
+        reason: reason.into(),
+    };
+    if file_bytes == 0 {
+        return Err(not("the file is empty"));
+    }
+    let mut head = [0u8; 8];
+    if file.read_exact(&mut head).is_err() || head != mcap::MAGIC {
+        return Err(not("it does not start with the MCAP magic bytes"));
+    }
+    file.seek(SeekFrom::Start(0))
+        .map_err(|source| LogError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    Ok(())
+}
+
+/// Opens a log for reading: only a regular file (checked before opening, since opening a FIFO
+/// blocks until a writer comes) that starts like an MCAP file.
+fn open_log(path: &Path) -> Result<(File, u64), LogError> {
+    let open_err = |source| LogError::Open {
+        path: path.to_path_buf(),
+        source,
+    };
+    let meta = std::fs::metadata(path).map_err(open_err)?;
+    if !meta.is_file() {
+        return Err(LogError::NotMcap {
+            path: path.to_path_buf(),
+            reason: "it is not a regular file (a directory, pipe or device)".into(),
+        });
+    }
+    let mut file = File::open(path).map_err(open_err)?;
+    let file_bytes = file.metadata().map_err(open_err)?.len();
+    check_is_mcap(path, &mut file, file_bytes)?;
+    Ok((file, file_bytes))
 }
 
 /// Reads `path`, calling `on` for every record, until the end or the first damage.
@@ -145,8 +192,7 @@ pub fn read_log_progress(
         path: path.to_path_buf(),
         source,
     };
-    let mut file = File::open(path).map_err(open_err)?;
-    let file_bytes = file.metadata().map_err(open_err)?.len();
+    let (mut file, file_bytes) = open_log(path)?;
     let mut summary = ReadSummary {
         file_bytes,
         ..ReadSummary::default()
@@ -169,6 +215,8 @@ pub fn read_log_progress(
     let mut schemas: BTreeMap<u16, (String, String, Vec<u8>)> = BTreeMap::new();
     let mut topics: BTreeMap<u16, (String, String)> = BTreeMap::new();
     let mut saw_footer = false;
+    // The message count of the summary section's statistics record, when it has one.
+    let mut counted: Option<u64> = None;
     loop {
         let ev = match reader.next_event() {
             None => {
@@ -178,6 +226,7 @@ pub fn read_log_progress(
                     summary.error = Some("the file ends inside the closing magic".into());
                 } else {
                     summary.clean_close = true;
+                    check_count(&mut summary, counted);
                 }
                 break;
             }
@@ -293,6 +342,10 @@ pub fn read_log_progress(
                         saw_footer = true;
                         ControlFlow::Continue(())
                     }
+                    Record::Statistics(st) => {
+                        counted = Some(st.message_count);
+                        ControlFlow::Continue(())
+                    }
                     _ => ControlFlow::Continue(()),
                 };
                 if flow.is_break() {
@@ -302,4 +355,18 @@ pub fn read_log_progress(
         }
     }
     Ok(summary)
+}
+
+/// A cleanly closed file whose summary counts more messages than were read lost records in
+/// its middle (a chunk removed or overwritten): it is damaged, not intact.
+fn check_count(summary: &mut ReadSummary, counted: Option<u64>) {
+    let Some(n) = counted else { return };
+    if n > summary.messages {
+        summary.missing_messages = n - summary.messages;
+        summary.error = Some(format!(
+            "the file closes cleanly but {} of the {n} messages its summary counts are missing \
+             (a chunk removed or overwritten); the log is damaged",
+            summary.missing_messages
+        ));
+    }
 }

@@ -157,6 +157,12 @@ pub enum LogError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// {path} is not an MCAP log: {reason}
+    #[error(
+        "{} is not an MCAP log: {reason}; metrolog reads the .mcap files a run writes",
+        path.display()
+    )]
+    NotMcap { path: PathBuf, reason: String },
     /// cannot read attachment {path}: {source}
     #[error("cannot read attachment {}: {source}", path.display())]
     Attachment {

@@ -95,6 +95,11 @@ pub enum DatasetError {
 /// targets, 5 bidirectional cycles), and what the analyses handle in well under 1 GB.
 pub const MAX_READINGS: usize = 100_000;
 
+/// The metadata key of a dataset read from a damaged log (set by the log adapter): where the
+/// damage is and how much was read. Results on it are built on part of the run, and readings
+/// missing after the damage are the log's loss, not beam interruptions.
+pub const LOG_DAMAGE_KEY: &str = "log_damage";
+
 /// The physical range of a numeric column (its unit in its name): a number outside it is a
 /// damaged file or a unit mistake, refused where it is read rather than let into a result.
 fn column_range(name: &str) -> Option<(f64, f64, &'static str)> {

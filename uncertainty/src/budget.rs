@@ -5,10 +5,10 @@
 //! [settings]              # all optional
 //! coverage_probability = 0.95
 //! coverage_factor = 2.0   # a fixed k for the GUM result instead of t(p, ν_eff)
-//! ndig = 2                # significant digits for the adaptive Monte Carlo tolerance
+//! ndig = 2                # significant digits for the adaptive Monte Carlo tolerance (1 to 4)
 //! seed = 1
 //! trials = 1000000        # a fixed number of trials instead of the adaptive procedure
-//! max_trials = 10000000
+//! max_trials = 10000000   # trials and max_trials: 1 to 20 000 000 (mc::MAX_TRIALS)
 //! interval = "symmetric"  # or "shortest": the interval the adaptive procedure watches
 //!
 //! [[input]]
@@ -46,7 +46,10 @@ use serde::{Deserialize, Serialize};
 use super::dist::{Distribution, open_unit, std_normal_cdf};
 use super::expr::Expr;
 use super::gum::{self, Coverage, GumInput, GumResult};
-use super::mc::{self, IntervalKind, McOptions, McProgress, McResult, TrialSource, Validation};
+use super::mc::{
+    self, IntervalKind, MAX_NDIG, MAX_TRIALS, McOptions, McProgress, McResult, TrialSource,
+    Validation,
+};
 use super::{Model, UncertaintyError};
 
 /// Optional settings of a budget.
@@ -62,6 +65,38 @@ pub struct Settings {
     pub interval: Option<IntervalKind>,
     /// Absolute numerical tolerance per output (overrides `ndig`).
     pub tolerance: Option<Vec<f64>>,
+}
+
+impl Settings {
+    /// Every setting within what a run can do: trial counts within [`MAX_TRIALS`], `ndig`
+    /// 1 to [`MAX_NDIG`], a probability in (0, 1), positive finite factors and tolerances.
+    fn check(&self) -> Result<(), UncertaintyError> {
+        let bad = |m: String| Err(UncertaintyError::Format(format!("[settings] {m}")));
+        for (name, n) in [("trials", self.trials), ("max_trials", self.max_trials)] {
+            if n.is_some_and(|n| !(1..=MAX_TRIALS).contains(&n)) {
+                return bad(format!("`{name}` must be 1 to {MAX_TRIALS}"));
+            }
+        }
+        if self.ndig.is_some_and(|n| !(1..=MAX_NDIG).contains(&n)) {
+            return bad(format!("`ndig` must be 1 to {MAX_NDIG}"));
+        }
+        if self
+            .coverage_probability
+            .is_some_and(|p| !(p > 0.0 && p < 1.0))
+        {
+            return bad("`coverage_probability` must be between 0 and 1".into());
+        }
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        if self.coverage_factor.is_some_and(|k| !positive(k))
+            || self
+                .tolerance
+                .as_ref()
+                .is_some_and(|t| !t.iter().copied().all(positive))
+        {
+            return bad("`coverage_factor` and `tolerance` must be positive finite numbers".into());
+        }
+        Ok(())
+    }
 }
 
 /// One input quantity.
@@ -292,14 +327,15 @@ impl Budget {
                 q.name
             )));
         }
+        f.settings.check()?;
         let n_in = f.inputs.len();
         let mut intermediate_exprs = Vec::new();
         for (k, q) in f.intermediates.iter().enumerate() {
             let visible = n_in + k;
             let e = Expr::compile(&q.expr, &|n| names[..visible].iter().position(|m| *m == n))
-                .map_err(|source| UncertaintyError::Expr {
+                .map_err(|error| UncertaintyError::Expr {
                     quantity: q.name.clone(),
-                    source,
+                    error,
                 })?;
             intermediate_exprs.push(e);
         }
@@ -307,9 +343,9 @@ impl Budget {
         let mut output_exprs = Vec::new();
         for q in &f.outputs {
             let e = Expr::compile(&q.expr, &|n| names[..visible].iter().position(|m| *m == n))
-                .map_err(|source| UncertaintyError::Expr {
+                .map_err(|error| UncertaintyError::Expr {
                     quantity: q.name.clone(),
-                    source,
+                    error,
                 })?;
             output_exprs.push(e);
         }

@@ -233,7 +233,12 @@ fn trial_matrix(
 /// Moore–Penrose pseudo-inverse of a full-column-rank `J` by SVD.
 pub fn pseudo_inverse(j: &DMatrix<f64>) -> Result<DMatrix<f64>, UncertaintyError> {
     let n = j.ncols();
-    let svd = j.clone().svd(true, true);
+    let svd = geometry::linalg::svd(j.clone(), true, true).ok_or_else(|| {
+        UncertaintyError::Invalid(
+            "the identification Jacobian cannot be decomposed (non-finite or extreme values)"
+                .into(),
+        )
+    })?;
     let smax = svd.singular_values.max();
     let smin = svd.singular_values.min();
     if smin.is_nan() || smin <= smax * 1e-12 {
@@ -688,7 +693,7 @@ fn fit_harmonics(record: &[(f64, [f64; 3])], period_s: f64, harmonics: u32) -> (
         let (s, co) = (k * w * record[i].0).sin_cos();
         if c % 2 == 1 { co } else { s }
     });
-    let svd = a.clone().svd(true, true);
+    let svd = geometry::linalg::svd(a.clone(), true, true);
     let mut hs: Vec<DriftHarmonic> = (1..=harmonics)
         .map(|k| DriftHarmonic {
             order: k,
@@ -699,7 +704,7 @@ fn fit_harmonics(record: &[(f64, [f64; 3])], period_s: f64, harmonics: u32) -> (
     let mut rss = 0.0;
     for d in 0..3 {
         let b = nalgebra::DVector::from_iterator(n, record.iter().map(|r| r.1[d]));
-        let Ok(x) = svd.solve(&b, 1e-12) else {
+        let Some(Ok(x)) = svd.as_ref().map(|s| s.solve(&b, 1e-12)) else {
             return (
                 CyclicDrift {
                     period_s,

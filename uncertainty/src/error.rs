@@ -11,11 +11,12 @@ pub enum UncertaintyError {
     /// input `{input}`: {reason}
     #[error("input `{input}`: {reason}")]
     BadDistribution { input: String, reason: String },
-    /// the expression of `{quantity}` is wrong {source}
-    #[error("the expression of `{quantity}` is wrong {source}")]
+    /// the expression of `{quantity}` is wrong {error}
+    #[error("the expression of `{quantity}` is wrong {error}")]
     Expr {
         quantity: String,
-        source: expr::ExprError,
+        /// Not a `source`: the message above already says it (anyhow's `{:#}` printed it twice).
+        error: expr::ExprError,
     },
     /// the name `{0}` is used twice (inputs, intermediates and outputs need distinct names)
     #[error("the name `{0}` is used twice (inputs, intermediates and outputs need distinct names)")]

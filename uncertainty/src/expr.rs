@@ -8,6 +8,19 @@
 //! Grammar: `+ - * / ^` (power is right-associative and binds tighter than unary minus, so
 //! `-x^2 = -(x^2)`), parentheses, numbers like `1.5e-3`, the constant `pi`, and the functions
 //! `sin cos tan asin acos atan atan2 sinh cosh tanh sqrt exp ln log10 abs pow min max`.
+//!
+//! Limits: at most [`MAX_CHARS`] characters and a tree at most [`MAX_DEPTH`] levels deep
+//! (nesting and the operands of one `+ - * /` chain both count); past them the expression is
+//! refused with the column, instead of overflowing the stack in evaluation.
+
+/// The deepest an expression's tree may be: nested parentheses, function calls, powers, signs
+/// and the operands of one chain of `+ - * /` all count. Evaluating (and dropping) a tree
+/// recurses once per level, so a 30 000-deep nesting or a 300 000-term sum overflowed the
+/// stack; a budget this deep is better written as intermediate quantities.
+pub const MAX_DEPTH: usize = 256;
+
+/// The longest expression accepted, characters.
+pub const MAX_CHARS: usize = 100_000;
 
 /// Why an expression could not be compiled.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -88,13 +101,23 @@ pub struct FuncId(Func);
 impl Expr {
     /// Compiles `src`; `resolve` maps a variable name to its index in the value slice.
     pub fn compile(src: &str, resolve: &dyn Fn(&str) -> Option<usize>) -> Result<Expr, ExprError> {
+        if src.chars().count() > MAX_CHARS {
+            return Err(ExprError {
+                column: MAX_CHARS + 1,
+                message: format!(
+                    "the expression is longer than {MAX_CHARS} characters; split it into \
+                     intermediate quantities"
+                ),
+            });
+        }
         let chars: Vec<char> = src.chars().collect();
         let mut p = Parser {
             s: &chars,
             i: 0,
+            nesting: 0,
             resolve,
         };
-        let e = p.expr()?;
+        let (e, _) = p.expr()?;
         p.skip_ws();
         if p.i < chars.len() {
             return Err(p.err(format!("unexpected `{}`", chars[p.i])));
@@ -158,9 +181,14 @@ fn pow(x: f64, y: f64) -> f64 {
     }
 }
 
+/// A parsed subtree and its depth (levels, a leaf is 1).
+type Parsed = Result<(Expr, usize), ExprError>;
+
 struct Parser<'a> {
     s: &'a [char],
     i: usize,
+    /// How deep the parser has recursed (parentheses, calls, signs, exponents).
+    nesting: usize,
     resolve: &'a dyn Fn(&str) -> Option<usize>,
 }
 
@@ -183,79 +211,100 @@ impl Parser<'_> {
         self.s.get(self.i).copied()
     }
 
-    fn expr(&mut self) -> Result<Expr, ExprError> {
-        let mut lhs = self.term()?;
-        while let Some(c) = self.peek() {
-            match c {
-                '+' => {
-                    self.i += 1;
-                    lhs = Expr::Add(Box::new(lhs), Box::new(self.term()?));
-                }
-                '-' => {
-                    self.i += 1;
-                    lhs = Expr::Sub(Box::new(lhs), Box::new(self.term()?));
-                }
-                _ => break,
-            }
+    /// A node over subtrees of depth `d`: refused past [`MAX_DEPTH`].
+    fn deeper(&self, e: Expr, d: usize) -> Parsed {
+        if d >= MAX_DEPTH {
+            return Err(self.too_deep());
         }
-        Ok(lhs)
+        Ok((e, d + 1))
     }
 
-    fn term(&mut self) -> Result<Expr, ExprError> {
-        let mut lhs = self.unary()?;
-        while let Some(c) = self.peek() {
-            match c {
-                '*' => {
-                    self.i += 1;
-                    lhs = Expr::Mul(Box::new(lhs), Box::new(self.unary()?));
-                }
-                '/' => {
-                    self.i += 1;
-                    lhs = Expr::Div(Box::new(lhs), Box::new(self.unary()?));
-                }
-                _ => break,
-            }
-        }
-        Ok(lhs)
+    fn too_deep(&self) -> ExprError {
+        self.err(format!(
+            "the expression is nested or chained deeper than {MAX_DEPTH} levels; split it into \
+             intermediate quantities"
+        ))
     }
 
-    fn unary(&mut self) -> Result<Expr, ExprError> {
+    /// Runs `f` one recursion level deeper, refused past [`MAX_DEPTH`].
+    fn nested(&mut self, f: impl FnOnce(&mut Self) -> Parsed) -> Parsed {
+        if self.nesting >= MAX_DEPTH {
+            return Err(self.too_deep());
+        }
+        self.nesting += 1;
+        let r = f(self);
+        self.nesting -= 1;
+        r
+    }
+
+    fn expr(&mut self) -> Parsed {
+        let (mut lhs, mut d) = self.term()?;
+        while let Some(c) = self.peek() {
+            let op: fn(Box<Expr>, Box<Expr>) -> Expr = match c {
+                '+' => Expr::Add,
+                '-' => Expr::Sub,
+                _ => break,
+            };
+            self.i += 1;
+            let (rhs, dr) = self.term()?;
+            (lhs, d) = self.deeper(op(Box::new(lhs), Box::new(rhs)), d.max(dr))?;
+        }
+        Ok((lhs, d))
+    }
+
+    fn term(&mut self) -> Parsed {
+        let (mut lhs, mut d) = self.unary()?;
+        while let Some(c) = self.peek() {
+            let op: fn(Box<Expr>, Box<Expr>) -> Expr = match c {
+                '*' => Expr::Mul,
+                '/' => Expr::Div,
+                _ => break,
+            };
+            self.i += 1;
+            let (rhs, dr) = self.unary()?;
+            (lhs, d) = self.deeper(op(Box::new(lhs), Box::new(rhs)), d.max(dr))?;
+        }
+        Ok((lhs, d))
+    }
+
+    fn unary(&mut self) -> Parsed {
         match self.peek() {
             Some('-') => {
                 self.i += 1;
-                Ok(Expr::Neg(Box::new(self.unary()?)))
+                let (a, d) = self.nested(Self::unary)?;
+                self.deeper(Expr::Neg(Box::new(a)), d)
             }
             Some('+') => {
                 self.i += 1;
-                self.unary()
+                self.nested(Self::unary)
             }
             _ => self.power(),
         }
     }
 
-    fn power(&mut self) -> Result<Expr, ExprError> {
-        let base = self.atom()?;
+    fn power(&mut self) -> Parsed {
+        let (base, db) = self.atom()?;
         if self.peek() == Some('^') {
             self.i += 1;
-            let exp = self.unary()?;
-            return Ok(Expr::Pow(Box::new(base), Box::new(exp)));
+            let (exp, de) = self.nested(Self::unary)?;
+            return self.deeper(Expr::Pow(Box::new(base), Box::new(exp)), db.max(de));
         }
-        Ok(base)
+        Ok((base, db))
     }
 
-    fn atom(&mut self) -> Result<Expr, ExprError> {
+    fn atom(&mut self) -> Parsed {
         match self.peek() {
             None => Err(self.err("expression ends where a value was expected".into())),
             Some('(') => {
                 self.i += 1;
-                let e = self.expr()?;
+                let e = self.nested(Self::expr)?;
                 if self.peek() != Some(')') {
                     return Err(self.err("missing `)`".into()));
                 }
                 self.i += 1;
                 Ok(e)
             }
-            Some(c) if c.is_ascii_digit() || c == '.' => self.number(),
+            Some(c) if c.is_ascii_digit() || c == '.' => Ok((self.number()?, 1)),
             Some(c) if c.is_alphabetic() || c == '_' => self.name(),
             Some(c) => Err(self.err(format!("unexpected `{c}` where a value was expected"))),
         }
@@ -288,7 +337,7 @@ impl Parser<'_> {
         })
     }
 
-    fn name(&mut self) -> Result<Expr, ExprError> {
+    fn name(&mut self) -> Parsed {
         let start = self.i;
         let s = self.s;
         while self.i < s.len() && (s[self.i].is_alphanumeric() || s[self.i] == '_') {
@@ -303,10 +352,10 @@ impl Parser<'_> {
                 });
             };
             self.i += 1;
-            let mut args = vec![self.expr()?];
+            let mut args = vec![self.nested(Self::expr)?];
             while self.peek() == Some(',') {
                 self.i += 1;
-                args.push(self.expr()?);
+                args.push(self.nested(Self::expr)?);
             }
             if self.peek() != Some(')') {
                 return Err(self.err(format!("missing `)` after the arguments of `{name}`")));
@@ -318,18 +367,20 @@ impl Parser<'_> {
                     message: format!("`{name}` takes {arity} argument(s), got {}", args.len()),
                 });
             }
-            let mut it = args.into_iter().map(Box::new);
-            return Ok(match (it.next(), it.next()) {
+            let d = args.iter().map(|a| a.1).max().unwrap_or(0);
+            let mut it = args.into_iter().map(|a| Box::new(a.0));
+            let call = match (it.next(), it.next()) {
                 (Some(a), None) => Expr::Call1(FuncId(f), a),
                 (Some(a), Some(b)) => Expr::Call2(FuncId(f), a, b),
                 _ => unreachable!("arity checked above"),
-            });
+            };
+            return self.deeper(call, d);
         }
         if let Some(i) = (self.resolve)(&name) {
-            return Ok(Expr::Var(i));
+            return Ok((Expr::Var(i), 1));
         }
         if name == "pi" {
-            return Ok(Expr::Num(std::f64::consts::PI));
+            return Ok((Expr::Num(std::f64::consts::PI), 1));
         }
         Err(ExprError {
             column: start + 1,
@@ -374,5 +425,35 @@ mod tests {
         assert!(r("(1 + 2").message.contains("missing `)`"));
         assert!(r("1 $ 2").message.contains("unexpected `$`"));
         assert!(r("blah(2)").message.contains("unknown function"));
+    }
+
+    /// 30 000 nested parentheses, a 300 000-term sum, a long chain of signs or powers: a
+    /// clear error at the column where the limit is passed, not a stack overflow.
+    #[test]
+    fn deep_or_long_expressions_are_refused_not_overflowed() {
+        let r = |s: &str| Expr::compile(s, &|_| None).unwrap_err();
+        let nested = format!("{}1{}", "(".repeat(30_000), ")".repeat(30_000));
+        assert!(
+            r(&nested).message.contains("deeper than 256"),
+            "{}",
+            r(&nested)
+        );
+        let sum = vec!["1"; 300_000].join("+");
+        assert!(r(&sum).message.contains("longer than"), "{}", r(&sum));
+        let sum = vec!["1"; 40_000].join("+");
+        let e = r(&sum);
+        assert!(
+            e.message.contains("deeper than 256") && e.column < 1_000,
+            "{e}"
+        );
+        assert!(r(&"-".repeat(50_000)).message.contains("deeper"));
+        let pw = vec!["2"; 50_000].join("^");
+        assert!(r(&pw).message.contains("deeper"));
+        let calls = format!("{}1{}", "sin(".repeat(10_000), ")".repeat(10_000));
+        assert!(r(&calls).message.contains("deeper"));
+        // At the limit it compiles and evaluates.
+        assert_eq!(ev(&vec!["1"; 255].join("+"), &[]), 255.0);
+        let ok = format!("{}1{}", "(".repeat(200), ")".repeat(200));
+        assert_eq!(ev(&ok, &[]), 1.0);
     }
 }

@@ -42,6 +42,16 @@ pub enum IntervalKind {
     Shortest,
 }
 
+/// The most trials a run may be asked for (a budget's `trials`/`max_trials`, a command's
+/// `--trials`): every trial's outputs are kept for the coverage intervals, so the count bounds
+/// the memory (10⁷ trials: about 80 MB per output; 2⁶⁴ − 1 aborted on an exabyte allocation).
+pub const MAX_TRIALS: usize = 20_000_000;
+
+/// The most significant digits the adaptive tolerance may ask for (JCGM 101 §7.9.2 uses 1 or
+/// 2): each further digit needs about 100 times the trials, so more only runs to the trial
+/// limit without deciding anything.
+pub const MAX_NDIG: u32 = 4;
+
 /// Options of a Monte Carlo run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct McOptions {

@@ -8,10 +8,10 @@ use diagnose::axis::Diagnosis;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use positioning::axis_model::Direction;
-use positioning::positioning_data::PositioningData;
+use positioning::positioning_data::{PositioningData, Reading};
 
 use super::positioning::{DOWN, UP};
-use super::{FONT, LABELS, e, padded_range, ticks, with_backend};
+use super::{FONT, LABELS, axis_range, e, padded_range, ticks, with_backend};
 
 fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
     padded_range(vals, 0.08)
@@ -98,14 +98,21 @@ fn residuals_vs_time<'a, DB: DrawingBackend>(
         .label_style((FONT, 13))
         .draw()
         .map_err(e)?;
-    c.draw_series(data.readings.iter().zip(residuals_um).map(|(r, v)| {
-        let col = if r.direction == Direction::Up {
-            UP
-        } else {
-            DOWN
-        };
-        Circle::new((r.time_s / ta.scale, *v), 2, col.mix(0.6).filled())
-    }))
+    let finite = |(r, v): &(&Reading, &f64)| r.time_s.is_finite() && v.is_finite();
+    c.draw_series(
+        data.readings
+            .iter()
+            .zip(residuals_um)
+            .filter(finite)
+            .map(|(r, v)| {
+                let col = if r.direction == Direction::Up {
+                    UP
+                } else {
+                    DOWN
+                };
+                Circle::new((r.time_s / ta.scale, *v), 2, col.mix(0.6).filled())
+            }),
+    )
     .map_err(e)?;
     Ok(c)
 }
@@ -185,7 +192,8 @@ fn draw_baseline_vs_position<DB: DrawingBackend>(
         .label_style((FONT, 13))
         .draw()
         .map_err(e)?;
-    c.draw_series(data.readings.iter().zip(rb).map(|(r, v)| {
+    let finite = |(r, v): &(&Reading, &f64)| r.target_mm.is_finite() && v.is_finite();
+    c.draw_series(data.readings.iter().zip(rb).filter(finite).map(|(r, v)| {
         Circle::new(
             (r.target_mm, *v),
             2,
@@ -230,9 +238,11 @@ fn draw_rms_per_target<DB: DrawingBackend>(
         .iter()
         .flat_map(|v| v.iter())
         .copied()
+        .filter(|v| v.is_finite())
         .fold(0.0, f64::max)
         * 1.15
         + 1e-3;
+    let (_, ymax) = axis_range((0.0, ymax));
     let mut c = ChartBuilder::on(area)
         .caption(
             "RMS residual per target (blue ↑, red ↓; after the found mean effects)",
@@ -256,7 +266,10 @@ fn draw_rms_per_target<DB: DrawingBackend>(
     for (k, col) in [(0usize, UP), (1, DOWN)] {
         c.draw_series(sd.iter().enumerate().map(|(i, v)| {
             let x0 = i as f64 + 1.0 + if k == 0 { -0.35 } else { 0.0 };
-            Rectangle::new([(x0, 0.0), (x0 + 0.35, v[k])], col.mix(0.7).filled())
+            Rectangle::new(
+                [(x0, 0.0), (x0 + 0.35, v[k].min(ymax))],
+                col.mix(0.7).filled(),
+            )
         }))
         .map_err(e)?;
     }
@@ -284,7 +297,7 @@ fn draw_final_residuals<DB: DrawingBackend>(
             .iter()
             .zip(rf)
             .zip(&d.outlier)
-            .filter(|(_, o)| **o)
+            .filter(|((r, v), o)| **o && r.time_s.is_finite() && v.is_finite())
             .map(|((r, v), _)| Circle::new((r.time_s / ta.scale, *v), 7, BLACK.stroke_width(2))),
     )
     .map_err(e)?;

@@ -99,8 +99,9 @@ pub(crate) const LABELS: usize = 10;
 /// The tick labels of an axis over `(lo, hi)`: the fewest decimals that write every label
 /// plotters will put on it (its own key points for [`LABELS`]) exactly, one count for the
 /// whole axis so that the labels align; [`num`] never writes "-0".
-pub(crate) fn ticks((lo, hi): (f64, f64)) -> impl Fn(&f64) -> String {
+pub(crate) fn ticks(range: (f64, f64)) -> impl Fn(&f64) -> String {
     use plotters::coord::ranged1d::Ranged as _;
+    let (lo, hi) = axis_range(range);
     let keys = RangedCoordf64::from(lo..hi).key_points(LABELS);
     let step = match keys.as_slice() {
         [a, b, ..] => b - a,
@@ -116,11 +117,34 @@ pub(crate) fn ticks((lo, hi): (f64, f64)) -> impl Fn(&f64) -> String {
     move |v: &f64| num(*v, d)
 }
 
+/// The largest magnitude an axis reaches: plotters' key points loop forever over a span that
+/// overflows to infinity (±1e308 did) or that vanishes against its values' magnitude.
+const AXIS_LIMIT: f64 = 1e300;
+
+/// A range every chart axis can take: finite, within ±[`AXIS_LIMIT`], increasing, and with a
+/// span of at least 10⁻⁹ of its magnitude (a NaN range becomes −1…1).
+pub(crate) fn axis_range((lo, hi): (f64, f64)) -> (f64, f64) {
+    if lo.is_nan() || hi.is_nan() {
+        return (-1.0, 1.0);
+    }
+    let (lo, hi) = (
+        lo.min(hi).clamp(-AXIS_LIMIT, AXIS_LIMIT),
+        hi.max(lo).clamp(-AXIS_LIMIT, AXIS_LIMIT),
+    );
+    let magnitude = lo.abs().max(hi.abs());
+    if hi - lo >= 1e-9 * magnitude && hi - lo > 1e-200 {
+        return (lo, hi);
+    }
+    let half = (magnitude * 0.05).max(0.5);
+    (lo - half, hi + half)
+}
+
 /// The range of some values (finite ones only) widened by `margin` of its span on each side;
 /// a flat or empty set gets a span of its own so that the chart still has a scale.
 pub(crate) fn padded_range(vals: impl Iterator<Item = f64>, margin: f64) -> (f64, f64) {
     let (lo, hi) = vals
         .filter(|v| v.is_finite())
+        .map(|v| v.clamp(-AXIS_LIMIT, AXIS_LIMIT))
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
             (a.min(v), b.max(v))
         });
@@ -130,9 +154,9 @@ pub(crate) fn padded_range(vals: impl Iterator<Item = f64>, margin: f64) -> (f64
     let span = hi - lo;
     if span < 1e-9 * lo.abs().max(1.0) {
         let half = (lo.abs() * 0.05).max(0.5);
-        return (lo - half, hi + half);
+        return axis_range((lo - half, hi + half));
     }
-    (lo - margin * span, hi + margin * span)
+    axis_range((lo - margin * span, hi + margin * span))
 }
 
 /// How a legend entry is drawn.
@@ -272,5 +296,36 @@ mod tests {
         assert_eq!(padded_range(std::iter::empty(), 0.06), (-1.0, 1.0));
         let (a, b) = padded_range([0.0, 10.0].into_iter(), 0.06);
         assert!((a + 0.6).abs() < 1e-12 && (b - 10.6).abs() < 1e-12);
+    }
+
+    /// ±1e308 made plotters' key points loop forever (the span overflowed to infinity); a
+    /// span that vanishes against its magnitude, NaN and infinities must end too. Each range
+    /// gets key points, few of them, and finite ones.
+    #[test]
+    fn extreme_ranges_give_finite_axes_and_end() {
+        for r in [
+            (-1e308, 1e308),
+            (f64::MIN, f64::MAX),
+            (f64::NEG_INFINITY, f64::INFINITY),
+            (f64::NAN, 1.0),
+            (1e20, 1e20 + 1.0),
+            (1e300, 1e300),
+            (5.0, -5.0),
+            (0.0, 1e-300),
+        ] {
+            let (lo, hi) = axis_range(r);
+            assert!(
+                lo.is_finite() && hi.is_finite() && (hi - lo).is_finite() && hi > lo,
+                "{r:?}"
+            );
+            let keys = RangedCoordf64::from(lo..hi).key_points(LABELS);
+            assert!(
+                keys.len() <= LABELS + 1 && keys.iter().all(|k| k.is_finite()),
+                "{r:?}"
+            );
+            let _ = ticks(r)(&lo);
+        }
+        let (a, b) = padded_range([-1e308, 1e308, f64::NAN, f64::INFINITY].into_iter(), 0.08);
+        assert!(a.is_finite() && b.is_finite() && (b - a).is_finite());
     }
 }

@@ -13,7 +13,7 @@ use positioning::axis_model::Direction;
 use positioning::positioning_data::PositioningData;
 use positioning::units::Units;
 
-use super::{FONT, LABELS, Mark, e, padded_range, side_column, ticks, with_backend};
+use super::{FONT, LABELS, Mark, axis_range, e, padded_range, side_column, ticks, with_backend};
 use crate::export::num;
 use crate::positioning_report::PositioningAnalysis;
 
@@ -50,6 +50,7 @@ fn framed<'a, DB: DrawingBackend>(
     x_desc: &str,
     u: &Units,
 ) -> anyhow::Result<Chart<'a, DB>> {
+    let (x, y) = (axis_range(x), axis_range(y));
     let mut chart = ChartBuilder::on(area)
         .caption(u.relabel(caption), (FONT, 19))
         .margin(10)
@@ -257,7 +258,8 @@ fn drift_chart<DB: DrawingBackend>(
             .directions
             .iter()
             .find(|d| d.direction == dir)
-            .and_then(|d| d.mean_ratio);
+            .and_then(|d| d.mean_ratio)
+            .filter(|r| r.is_finite());
         block.push((
             format!("s / s_diff {a}"),
             ratio.map(|r| num(r, 2)).unwrap_or_else(|| "—".into()),

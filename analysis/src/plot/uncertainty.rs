@@ -8,7 +8,7 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use uncertainty::{GumResult, McResult};
 
-use super::{FONT, LABELS, Mark, e, side_column, ticks, with_backend};
+use super::{FONT, LABELS, Mark, axis_range, e, side_column, ticks, with_backend};
 use crate::export::num;
 
 const MC: RGBColor = RGBColor(31, 119, 180);
@@ -103,6 +103,7 @@ fn draw_panel<DB: DrawingBackend>(
     if hi.is_nan() || hi <= lo {
         hi = lo + 1.0;
     }
+    let (lo, hi) = axis_range((lo, hi));
     let (w, dens) = density(values, lo, hi);
     let mut ymax = dens.iter().cloned().fold(0.0, f64::max);
     if let Some(g) = g {
@@ -119,7 +120,7 @@ fn draw_panel<DB: DrawingBackend>(
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d(lo..hi, 0.0..ymax * 1.06)
+        .build_cartesian_2d(lo..hi, 0.0..axis_range((0.0, ymax * 1.06)).1)
         .map_err(e)?;
     chart
         .configure_mesh()

@@ -178,7 +178,12 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
 fn print_text(r: &InfoReport) {
     println!("log        {}", r.path.display());
     let rd = &r.read;
-    if rd.clean_close {
+    if rd.clean_close && rd.missing_messages > 0 {
+        println!(
+            "closed     cleanly but DAMAGED — {} messages its summary counts are missing ({} read)",
+            rd.missing_messages, rd.messages
+        );
+    } else if rd.clean_close {
         println!("closed     cleanly ({} bytes)", rd.file_bytes);
     } else {
         println!(
@@ -191,7 +196,7 @@ fn print_text(r: &InfoReport) {
         );
     }
     if let Some(e) = &rd.error {
-        println!("           reading stopped: {e}");
+        println!("           damage: {e}");
     }
     if let (Some(a), Some(b)) = (rd.first_log_ns, rd.last_log_ns) {
         println!(

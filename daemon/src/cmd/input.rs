@@ -28,7 +28,7 @@ pub fn load_positioning_with(
             .and_then(|log| metrolog_analysis::positioning::positioning_from_contents(&log, opts))
             .with_context(|| format!("reading the positioning run of {}", path.display()));
     }
-    let (data, notes) = PositioningData::from_csv_path_noted(path)
+    let (data, notes) = PositioningData::from_csv_str_noted(&read_text(path)?)
         .with_context(|| format!("reading {}", path.display()))?;
     // What a metrologist must know about the file's shape (renumbered cycles or targets,
     // passes against their direction): on stderr, so the results on stdout stay as they are.
@@ -44,7 +44,7 @@ pub fn is_capball_csv(path: &Path) -> bool {
     if metrolog_analysis::is_mcap(path) {
         return false;
     }
-    std::fs::read_to_string(path)
+    read_text(path)
         .ok()
         .and_then(|t| {
             t.lines()
@@ -124,6 +124,31 @@ pub fn load_machine(path: Option<&PathBuf>) -> anyhow::Result<Machine> {
     })
 }
 
+/// The largest text input a command reads (a CSV dataset, a budget, a description file),
+/// bytes: far past any real one (a week of a thermal test at 1 Hz is tens of MB), and read whole
+/// into memory.
+pub const MAX_TEXT_INPUT_BYTES: u64 = 256 << 20;
+
+/// The text of an input file: only a regular file (checked before it is opened: a FIFO would
+/// block the command until a writer comes, a device could be read forever) of at most
+/// [`MAX_TEXT_INPUT_BYTES`], in UTF-8. Each error names the file and what to fix.
+pub fn read_text(p: &Path) -> anyhow::Result<String> {
+    let meta = std::fs::metadata(p).with_context(|| format!("reading {}", p.display()))?;
+    anyhow::ensure!(
+        meta.is_file(),
+        "{}: not a regular file (a directory, pipe or device); give the path of a file",
+        p.display()
+    );
+    anyhow::ensure!(
+        meta.len() <= MAX_TEXT_INPUT_BYTES,
+        "{}: {} bytes is more than the {} MiB an input file may have",
+        p.display(),
+        meta.len(),
+        MAX_TEXT_INPUT_BYTES >> 20
+    );
+    std::fs::read_to_string(p).with_context(|| format!("reading {} as UTF-8 text", p.display()))
+}
+
 /// The text of an input that must not be a log (a CSV dataset, a description file).
 pub fn read_csv(p: &Path) -> anyhow::Result<String> {
     if metrolog_analysis::is_mcap(p) {
@@ -134,7 +159,7 @@ pub fn read_csv(p: &Path) -> anyhow::Result<String> {
             p.display()
         );
     }
-    std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))
+    read_text(p)
 }
 
 /// The value of an option that takes `n` comma-separated numbers (`--layout`, `--ball-mm`);
@@ -208,8 +233,7 @@ pub fn load_thermal(path: &Path) -> anyhow::Result<thermal::ThermalDataset> {
     if metrolog_analysis::is_mcap(path) {
         return super::thermal::from_log::dataset_from_log(path);
     }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = read_text(path)?;
     thermal::ThermalDataset::from_csv(&text).with_context(|| {
         format!(
             "{} is not a valid thermal test; fix the file at the place named",
@@ -246,6 +270,45 @@ pub fn write_output(path: &Path, text: &str) -> anyhow::Result<()> {
         .map_err(|e| fail("writing", e))?;
     tmp.persist(path)
         .map_err(|e| fail("renaming the finished temporary file", e.error))?;
+    Ok(())
+}
+
+/// A fresh, unused path beside `out` for an output whose writer creates the file itself (an
+/// MCAP log): the file is removed when this is dropped (a failed command leaves nothing, and
+/// nothing that makes the next run fail with "File exists"); [`finish_new_output`] renames it
+/// to `out` once complete. `out` must not exist yet.
+pub fn new_output_path(out: &Path) -> anyhow::Result<tempfile::TempPath> {
+    anyhow::ensure!(
+        !out.exists(),
+        "{} exists; this command writes a new file, choose another name",
+        out.display()
+    );
+    let dir = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".metrolog-")
+        .suffix(".mcap.tmp")
+        .make_in(dir, |_| Ok(()))
+        .map_err(|e| {
+            crate::exit::OutputWriteFailed(format!(
+                "cannot write {}: reserving a temporary name in its directory: {e}",
+                out.display()
+            ))
+        })?;
+    Ok(tmp.into_temp_path())
+}
+
+/// Renames the complete temporary output to `out`, never over an existing file.
+pub fn finish_new_output(tmp: tempfile::TempPath, out: &Path) -> anyhow::Result<()> {
+    tmp.persist_noclobber(out).map_err(|e| {
+        crate::exit::OutputWriteFailed(format!(
+            "cannot write {}: renaming the finished temporary file: {}",
+            out.display(),
+            e.error
+        ))
+    })?;
     Ok(())
 }
 
@@ -316,9 +379,7 @@ fn parse_assume(s: &str) -> Result<(String, f64), String> {
     Ok((k, v))
 }
 
-/// The most Monte Carlo trials a command accepts: every trial's outputs are kept for the
-/// coverage intervals, so the count bounds the memory (10⁷ trials: about 240 MB per output).
-pub const MAX_TRIALS: usize = 20_000_000;
+pub use uncertainty::mc::{MAX_NDIG, MAX_TRIALS};
 
 /// `--trials N`: a whole number from 1 to [`MAX_TRIALS`] (2⁶⁴ − 1 trials aborted on an
 /// allocation of exabytes).
@@ -328,6 +389,17 @@ pub fn trials_arg(s: &str) -> Result<usize, String> {
         _ => Err(format!(
             "`{s}`: the number of trials is a whole number from 1 to {MAX_TRIALS} (each trial's \
              outputs are kept in memory)"
+        )),
+    }
+}
+
+/// `--ndig N`: a whole number from 1 to [`MAX_NDIG`].
+pub fn ndig_arg(s: &str) -> Result<u32, String> {
+    match s.trim().parse::<u32>() {
+        Ok(n) if (1..=MAX_NDIG).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "`{s}`: the significant digits of the tolerance are a whole number from 1 to \
+             {MAX_NDIG} (each digit needs about 100 times the trials)"
         )),
     }
 }

@@ -3,8 +3,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-
 /// Compare a part dimension measured before and after a correction against its tolerance.
 ///
 /// Each file holds one sample: one number per line, or a CSV whose column `value` (or the
@@ -39,8 +37,7 @@ fn parse_tolerance(s: &str) -> anyhow::Result<(f64, f64)> {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let (lo, hi) = parse_tolerance(&args.tolerance)?;
     let read = |p: &PathBuf, which: &str| -> anyhow::Result<Vec<f64>> {
-        let text =
-            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        let text = crate::cmd::input::read_text(p)?;
         Ok(positioning::parts::parse_sample(which, &text)?)
     };
     let before = read(&args.before, "before")?;

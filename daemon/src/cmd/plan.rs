@@ -95,8 +95,7 @@ pub fn run(c: Command) -> anyhow::Result<()> {
         .collect();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let traj = a.out.join("trajectory.csv");
-    std::fs::write(&traj, write_trajectory(&rows))
-        .with_context(|| format!("writing {}", traj.display()))?;
+    crate::cmd::input::write_output(&traj, &write_trajectory(&rows))?;
     let ext = match a.dialect {
         Dialect::Sinumerik => "MPF",
         Dialect::Fanuc => "NC",
@@ -104,8 +103,7 @@ pub fn run(c: Command) -> anyhow::Result<()> {
         Dialect::LinuxCnc => "ngc",
     };
     let prog = a.out.join(format!("iso230_{}.{ext}", o.axis));
-    std::fs::write(&prog, p.part_program(a.dialect))
-        .with_context(|| format!("writing {}", prog.display()))?;
+    crate::cmd::input::write_output(&prog, &p.part_program(a.dialect))?;
     let targets: Vec<String> = p.targets_mm.iter().map(|t| format!("{t:.3}")).collect();
     for b in positioning::plan::below_minimums(&o) {
         eprintln!("warning: below ISO 230-2's minimums: {b}");

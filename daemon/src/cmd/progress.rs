@@ -40,7 +40,17 @@ pub fn read_contents(
     label: &str,
 ) -> Result<metrolog_analysis::LogContents, metrolog_analysis::AnalysisError> {
     let bar = Progress::new(label);
-    metrolog_analysis::LogContents::read_progress(path, |d, t| bar.update(d, t))
+    let log = metrolog_analysis::LogContents::read_progress(path, |d, t| bar.update(d, t))?;
+    drop(bar);
+    // Every analysis of a damaged log says so, and where, before its results.
+    if let Some(d) = log.damage() {
+        eprintln!(
+            "warning: {} is damaged: {d}; the results are built on the part of the run before \
+             the damage",
+            path.display()
+        );
+    }
+    Ok(log)
 }
 
 /// A Monte Carlo's bar: trials of a fixed number, or a spinner with the adaptive procedure's

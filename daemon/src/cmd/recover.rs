@@ -18,10 +18,20 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // Written beside the output under a temporary name, renamed when complete: a failed
+    // recover leaves no file behind.
+    let tmp = super::input::new_output_path(&args.output)?;
     let bar = Progress::new("recover");
-    let s = metrolog_log::recover::recover(&args.log, &args.output, |d, t| bar.update(d, t))
+    let s = metrolog_log::recover::recover(&args.log, &tmp, |d, t| bar.update(d, t))
         .with_context(|| format!("cannot recover {}", args.log.display()))?;
     drop(bar);
+    anyhow::ensure!(
+        s.messages > 0,
+        "cannot recover {}: not one message could be read ({}); nothing written",
+        args.log.display(),
+        s.error.as_deref().unwrap_or("the log holds none")
+    );
+    super::input::finish_new_output(tmp, &args.output)?;
     match &s.error {
         None => println!(
             "{} was intact (closed cleanly: {}); copied its {} messages to {}",
@@ -31,7 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.output.display()
         ),
         Some(e) => println!(
-            "recovered {} messages ({} of {} bytes read) into {}; reading stopped: {e}",
+            "recovered {} messages ({} of {} bytes read) into {}; damage: {e}",
             s.messages,
             s.bytes_read,
             s.file_bytes,

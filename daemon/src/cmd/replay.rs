@@ -176,19 +176,20 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
     }
     let mut engine = PoseEngine::new(&detector).context("cannot build the detectors")?;
 
-    let mut writer = match &opts.output {
-        Some(out) => {
-            if out.exists() {
-                bail!(
-                    "{} exists; replay writes a new file, choose another name",
-                    out.display()
-                );
-            }
+    // The new log is written under a temporary name beside `-o` and renamed when complete: a
+    // replay that fails leaves no file.
+    let tmp = opts
+        .output
+        .as_deref()
+        .map(super::input::new_output_path)
+        .transpose()?;
+    let mut writer = match &tmp {
+        Some(t) => {
             let mut meta = run.clone();
             meta.detector = detector.clone();
             meta.extra
                 .insert("replayed_from".into(), path.display().to_string());
-            Some(LogWriter::create(out, &meta, LogOptions::default())?)
+            Some(LogWriter::create(t, &meta, LogOptions::default())?)
         }
         None => None,
     };
@@ -302,8 +303,9 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
         }
     }
     replayed.extend(tail.into_iter().map(|p| (last_ns, p)));
-    if let Some(w) = writer {
+    if let (Some(w), Some(t), Some(out)) = (writer, tmp, &opts.output) {
         w.finish()?;
+        super::input::finish_new_output(t, out)?;
     }
     let identical = logged
         .iter()
@@ -350,9 +352,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
-    if !out.read.clean_close {
+    if !out.read.clean_close || out.read.error.is_some() {
         println!(
-            "note: the log was not closed cleanly; replayed its intact part ({} messages){}",
+            "note: the log is damaged or was not closed cleanly; replayed its intact part ({} messages){}",
             out.read.messages,
             out.read
                 .error

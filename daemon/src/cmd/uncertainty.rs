@@ -41,13 +41,14 @@ pub struct Args {
     /// 240 MB per output).
     #[arg(long, value_parser = crate::cmd::input::trials_arg)]
     pub trials: Option<usize>,
-    /// Significant digits for the adaptive tolerance (JCGM 101 §7.9.2; overrides the budget's).
-    #[arg(long)]
+    /// Significant digits for the adaptive tolerance (JCGM 101 §7.9.2; overrides the budget's),
+    /// 1 to 4.
+    #[arg(long, value_parser = crate::cmd::input::ndig_arg)]
     pub ndig: Option<u32>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&args.budget)
+    let text = crate::cmd::input::read_text(&args.budget)
         .with_context(|| format!("reading the budget file {}", args.budget.display()))?;
     let budget = Budget::from_toml(&text)
         .with_context(|| format!("in the budget file {}", args.budget.display()))?;

@@ -52,12 +52,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mtext = std::fs::read_to_string(&args.machine)
-        .with_context(|| format!("reading {}", args.machine.display()))?;
+    let mtext = crate::cmd::input::read_text(&args.machine)?;
     let machine = Machine::from_toml(&mtext)
         .with_context(|| format!("machine {}", args.machine.display()))?;
-    let etext = std::fs::read_to_string(&args.errors)
-        .with_context(|| format!("reading {}", args.errors.display()))?;
+    let etext = crate::cmd::input::read_text(&args.errors)?;
     let errors = ComponentErrors::from_csv(&etext)
         .with_context(|| format!("errors {}", args.errors.display()))?;
     let grid = GridSpec::parse(&args.grid)?;

@@ -54,9 +54,27 @@ use projector::Projector;
 use run::Run;
 use search::all_cols;
 
+/// The largest run the diagnosis takes, as readings × (targets + cycles): its candidate
+/// columns grow with the targets and the cycles, each as long as the readings, so memory is
+/// about 60 bytes per unit (measured: 10 000 readings of 1 000 targets in 5 cycles, 0.54 GB;
+/// 100 000 of 1 000 in 50 cycles, 6.6 GB). This bound keeps it under about 0.8 GB; an ISO
+/// 230-2 run is a few thousand units.
+pub const MAX_SIZE: usize = 12_000_000;
+
 /// Diagnoses a positioning run against the static baseline.
 pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, DiagnoseError> {
     let m = data.n_targets();
+    let (readings, cycles) = (data.readings.len(), data.n_cycles());
+    let size = readings.saturating_mul(m.saturating_add(cycles));
+    if size > MAX_SIZE {
+        return Err(DiagnoseError::TooLarge {
+            readings,
+            targets: m,
+            cycles,
+            size,
+            max: MAX_SIZE,
+        });
+    }
     if data.n_cycles() < 3 && m >= 2 {
         return Err(DiagnoseError::Sweep {
             cycles: data.n_cycles(),
@@ -303,9 +321,26 @@ fn note_alternatives(f: &mut Finding) {
 fn input_notes(data: &PositioningData) -> Vec<String> {
     let mut notes: Vec<String> = data.units().note().into_iter().collect();
     let missing = data.missing();
+    let damage = data
+        .metadata
+        .get(positioning::positioning_data::LOG_DAMAGE_KEY);
+    if let Some(d) = damage {
+        notes.insert(
+            0,
+            format!(
+                "BUILT ON PART OF THE RUN: the log is damaged: {d}; the diagnosis uses the \
+                 readings before the damage only"
+            ),
+        );
+    }
     if !missing.is_empty() {
+        let why = if damage.is_some() {
+            "lost with the damaged part of the log, or a beam interruption"
+        } else {
+            "beam interruption?"
+        };
         notes.push(format!(
-            "{} reading(s) missing (beam interruption?): {}; the diagnosis uses the others",
+            "{} reading(s) missing ({why}): {}; the diagnosis uses the others",
             missing.len(),
             missing
                 .iter()

@@ -312,4 +312,18 @@ pub enum DiagnoseError {
          3 cycles of at least 2 targets"
     )]
     Sweep { cycles: usize },
+    /// The run is too large for the diagnosis's memory: readings × (targets + cycles) past
+    /// [`super::MAX_SIZE`].
+    #[error(
+        "{readings} readings of {targets} targets in {cycles} cycles are too many to diagnose: \
+         readings × (targets + cycles) = {size} is past {max} (about 1 GB of memory; a million \
+         rows grew to 21 GB); diagnose a part of the run (fewer cycles or targets)"
+    )]
+    TooLarge {
+        readings: usize,
+        targets: usize,
+        cycles: usize,
+        size: usize,
+        max: usize,
+    },
 }

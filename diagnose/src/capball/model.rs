@@ -192,7 +192,7 @@ pub(crate) fn lstsq(a: &DMatrix<f64>, y: &DVector<f64>, keep: &[bool]) -> Option
     for (c, s) in scale.iter().enumerate() {
         aw.column_mut(c).unscale_mut(*s);
     }
-    let svd = aw.clone().svd(true, true);
+    let svd = geometry::linalg::svd(aw.clone(), true, true)?;
     let sv = &svd.singular_values;
     let smax = sv.max();
     if smax <= 0.0 || sv.min() <= smax * 1e-9 {

@@ -415,8 +415,13 @@ pub(crate) fn assemble(
         .collect();
     let mut notes = Vec::new();
     if let Some((p, u)) = periods.from_record {
+        let u = if u.is_finite() {
+            format!("± {u:.0} s")
+        } else {
+            "s (its uncertainty not determined: the fit's residual does not rise on either side of this period)".into()
+        };
         notes.push(format!(
-            "drift record: cyclic drift with period {p:.0} ± {u:.0} s; the cyclic candidate uses this period"
+            "drift record: cyclic drift with period {p:.0} {u}; the cyclic candidate uses this period"
         ));
     }
     let absorbed = absorption_probes(ctx, start, periods);

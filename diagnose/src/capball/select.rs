@@ -157,7 +157,9 @@ pub(crate) fn identifiable_basis(x: &DMatrix<f64>, xt: &DMatrix<f64>) -> (DMatri
     for c in 0..k {
         xs.column_mut(c).unscale_mut(scale[c]);
     }
-    let svd = xs.svd(false, true);
+    let Some(svd) = geometry::linalg::svd(xs, false, true) else {
+        return (DMatrix::zeros(k, 0), k);
+    };
     let Some(vt) = svd.v_t else {
         return (DMatrix::zeros(k, 0), k);
     };

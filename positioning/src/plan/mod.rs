@@ -66,6 +66,18 @@ impl Default for PlanOptions {
 /// The program parameter (R/#/Q number) that carries the pose index for the trigger.
 pub const POSE_PARAMETER: u32 = 100;
 
+/// The largest machine coordinate a plan takes, mm (100 m: past the travel of any machine
+/// tool; a larger number is a typing error and would overflow the programmed positions).
+pub const MAX_COORDINATE_MM: f64 = 100_000.0;
+
+/// The most measured stops a plan may have: the positioning reader's limit (`MAX_READINGS`),
+/// so every planned run can be analysed; `--cycles 1000000` wrote an 894 MB trajectory.
+pub const MAX_STOPS: usize = crate::positioning_data::MAX_READINGS;
+
+/// The longest dwell, s (an hour), and the fastest feed, mm/min (1 000 m/min).
+pub const MAX_DWELL_S: f64 = 3_600.0;
+pub const MAX_FEED_MM_MIN: f64 = 1_000_000.0;
+
 /// Why no plan could be made.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum PlanError {
@@ -127,14 +139,35 @@ fn check(o: &PlanOptions) -> Result<(), PlanError> {
     if !"XYZ".contains(o.axis) {
         return bad("--axis must be X, Y or Z");
     }
-    if !(o.from_mm.is_finite() && o.to_mm.is_finite() && o.to_mm > o.from_mm) {
+    let coordinate = |x: f64| x.is_finite() && x.abs() <= MAX_COORDINATE_MM;
+    if !(coordinate(o.from_mm) && coordinate(o.to_mm)) {
+        return Err(PlanError::Bad(format!(
+            "--from {:?} and --to {:?} must be positions within ±{MAX_COORDINATE_MM} mm",
+            o.from_mm, o.to_mm
+        )));
+    }
+    if o.to_mm <= o.from_mm {
         return bad("--to must be greater than --from");
     }
     if o.targets < 2 || o.cycles < 1 {
         return bad("a test needs at least 2 targets and 1 cycle (ISO 230-2: 5 targets, 5 cycles)");
     }
-    if !(o.overrun_mm >= 0.0 && o.dwell_s >= 0.0 && o.feed_mm_min > 0.0) {
-        return bad("--overrun and --dwell must not be negative, the feed must be positive");
+    if o.targets.saturating_mul(o.cycles).saturating_mul(2) > MAX_STOPS {
+        return Err(PlanError::Bad(format!(
+            "{} targets × {} cycles × 2 directions is more than {MAX_STOPS} measured stops; \
+             plan fewer cycles or targets (ISO 230-2: 5 cycles)",
+            o.targets, o.cycles
+        )));
+    }
+    if !((0.0..=MAX_DWELL_S).contains(&o.dwell_s)
+        && o.overrun_mm >= 0.0
+        && o.feed_mm_min > 0.0
+        && o.feed_mm_min <= MAX_FEED_MM_MIN)
+    {
+        return Err(PlanError::Bad(format!(
+            "--overrun must not be negative, --dwell must be 0 to {MAX_DWELL_S} s and --feed \
+             above 0 up to {MAX_FEED_MM_MIN} mm/min"
+        )));
     }
     let (lo, hi) = span(o);
     if hi <= lo {

@@ -38,8 +38,7 @@ pub fn diagnose_path(path: &Path, drift: Option<&Path>) -> anyhow::Result<Capbal
         .with_context(|| format!("{}: run 1", path.display()))?;
     let record: Option<DriftRecord> = match drift {
         Some(p) => {
-            let t =
-                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            let t = crate::cmd::input::read_text(p)?;
             Some(parse_drift_record(&t).with_context(|| format!("{}", p.display()))?)
         }
         None => None,

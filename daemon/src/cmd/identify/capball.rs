@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use geometry::capball::{self, CapballSetup, Identification, PARAM_NAMES};
 use geometry::kinematics::Pose;
+use metrolog_analysis::export::{result_or, xyz_or};
 use nalgebra::Vector3;
 
 use super::capball_mc::{self, CapballMcArgs};
@@ -204,22 +205,32 @@ fn print_identification(
     val: Option<&[f64; 3]>,
 ) {
     println!(
-        "run {run}: {} poses, ball at ({:.3}, {:.3}, {:.3}) mm, condition number {:.1}",
-        id.n_poses, ball.x, ball.y, ball.z, id.condition_number
+        "run {run}: {} poses, ball at ({:.3}, {:.3}, {:.3}) mm, condition number {}",
+        id.n_poses,
+        ball.x,
+        ball.y,
+        ball.z,
+        result_or(id.condition_number, 1, "singular")
     );
     println!("  {:<12} {:>12} {:>12}", "parameter", "value", "u (k=1)");
     for ((name, p), u) in PARAM_NAMES.iter().zip(&id.params).zip(&id.std_uncertainty) {
-        println!("  {name:<12} {p:>12.3} {u:>12.3}");
+        // A parameter the poses do not determine: "n/d", never NaN in the table.
+        let cell = |v: f64| {
+            if v.is_finite() {
+                format!("{v:.3}")
+            } else {
+                "n/d".into()
+            }
+        };
+        println!("  {name:<12} {:>12} {:>12}", cell(*p), cell(*u));
     }
-    let r = id.residual_rms_um;
+    let why = "residuals not finite";
     println!(
-        "  identification residual RMS x {:.3} y {:.3} z {:.3} µm (s = {:.3} µm)",
-        r[0], r[1], r[2], id.residual_sigma_um
+        "  identification residual RMS {} µm (s = {} µm)",
+        xyz_or(id.residual_rms_um, 3, why),
+        result_or(id.residual_sigma_um, 3, why)
     );
     if let Some(v) = val {
-        println!(
-            "  validation residual RMS     x {:.3} y {:.3} z {:.3} µm",
-            v[0], v[1], v[2]
-        );
+        println!("  validation residual RMS     {} µm", xyz_or(*v, 3, why));
     }
 }

@@ -45,8 +45,8 @@ pub struct CapballMcArgs {
     /// How the drift enters the Monte Carlo.
     #[arg(long, value_enum, default_value = "cyclic")]
     pub drift: DriftKind,
-    /// Harmonics of the cyclic drift's shape.
-    #[arg(long, default_value_t = 3)]
+    /// Harmonics of the cyclic drift's shape, 1 to 20.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=20))]
     pub drift_harmonics: u32,
     /// Standard uncertainty of the sensor outputs `x,y,z` (µm, per point).
     #[arg(long, default_value = "0.1,0.1,0.1")]
@@ -57,8 +57,8 @@ pub struct CapballMcArgs {
     /// Leading runs left out as warm-up (paper 001 dropped 5 of 15).
     #[arg(long, default_value_t = 0)]
     pub warmup_runs: usize,
-    /// Significant digits of the adaptive procedure's tolerance (JCGM 101 §7.9.2).
-    #[arg(long, default_value_t = 2)]
+    /// Significant digits of the adaptive procedure's tolerance (JCGM 101 §7.9.2), 1 to 4.
+    #[arg(long, default_value_t = 2, value_parser = crate::cmd::input::ndig_arg)]
     pub ndig: u32,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -84,7 +84,7 @@ fn drift_model(a: &CapballMcArgs) -> anyhow::Result<DriftModel> {
         );
         return Ok(DriftModel::None);
     };
-    let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+    let text = crate::cmd::input::read_text(p)?;
     let rec = ucb::parse_drift_record(&text).with_context(|| p.display().to_string())?;
     let m = match a.drift {
         DriftKind::Cyclic => DriftModel::Cyclic(

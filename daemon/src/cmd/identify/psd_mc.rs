@@ -59,8 +59,7 @@ pub fn run(
             a.trials
         );
     }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = crate::cmd::input::read_text(path)?;
     let budget = PsdBudget::from_toml(&text).with_context(|| path.display().to_string())?;
     let lever = a.lever_mm.unwrap_or_else(|| {
         (layout.x_hi - layout.x_lo)

@@ -71,8 +71,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 }
 
 fn load_model(path: &Path) -> anyhow::Result<thermal::ThermalModel> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = crate::cmd::input::read_text(path)?;
     let model: thermal::ThermalModel = serde_json::from_str(&text).with_context(|| {
         format!(
             "{} is not a thermal model (write one with `metrolog thermal fit DATA.csv -o \

@@ -1,0 +1,50 @@
+//! The check shared by the `positioning_path` cargo-fuzz target (`protocol/fuzz`) and the
+//! generated-input tests (`analysis/tests/hostile_path.rs`): it panics when the analysis path
+//! of a positioning CSV breaks a promise on the input. Not part of the API.
+
+use positioning::positioning_data::PositioningData;
+use positioning::standards::{Standard, evaluate};
+
+use crate::export::{render_standards, results_csv, targets_csv};
+use crate::html_report::{ReportHeader, positioning_html};
+use crate::positioning_report::{analyze_positioning, render_text};
+
+/// A NaN or an infinity written as a number: a word `nan`, `inf` or `infinity` (any case).
+pub fn non_finite_word(text: &str) -> Option<&str> {
+    text.split(|c: char| !c.is_alphanumeric() && c != '_')
+        .find(|w| matches!(w.to_ascii_lowercase().as_str(), "nan" | "inf" | "infinity"))
+}
+
+/// CSV text → the positioning reader → ISO 230-2, drift elimination and the standards → the
+/// text report, the CSV tables and the HTML report. Never panics; what the reader accepts is
+/// reported without a NaN or an infinity in any output. Returns the outputs (`None`: the
+/// reader refused the text).
+pub fn positioning_path(text: &str) -> Option<Vec<String>> {
+    let (data, _notes) = PositioningData::from_csv_str_noted(text).ok()?;
+    let an = analyze_positioning(&data, None);
+    let standards: Vec<_> = [
+        Standard::Iso230_2_2014,
+        Standard::Iso230_2_1988,
+        Standard::Vdi3441,
+        Standard::AsmeB5_54,
+        Standard::JisB6192,
+        Standard::Gb17421_2_2016,
+    ]
+    .into_iter()
+    .map(|s| evaluate(&data, s))
+    .collect();
+    let h = ReportHeader::from_metadata(&data);
+    let outputs = vec![
+        render_text(&an),
+        render_standards(&standards),
+        targets_csv(&an.targets),
+        results_csv(&standards),
+        positioning_html(&data, &an, &standards, &h),
+    ];
+    for o in &outputs {
+        if let Some(w) = non_finite_word(o) {
+            panic!("`{w}` in an output of an accepted file:\n{o}\n--- input:\n{text}");
+        }
+    }
+    Some(outputs)
+}

@@ -19,7 +19,9 @@ pub fn svd(
     if m.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    m.try_svd(compute_u, compute_v, f64::EPSILON, MAX_ITERATIONS)
+    // nalgebra's own `svd()` stops at 5·ε: the same tolerance, so the results are those of
+    // `svd()` whenever it ends.
+    m.try_svd(compute_u, compute_v, 5.0 * f64::EPSILON, MAX_ITERATIONS)
 }
 
 #[cfg(test)]

@@ -13,6 +13,7 @@ use metrolog_log::trajectory::{TrajectoryRow, parse_trajectory};
 use serde::Deserialize;
 use toml::Spanned;
 
+pub use super::preflight::PortSpec;
 use super::storage::{self, StoragePolicy};
 
 /// Defaults, shared with the example config `deploy/metrolog.toml`. The data-sheet limits the
@@ -242,21 +243,6 @@ pub struct Config {
     pub ports: Vec<PortSpec>,
     /// `[storage]`: retention and the low-space warning (defaults when absent).
     pub storage: StoragePolicy,
-}
-
-/// A device a config names (a serial port, or a SocketCAN interface), and where.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PortSpec {
-    /// Section and key, e.g. `[interferometer] port`.
-    pub key: String,
-    /// The device path (or interface name) as written.
-    pub path: String,
-    /// A network interface (SocketCAN), not a device file.
-    pub interface: bool,
-    /// `hotplug = true`: the device may be absent at start; the service waits for it.
-    pub hotplug: bool,
-    pub line: usize,
-    pub column: usize,
 }
 
 /// Default of `[live] raw_hz`: raw batches per second and raw topic sent to the live view.

@@ -10,7 +10,20 @@
 use std::os::unix::fs::FileTypeExt as _;
 use std::path::{Path, PathBuf};
 
-use super::config::PortSpec;
+/// A device a config names (a serial port, or a SocketCAN interface), and where.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PortSpec {
+    /// Section and key, e.g. `[interferometer] port`.
+    pub key: String,
+    /// The device path (or interface name) as written.
+    pub path: String,
+    /// A network interface (SocketCAN), not a device file.
+    pub interface: bool,
+    /// `hotplug = true`: the device may be absent at start; the service waits for it.
+    pub hotplug: bool,
+    pub line: usize,
+    pub column: usize,
+}
 
 /// Where a SocketCAN interface shows when it exists.
 const NET_CLASS: &str = "/sys/class/net";

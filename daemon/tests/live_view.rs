@@ -643,12 +643,13 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
         .unwrap();
     sim.start_program();
 
-    // Running: a PSD pose value is shown, the pose being measured with its target.
+    // Running: a PSD pose value is shown, the pose being measured with its target, and the
+    // triggers are counted (they read 0 until the 256th trigger before).
     let dom = render_dom(
         &browser,
         &modules,
         url,
-        "body:has(#posek[data-of]) tr.pose[data-instrument=\"psd\"]",
+        "body:has(#posek[data-of]):has(tr.counter[data-instrument=\"trigger\"]:not([data-samples=\"0\"])) tr.pose[data-instrument=\"psd\"]",
         "live_page_running.png",
     );
     assert_fits(&dom);

@@ -554,3 +554,154 @@ async fn the_page_shows_the_temperatures() {
         "{spindle} is not among the logged {logged:?}"
     );
 }
+
+/// The trajectory file the simulator wrote, read here by hand: pose -> (x, y, z) mm.
+fn trajectory_rows(path: &Path) -> BTreeMap<u32, [f64; 3]> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let xyz = [1, 2, 3].map(|i| f[i].parse::<f64>().unwrap());
+            (f[0].parse().unwrap(), xyz)
+        })
+        .collect()
+}
+
+/// The text of the first element of `dom` with `id="..."`'s attribute `name`.
+fn attr_of_id<'a>(dom: &'a str, id: &str, name: &str) -> &'a str {
+    let at = dom
+        .find(&format!("id=\"{id}\""))
+        .unwrap_or_else(|| panic!("no #{id}"));
+    let start = dom[..at].rfind('<').unwrap();
+    let tag = &dom[start..start + dom[start..].find('>').unwrap()];
+    attr(tag, name).unwrap_or_else(|| panic!("no {name} on #{id}: {tag}"))
+}
+
+/// The essentials (alarms, the pose being measured, live readings, current pose, counters,
+/// faults) lie inside the viewport of a 1280x800 Chromium window (1280x713 with headless
+/// Chromium 13x's window frame): the page measures their boxes itself.
+fn assert_fits(dom: &str) {
+    let body = &dom[dom.find("<body").unwrap()..];
+    let body = &body[..body.find('>').unwrap()];
+    let viewport = attr(body, "data-viewport").unwrap_or("");
+    let (w, h) = viewport.split_once('x').unwrap_or(("0", "0"));
+    let (w, h): (u32, u32) = (w.parse().unwrap(), h.parse().unwrap());
+    assert!(w == 1280 && (600..=800).contains(&h), "{body}");
+    assert_eq!(
+        attr(body, "data-outside"),
+        Some(""),
+        "outside the window: {body}"
+    );
+    println!("the essentials fit a {viewport} viewport");
+}
+
+/// The operator's screen during a run with faults: the pose being measured as "pose k of N"
+/// with its target from the trajectory, alarms as banners (PSD unplugged, beam lost, datum
+/// lost), the PSD's current pose no longer green, a live reading per instrument, the reconnect
+/// in the faults list when the PSD is plugged in again, everything essential inside 1280x800.
+/// Screenshots: `live_page_running.png`, `live_page_alarms.png`, `live_page_reconnect.png`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_shows_the_pose_being_measured_and_alarms() {
+    let (Some(modules), Some(browser)) = (node_modules(), chromium()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (ports, logs) = (dir.path().join("ports"), dir.path().join("logs"));
+    std::fs::create_dir_all(&ports).unwrap();
+    let mut sc = sim::Scenario::demo();
+    sc.program.start = sim::ProgramStart::Manual;
+    sc.faults = Default::default();
+    sc.faults.beam_interruptions = vec![sim::scenario::Timed {
+        at_s: 4.0,
+        duration_s: 600.0,
+    }];
+    let sim = sim::Sim::start(sc, &ports).unwrap();
+    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
+    let cfg = dir.path().join("metrolog.toml");
+    std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
+    let trajectory = trajectory_rows(&ports.join("trajectory.csv"));
+    let mut daemon = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["run", "--config"])
+            .arg(&cfg)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
+    let mut err = Vec::new();
+    let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
+    let url = line
+        .split("page ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap();
+    sim.start_program();
+
+    // Running: a PSD pose value is shown, the pose being measured with its target, and the
+    // triggers are counted (they read 0 until the 256th trigger before).
+    let dom = render_dom(
+        &browser,
+        &modules,
+        url,
+        "body:has(#posek[data-of]):has(tr.counter[data-instrument=\"trigger\"]:not([data-samples=\"0\"])) tr.pose[data-instrument=\"psd\"]",
+        "live_page_running.png",
+    );
+    assert_fits(&dom);
+    let k: u32 = attr_of_id(&dom, "posek", "data-pose").parse().unwrap();
+    let n: usize = attr_of_id(&dom, "posek", "data-of").parse().unwrap();
+    assert_eq!(n, trajectory.len());
+    let shown: Vec<f64> = attr_of_id(&dom, "target", "data-xyz")
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(shown, trajectory[&k].to_vec(), "target of pose {k}");
+    let value = attr_of_id(&dom, "tile-interferometer", "data-value");
+    assert!(
+        value.parse::<f64>().is_ok(),
+        "interferometer reading {value}"
+    );
+
+    // The PSD unplugged and the beam broken: alarms, and the PSD's old pose not green.
+    sim.unplug(sim::Device::Psd).await.unwrap();
+    let dom = render_dom(
+        &browser,
+        &modules,
+        url,
+        "#alarms:has([data-kind=\"beam\"]):has([data-kind=\"datum\"]) [data-kind=\"unplugged\"]",
+        "live_page_alarms.png",
+    );
+    assert_fits(&dom);
+    assert!(dom.contains(">PSD UNPLUGGED since "), "{dom}");
+    assert!(dom.contains(">BEAM LOST: interferometer signal "), "{dom}");
+    assert!(
+        dom.contains("class=\"tile invalid\" id=\"tile-interferometer\""),
+        "the reading is not marked invalid: {dom}"
+    );
+    assert!(
+        dom.contains("<tr class=\"pose old\" data-instrument=\"psd\""),
+        "the PSD's old pose is still shown as current: {dom}"
+    );
+
+    // Plugged in again: the reconnect is in the faults list.
+    sim.replug(sim::Device::Psd).await.unwrap();
+    let dom = render_dom(
+        &browser,
+        &modules,
+        url,
+        "tr.fault[data-kind=\"reconnected\"][data-instrument=\"psd\"]",
+        "live_page_reconnect.png",
+    );
+    assert_fits(&dom);
+    assert!(dom.contains("data-kind=\"disconnected\" data-instrument=\"psd\""));
+    sigterm(&daemon.0);
+    let status = daemon.0.wait().unwrap();
+    drain(&err_rx, &mut err);
+    assert!(status.success(), "{}", err.join("\n"));
+    sim.shutdown().await;
+}

@@ -7,6 +7,12 @@ use tokio::sync::mpsc::error::TrySendError;
 use crate::stamper::SampleStamper;
 use crate::{Counters, DriverError, DriverEvent, EventSender, HostClock, Instrument, Sample};
 
+/// Most samples between two clock reads of [`EventReporter::tick`] (a read costs ~20 ns).
+const MAX_CLOCK_STRIDE: u64 = 256;
+/// [`EventReporter::tick`] reads the clock about this often at high rates: 100 to 200 times a
+/// second, whatever the rate; at every sample when samples are further apart.
+const CLOCK_CHECK_NS: u64 = 5_000_000;
+
 /// Counts and reports what one instrument's driver sees.
 pub(crate) struct EventReporter {
     pub(crate) instrument: Instrument,
@@ -15,6 +21,11 @@ pub(crate) struct EventReporter {
     pub(crate) clock: HostClock,
     pub(crate) counters: Counters,
     last_counters_ns: u64,
+    /// When the clock was last read for [`Self::tick`], and how many samples pass between two
+    /// reads (1 at low rates, up to [`MAX_CLOCK_STRIDE`] at high ones).
+    last_check_ns: u64,
+    clock_stride: u64,
+    next_check: u64,
     /// The message of the last error sent, so a repeated one is sent once.
     last_error: Option<String>,
     /// Data frames become samples only once streaming was started by us; what a device sends
@@ -37,6 +48,9 @@ impl EventReporter {
             clock,
             counters: Counters::default(),
             last_counters_ns: 0,
+            last_check_ns: 0,
+            clock_stride: 1,
+            next_check: 0,
             last_error: None,
             accepting: false,
             was_connected: false,
@@ -134,12 +148,27 @@ impl EventReporter {
     }
 
     /// Send a counters snapshot when `force` or about a second after the last one.
+    ///
+    /// The clock is read every `clock_stride` samples: the stride doubles while reads come
+    /// less than [`CLOCK_CHECK_NS`] apart and halves when they are more than twice that, so a
+    /// 20 kHz stream reads it every 128 to 256 samples and a slow one (triggers, a Modbus
+    /// module) at every sample. A fixed stride of 256 left the trigger's counters at 0 until
+    /// the 256th trigger.
     pub(crate) fn tick(&mut self, force: bool, stamper: &SampleStamper) {
-        // Reading the clock costs ~20 ns; only do it every 256 samples unless forced.
-        if !force && self.counters.samples & 0xFF != 0 {
+        if !force && self.counters.samples < self.next_check {
             return;
         }
         let now = self.clock.now_ns();
+        let since = now.saturating_sub(self.last_check_ns);
+        self.clock_stride = if since < CLOCK_CHECK_NS {
+            (self.clock_stride * 2).min(MAX_CLOCK_STRIDE)
+        } else if since > 2 * CLOCK_CHECK_NS {
+            (self.clock_stride / 2).max(1)
+        } else {
+            self.clock_stride
+        };
+        self.last_check_ns = now;
+        self.next_check = self.counters.samples + self.clock_stride;
         if force || now.saturating_sub(self.last_counters_ns) >= 1_000_000_000 {
             self.last_counters_ns = now;
             self.counters.clock_drift_ppm = stamper.drift_ppm();
@@ -149,5 +178,68 @@ impl EventReporter {
             };
             self.send(ev);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trigger(pose: u16) -> crate::Trigger {
+        crate::Trigger {
+            event: protocol::can::TriggerEvent::ExactStop,
+            pose,
+            nc_ms: 0,
+            host_ns: 0,
+        }
+    }
+
+    /// The snapshots' trigger counts.
+    fn counted(rx: &mut tokio::sync::mpsc::Receiver<DriverEvent>) -> Vec<u64> {
+        let mut v = Vec::new();
+        while let Ok(ev) = rx.try_recv() {
+            if let DriverEvent::Counters { counters, .. } = ev {
+                v.push(counters.samples);
+            }
+        }
+        v
+    }
+
+    /// Triggers come one every few seconds: once a second has passed, the next trigger's
+    /// counters are reported, not at the 256th trigger (the `/status` that read 0 for 245
+    /// triggers, then 256).
+    #[test]
+    fn a_slow_stream_reports_its_counters_about_once_a_second() {
+        let (tx, mut rx) = tokio::sync::mpsc::channel(1024);
+        let clock = HostClock::new();
+        let mut rep = EventReporter::new(Instrument::Trigger, "can0", clock, tx);
+        let stamper = SampleStamper::new(32, 32);
+        for pose in 1..=3 {
+            // Wait (for the clock, not a fixed time) until a second after the last snapshot.
+            let t0 = clock.now_ns();
+            while clock.now_ns() < t0 + 1_000_000_000 {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            rep.emit_trigger(trigger(pose), &stamper);
+            assert_eq!(counted(&mut rx), [u64::from(pose)]);
+        }
+    }
+
+    /// However fast the stream, the clock is read at least every 256 samples, so a snapshot
+    /// is never more than 256 samples late.
+    #[test]
+    fn the_clock_is_read_at_least_every_256_samples() {
+        let (tx, _rx) = tokio::sync::mpsc::channel(1 << 20);
+        let mut rep = EventReporter::new(Instrument::Psd, "p", HostClock::new(), tx);
+        let stamper = SampleStamper::new(32, 32);
+        let mut strides = std::collections::BTreeSet::new();
+        for _ in 0..20_000 {
+            rep.emit_trigger(trigger(0), &stamper);
+            strides.insert(rep.clock_stride);
+        }
+        assert!(
+            strides.iter().all(|s| (1..=MAX_CLOCK_STRIDE).contains(s)),
+            "{strides:?}"
+        );
     }
 }

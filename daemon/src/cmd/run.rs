@@ -394,12 +394,22 @@ async fn start_live(cfg: &Config, log_path: &std::path::Path) -> Option<crate::l
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let sensors = cfg
-        .temperature
-        .iter()
-        .flat_map(|t| t.sensors.iter().map(|s| s.name.clone()))
-        .collect();
-    match crate::live::LiveView::start(live, &cfg.run.machine, session, sensors).await {
+    let run = crate::live::RunInfo {
+        machine: cfg.run.machine.clone(),
+        session,
+        temperature_sensors: cfg
+            .temperature
+            .iter()
+            .flat_map(|t| t.sensors.iter().map(|s| s.name.clone()))
+            .collect(),
+        trajectory: cfg
+            .run
+            .trajectory
+            .iter()
+            .flat_map(|t| t.rows.iter().cloned())
+            .collect(),
+    };
+    match crate::live::LiveView::start(live, run).await {
         Ok(l) => Some(l),
         Err(e) => {
             tracing::error!("live view not started: {e:#}; the run goes on without it");

@@ -6,6 +6,7 @@ use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
+use metrolog_log::trajectory::TrajectoryRow;
 use metrolog_log::{ChannelSpec, MessageTap};
 use tokio::sync::broadcast;
 
@@ -34,6 +35,19 @@ pub struct LiveMsg {
     pub data: Vec<u8>,
 }
 
+/// What a client is told about the run when it connects (`serverInfo`).
+#[derive(Debug, Clone, Default)]
+pub struct RunInfo {
+    pub machine: String,
+    /// The log file's name.
+    pub session: String,
+    /// The temperature module's channel names (the page names the `/temperature` values with
+    /// them).
+    pub temperature_sensors: Vec<String>,
+    /// The run's pose table (the page shows "pose k of N" and the pose's target).
+    pub trajectory: Vec<TrajectoryRow>,
+}
+
 /// What the tap and the client sessions share.
 pub struct Hub {
     pub channels: Vec<ChannelSpec>,
@@ -42,16 +56,12 @@ pub struct Hub {
     /// Messages skipped by slow clients, all clients together.
     pub dropped: AtomicU64,
     published: AtomicU64,
-    /// Run identity for `serverInfo`.
-    pub session: String,
-    pub machine: String,
-    /// The temperature module's channel names (`serverInfo` metadata; the page names the
-    /// `/temperature` values with them).
-    pub temperature_sensors: Vec<String>,
+    /// The run, for `serverInfo`.
+    pub run: RunInfo,
 }
 
 impl Hub {
-    pub(crate) fn new(machine: &str, session: String) -> Hub {
+    pub(crate) fn new(run: RunInfo) -> Hub {
         let channels = metrolog_log::channel_specs();
         let latest = vec![VecDeque::new(); channels.len()];
         Hub {
@@ -60,9 +70,7 @@ impl Hub {
             latest: Mutex::new(latest),
             dropped: AtomicU64::new(0),
             published: AtomicU64::new(0),
-            session,
-            machine: machine.to_string(),
-            temperature_sensors: Vec::new(),
+            run,
         }
     }
 

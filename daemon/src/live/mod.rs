@@ -30,7 +30,7 @@ use anyhow::Context;
 use metrolog_log::MessageTap;
 use tokio_util::sync::CancellationToken;
 
-pub use hub::{BACKLOG, Hub, LiveMsg, tap};
+pub use hub::{BACKLOG, Hub, LiveMsg, RunInfo, tap};
 
 use crate::acquire::config::LiveConfig;
 
@@ -45,14 +45,8 @@ pub struct LiveView {
 
 impl LiveView {
     /// Binds `cfg.listen` and starts serving. A non-loopback address is warned about loudly:
-    /// anyone who reaches it can watch the run. `temperature_sensors` names the channels of
-    /// `/temperature` for the page.
-    pub async fn start(
-        cfg: &LiveConfig,
-        machine: &str,
-        session: String,
-        temperature_sensors: Vec<String>,
-    ) -> anyhow::Result<Self> {
+    /// anyone who reaches it can watch the run. `run` is what clients are told about the run.
+    pub async fn start(cfg: &LiveConfig, run: RunInfo) -> anyhow::Result<Self> {
         let listener = tokio::net::TcpListener::bind(cfg.listen)
             .await
             .with_context(|| {
@@ -68,9 +62,7 @@ impl LiveView {
                 addr.port()
             );
         }
-        let mut hub = Hub::new(machine, session);
-        hub.temperature_sensors = temperature_sensors;
-        let hub = Arc::new(hub);
+        let hub = Arc::new(Hub::new(run));
         let stop = CancellationToken::new();
         let task = tokio::spawn(server::serve(listener, hub.clone(), stop.clone()));
         tracing::info!(
@@ -124,7 +116,7 @@ mod tests {
 
     #[test]
     fn raw_topics_are_decimated_and_json_topics_latched() {
-        let hub = Arc::new(Hub::new("m", "s".into()));
+        let hub = Arc::new(Hub::new(RunInfo::default()));
         let mut rx = hub.subscribe();
         let mut t = tap(hub.clone(), 10);
         let raw = hub.channels[0].topic;
@@ -154,9 +146,7 @@ mod tests {
             listen: "127.0.0.1:0".parse().unwrap(),
             raw_hz: 10,
         };
-        let view = LiveView::start(&cfg, "m", "s".into(), Vec::new())
-            .await
-            .unwrap();
+        let view = LiveView::start(&cfg, RunInfo::default()).await.unwrap();
         let sock = tokio::net::TcpSocket::new_v4().unwrap();
         sock.set_recv_buffer_size(4096).unwrap();
         let mut c = sock.connect(view.addr()).await.unwrap();
@@ -202,7 +192,7 @@ mod tests {
 
     #[test]
     fn a_slow_client_loses_the_oldest_and_the_sender_never_waits() {
-        let hub = Arc::new(Hub::new("m", "s".into()));
+        let hub = Arc::new(Hub::new(RunInfo::default()));
         let mut rx = hub.subscribe();
         let mut t = tap(hub.clone(), 10);
         for k in 0..(BACKLOG as u64 + 10) {

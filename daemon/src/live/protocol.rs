@@ -13,6 +13,8 @@ use serde_json::{Value, json};
 
 use metrolog_log::ChannelSpec;
 
+use super::hub::RunInfo;
+
 /// The WebSocket subprotocol.
 pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";
 
@@ -24,16 +26,27 @@ pub fn channel_id(index: usize) -> u64 {
     index as u64 + 1
 }
 
-/// `temperature_sensors`: the temperature module's channel names, in `/temperature`'s
-/// channel order, comma-separated in the metadata (empty without a module).
-pub fn server_info(machine: &str, session: &str, temperature_sensors: &[String]) -> String {
+/// `metadata` (string values, as the protocol wants): the machine, the temperature module's
+/// channel names (in `/temperature`'s channel order, comma-separated; empty without a module)
+/// and the trajectory as JSON text, `[[pose, x_mm, y_mm, z_mm], ...]` (`[]` without one), so
+/// the page can say "pose k of N" and the target of the pose being measured.
+pub fn server_info(run: &RunInfo) -> String {
+    let trajectory: Vec<Value> = run
+        .trajectory
+        .iter()
+        .map(|r| json!([r.pose, r.x_mm, r.y_mm, r.z_mm]))
+        .collect();
     json!({
         "op": "serverInfo",
         "name": concat!("metrolog ", env!("CARGO_PKG_VERSION")),
         "capabilities": [],
         "supportedEncodings": [],
-        "metadata": { "machine": machine, "temperature_sensors": temperature_sensors.join(",") },
-        "sessionId": session,
+        "metadata": {
+            "machine": run.machine,
+            "temperature_sensors": run.temperature_sensors.join(","),
+            "trajectory": Value::Array(trajectory).to_string(),
+        },
+        "sessionId": run.session,
     })
     .to_string()
 }

@@ -233,11 +233,7 @@ impl Session {
     async fn run(mut self, mut ws: Ws, stop: CancellationToken) -> u64 {
         let mut rx = self.hub.subscribe();
         let hello = [
-            protocol::server_info(
-                &self.hub.machine,
-                &self.hub.session,
-                &self.hub.temperature_sensors,
-            ),
+            protocol::server_info(&self.hub.run),
             protocol::advertise(&self.hub.channels),
         ];
         for text in hello {

@@ -3,7 +3,7 @@
 // DevTools protocol (a page fed over a WebSocket fills in after it loads, which --dump-dom and
 // --screenshot do not wait for). Prints the page's HTML on stdout once
 // `document.querySelectorAll(SELECTOR).length > 0` (or fails after 90 s), and saves a
-// screenshot.
+// screenshot of the 1280x800 window.
 //
 // Usage: NODE_PATH=<npm dir>/node_modules node render_page.cjs CHROMIUM URL SELECTOR SHOT.png PROFILE
 // (PROFILE: an empty directory for Chromium's profile, which the caller removes).
@@ -18,7 +18,7 @@ const LIMIT_MS = 90000;
 const browser = spawn(bin, [
   "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
   "--disable-component-update", "--disable-sync", "--no-first-run",
-  "--window-size=1200,1400", "--remote-debugging-port=0", `--user-data-dir=${profile}`,
+  "--window-size=1280,800", "--remote-debugging-port=0", `--user-data-dir=${profile}`,
   "about:blank",
 ], { stdio: ["ignore", "ignore", "pipe"] });
 

@@ -20,7 +20,8 @@ pub struct DiagnoseOptions {
     pub fit: FitOptions,
     /// What a named effect must gain on held-out blocks.
     pub finding_rule: GainRule,
-    /// Variance inflation above which sensors are collinear (100).
+    /// Variance inflation above which sensors are collinear (30; calibrated on generated runs,
+    /// seeds 500 000+, see docs/methods.md).
     pub vif_limit: f64,
     /// Short-term noise, relative to the median sensor's, above which a sensor is noisy (5).
     pub noise_ratio_limit: f64,
@@ -40,7 +41,7 @@ impl Default for DiagnoseOptions {
         Self {
             fit: FitOptions::default(),
             finding_rule: GainRule::default(),
-            vif_limit: 100.0,
+            vif_limit: 30.0,
             noise_ratio_limit: 5.0,
             jump_scales: 10.0,
             unexplained_ratio: 3.0,
@@ -231,38 +232,10 @@ fn diagnose_channel(
     if let Some(f) = collinear_finding(ds, s, &pool.sensors, &s0, &s1, o) {
         findings.push(f);
     }
-    let no_spindle = Pool {
-        spindle_exponents: vec![],
-        asymmetric: false,
-        ..pool.clone()
-    };
-    let m2 = s
-        .forward(vec![], &no_spindle, o.fit.max_terms)
-        .ok_or_else(err)?;
-    let m = s.select(&pool, o.fit.max_terms).ok_or_else(err)?;
-    let m = if m2.score.total() < m.score.total() {
-        m2.clone()
-    } else {
-        m
-    };
+    let fam = families(s, &pool, &all, &s0, &s1, o).ok_or_else(err)?;
     let noise = short_term_noise(s.y);
-    let big_enough = |g: &HeldOutGain| {
-        let explained = (g.rms_before_um.powi(2) - g.rms_after_um.powi(2))
-            .max(0.0)
-            .sqrt();
-        explained >= o.min_effect_noise_ratio * noise
-    };
-    findings.extend(
-        lag_findings(ds, s, &m, o)
-            .into_iter()
-            .chain(spindle_findings(s, &m, &m2, o))
-            .filter(|f| match f {
-                Finding::Lag { gain, .. }
-                | Finding::UnseenHeatSource { gain, .. }
-                | Finding::HeatingCoolingAsymmetry { gain, .. } => big_enough(gain),
-                _ => true,
-            }),
-    );
+    findings.extend(effect_findings(ds, s, &fam, noise, o));
+    let (m2, m) = (&fam.no_spindle, &fam.best);
     let ladder = vec![
         Rung {
             model: "static, all sensors".into(),
@@ -388,100 +361,188 @@ fn collinear_finding(
     })
 }
 
-/// Each lagged sensor of the model whose lag, set to 0 with the others searched again,
-/// loses significantly.
-fn lag_findings(
+/// The best model of each family: with everything, sensors with lags but no spindle heat,
+/// no sensor lags, symmetric spindle heat only, static on chosen sensors, static on all.
+struct Families {
+    best: Selection,
+    no_spindle: Selection,
+    members: Vec<Selection>,
+}
+
+fn families(
+    s: &Search,
+    pool: &Pool,
+    all: &[Spec],
+    s0: &crate::cv::CvScore,
+    s1: &Selection,
+    o: &DiagnoseOptions,
+) -> Option<Families> {
+    let no_spindle_pool = Pool {
+        spindle_exponents: vec![],
+        asymmetric: false,
+        ..pool.clone()
+    };
+    // Each family searched from nothing and from the static chosen sensors: a greedy path
+    // from nothing can lock a sensor's lag in place of another sensor.
+    let from_static = |p: &Pool| s.forward(s1.specs.clone(), p, o.fit.max_terms);
+    let no_spindle = [
+        s.forward(vec![], &no_spindle_pool, o.fit.max_terms),
+        from_static(&no_spindle_pool),
+    ]
+    .into_iter()
+    .flatten()
+    .min_by(|a, b| a.score.total().total_cmp(&b.score.total()))?;
+    let no_lags = Search {
+        sensor_lags: false,
+        ..clone_search(s)
+    };
+    let symmetric = Pool {
+        asymmetric: false,
+        ..pool.clone()
+    };
+    let members: Vec<Selection> = [
+        s.select(pool, o.fit.max_terms),
+        Some(no_spindle.clone()),
+        no_lags.select(pool, o.fit.max_terms),
+        s.select(&symmetric, o.fit.max_terms),
+        from_static(pool),
+        from_static(&symmetric),
+        no_lags.forward(s1.specs.clone(), pool, o.fit.max_terms),
+        Some(s1.clone()),
+        Some(Selection {
+            specs: all.to_vec(),
+            score: s0.clone(),
+        }),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let best = best_by_score(members.iter(), |_| true)?.clone();
+    Some(Families {
+        best,
+        no_spindle,
+        members,
+    })
+}
+
+fn best_by_score<'a>(
+    it: impl Iterator<Item = &'a Selection>,
+    keep: impl Fn(&Selection) -> bool,
+) -> Option<&'a Selection> {
+    it.filter(|m| keep(m))
+        .min_by(|a, b| a.score.total().total_cmp(&b.score.total()))
+}
+
+fn has_lag(m: &Selection) -> bool {
+    m.specs
+        .iter()
+        .any(|sp| matches!(sp.src, Src::Sensor(_)) && sp.tau_heat_s > 0.0)
+}
+
+fn spindle_spec(m: &Selection) -> Option<(usize, Spec)> {
+    m.specs
+        .iter()
+        .copied()
+        .enumerate()
+        .find(|(_, sp)| matches!(sp.src, Src::Spindle(_)))
+}
+
+/// Heating and cooling time constants at least this far apart (ratio) to be called an
+/// asymmetry: closer ones are one time constant within what the held-out blocks resolve.
+const MIN_ASYMMETRY_RATIO: f64 = 1.5;
+
+fn has_asymmetry(m: &Selection) -> bool {
+    spindle_spec(m).is_some_and(|(_, sp)| {
+        let (a, b) = (
+            sp.tau_heat_s.max(sp.tau_cool_s),
+            sp.tau_heat_s.min(sp.tau_cool_s),
+        );
+        a >= MIN_ASYMMETRY_RATIO * b.max(1e-9)
+    })
+}
+
+/// An effect is named when the best model of the families that have it beats the best of
+/// the families that do not, on held-out blocks (the finding rule) and by an explained RMS,
+/// √(without² − with²), of at least `min_effect_noise_ratio` × the displacement's noise.
+fn effect_gain(
+    fam: &Families,
+    has: impl Fn(&Selection) -> bool,
+    noise: f64,
+    o: &DiagnoseOptions,
+) -> Option<(Selection, HeldOutGain)> {
+    let with = best_by_score(fam.members.iter(), &has)?;
+    let without = best_by_score(fam.members.iter(), |m| !has(m))?;
+    let gain = HeldOutGain::between(&without.score, &with.score, &o.finding_rule);
+    let explained = (gain.rms_before_um.powi(2) - gain.rms_after_um.powi(2))
+        .max(0.0)
+        .sqrt();
+    (gain.significant && explained >= o.min_effect_noise_ratio * noise)
+        .then(|| (with.clone(), gain))
+}
+
+/// The lagged sensor term whose contribution (coefficient × its input's spread) is largest:
+/// a fast lag beside a slower one of the same sensor is a correction, not the lag.
+fn largest_lag(s: &Search, m: &Selection) -> Option<(usize, f64)> {
+    let cols = s.columns(&m.specs)?;
+    m.specs
+        .iter()
+        .enumerate()
+        .filter_map(|(idx, sp)| match sp.src {
+            Src::Sensor(i) if sp.tau_heat_s > 0.0 => {
+                let c = coefficient_of(s, &m.specs, idx)?;
+                let col = &cols[idx];
+                let mean = col.iter().sum::<f64>() / col.len().max(1) as f64;
+                let spread = col.iter().map(|v| (v - mean).abs()).sum::<f64>();
+                Some(((c * spread).abs(), i, sp.tau_heat_s))
+            }
+            _ => None,
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, i, t)| (i, t))
+}
+
+fn effect_findings(
     ds: &ThermalDataset,
     s: &Search,
-    m: &Selection,
+    fam: &Families,
+    noise: f64,
     o: &DiagnoseOptions,
 ) -> Vec<Finding> {
     let mut out = vec![];
-    for (idx, spec) in m.specs.iter().enumerate() {
-        let Src::Sensor(i) = spec.src else { continue };
-        if spec.tau_heat_s == 0.0 {
-            continue;
-        }
-        let mut without = m.specs.clone();
-        without[idx] = Spec::symmetric(spec.src, 0.0);
-        let others = Search {
-            sensor_lags: true,
-            ..clone_search(s)
-        };
-        let Some(sw) = backfit_except(&others, &mut without, idx) else {
-            continue;
-        };
-        let gain = HeldOutGain::between(&sw, &m.score, &o.finding_rule);
-        if gain.significant {
+    if let Some((m, gain)) = effect_gain(fam, has_lag, noise, o) {
+        let lagged = largest_lag(s, &m);
+        if let Some((i, tau_s)) = lagged {
             out.push(Finding::Lag {
                 sensor: ds.sensor_names[i].clone(),
-                tau_s: spec.tau_heat_s,
+                tau_s,
                 gain,
             });
         }
     }
-    out
-}
-
-fn backfit_except(s: &Search, specs: &mut [Spec], keep: usize) -> Option<crate::cv::CvScore> {
-    let mut score = s.score(specs)?;
-    for idx in (0..specs.len()).filter(|&i| i != keep) {
-        let (spec, sc) = s.refine(specs, idx);
-        if sc.total() < score.total() {
-            specs[idx] = spec;
-            score = sc;
-        }
-    }
-    Some(score)
-}
-
-/// Spindle heat named when the best model without it loses significantly; its asymmetry
-/// when one time constant for both loses significantly.
-fn spindle_findings(
-    s: &Search,
-    m: &Selection,
-    m2: &Selection,
-    o: &DiagnoseOptions,
-) -> Vec<Finding> {
-    let mut out = vec![];
-    let Some((idx, spec)) = m
-        .specs
-        .iter()
-        .enumerate()
-        .find(|(_, sp)| matches!(sp.src, Src::Spindle(_)))
-    else {
+    let Some((m, gain)) = effect_gain(fam, |m| spindle_spec(m).is_some(), noise, o) else {
         return out;
     };
-    let gain = HeldOutGain::between(&m2.score, &m.score, &o.finding_rule);
-    if !gain.significant {
+    let Some((idx, spec)) = spindle_spec(&m) else {
         return out;
-    }
+    };
     let Src::Spindle(exponent) = spec.src else {
         return out;
     };
-    let coefficient = coefficient_of(s, &m.specs, idx).unwrap_or(0.0);
     out.push(Finding::UnseenHeatSource {
         exponent,
         tau_heat_s: spec.tau_heat_s,
         tau_cool_s: spec.tau_cool_s,
-        coefficient,
+        coefficient: coefficient_of(s, &m.specs, idx).unwrap_or(0.0),
         gain,
     });
-    if spec.is_asymmetric() {
-        let mut sym = m.specs.clone();
-        sym[idx] = Spec::symmetric(spec.src, (spec.tau_heat_s * spec.tau_cool_s).sqrt());
-        let (r, _) = s.refine(&sym, idx);
-        sym[idx] = r;
-        if let Some(ss) = s.backfit(&mut sym) {
-            let g = HeldOutGain::between(&ss, &m.score, &o.finding_rule);
-            if g.significant {
-                out.push(Finding::HeatingCoolingAsymmetry {
-                    tau_heat_s: spec.tau_heat_s,
-                    tau_cool_s: spec.tau_cool_s,
-                    gain: g,
-                });
-            }
-        }
+    if let Some((m, gain)) = effect_gain(fam, has_asymmetry, noise, o)
+        && let Some((_, spec)) = spindle_spec(&m)
+    {
+        out.push(Finding::HeatingCoolingAsymmetry {
+            tau_heat_s: spec.tau_heat_s,
+            tau_cool_s: spec.tau_cool_s,
+            gain,
+        });
     }
     out
 }

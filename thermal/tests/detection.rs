@@ -133,3 +133,38 @@ fn show_one_run() {
     let d = diagnose(&ds, &DiagnoseOptions::default()).unwrap();
     eprintln!("{}", d.render());
 }
+
+/// Calibration dump: every candidate finding with its held-out statistics, thresholds off.
+/// THERMAL_DUMP="runs seed0 [1: default thresholds]" (calibrate on seeds apart from the reported 100 000+).
+#[test]
+#[ignore = "a calibration aid: THERMAL_DUMP='20 500000' cargo test ... dump_candidates -- --ignored --nocapture"]
+fn dump_candidates() {
+    let Ok(spec) = std::env::var("THERMAL_DUMP") else {
+        return;
+    };
+    let v: Vec<u64> = spec
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let (runs, seed0) = (v[0], v[1]);
+    let mut opts = DiagnoseOptions::default();
+    if v.get(2) != Some(&1) {
+        opts.finding_rule.min_t = f64::NEG_INFINITY;
+        opts.min_effect_noise_ratio = 0.0;
+        opts.vif_limit = 1.0;
+    }
+    for (ci, class) in CLASSES.iter().enumerate() {
+        for r in 0..runs {
+            let seed = seed0 + 1000 * ci as u64 + r;
+            let run = generate(class, seed, 20.0, 60.0);
+            let ds = ThermalDataset::from_csv(&run.csv).unwrap();
+            let d = diagnose(&ds, &opts).unwrap();
+            let ch = &d.channels[0];
+            let line = serde_json::json!({
+                "class": class_name(class), "seed": seed, "noise": ch.noise_um,
+                "expect": expected_kinds(class), "findings": ch.findings, "ladder": ch.ladder,
+            });
+            println!("DUMP {line}");
+        }
+    }
+}

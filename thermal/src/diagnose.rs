@@ -461,23 +461,60 @@ fn has_asymmetry(m: &Selection) -> bool {
     })
 }
 
-/// An effect is named when the best model of the families that have it beats the best of
-/// the families that do not, on held-out blocks (the finding rule) and by an explained RMS,
-/// √(without² − with²), of at least `min_effect_noise_ratio` × the displacement's noise.
-fn effect_gain(
+/// The best model with an effect, and its gain over the best model without it.
+fn family_gain(
     fam: &Families,
     has: impl Fn(&Selection) -> bool,
-    noise: f64,
     o: &DiagnoseOptions,
 ) -> Option<(Selection, HeldOutGain)> {
     let with = best_by_score(fam.members.iter(), &has)?;
     let without = best_by_score(fam.members.iter(), |m| !has(m))?;
     let gain = HeldOutGain::between(&without.score, &with.score, &o.finding_rule);
+    Some((with.clone(), gain))
+}
+
+/// Whether a gain is a finding: it passes the finding rule on held-out blocks and explains
+/// an RMS, √(before² − after²), of at least `min_effect_noise_ratio` × the displacement's
+/// short-term noise.
+fn passes(gain: &HeldOutGain, noise: f64, o: &DiagnoseOptions) -> bool {
     let explained = (gain.rms_before_um.powi(2) - gain.rms_after_um.powi(2))
         .max(0.0)
         .sqrt();
-    (gain.significant && explained >= o.min_effect_noise_ratio * noise)
-        .then(|| (with.clone(), gain))
+    gain.significant && explained >= o.min_effect_noise_ratio * noise
+}
+
+fn has_spindle(m: &Selection) -> bool {
+    spindle_spec(m).is_some()
+}
+
+/// The smallest adequate model: nothing when no lag or spindle heat passes against the
+/// static fits; else lags alone or spindle heat alone (the better of the two on held-out
+/// blocks) when the best model with both does not pass against it; else the best model.
+/// Lags and spindle heat both follow the spindle's heat, so either can stand in for the
+/// other: the effect named is the one the data need, not every one that helps a little.
+fn chosen_model(fam: &Families, noise: f64, o: &DiagnoseOptions) -> Option<Selection> {
+    let dynamic = |m: &Selection| has_lag(m) || has_spindle(m);
+    let (best, gain) = family_gain(fam, dynamic, o)?;
+    if !passes(&gain, noise, o) {
+        return None;
+    }
+    let lag_only = best_by_score(fam.members.iter(), |m| has_lag(m) && !has_spindle(m));
+    let spindle_only = best_by_score(fam.members.iter(), |m| has_spindle(m) && !has_lag(m));
+    let single = [lag_only, spindle_only]
+        .into_iter()
+        .flatten()
+        .min_by(|a, b| a.score.total().total_cmp(&b.score.total()));
+    match single {
+        Some(one) => {
+            let more = HeldOutGain::between(&one.score, &best.score, &o.finding_rule);
+            Some(if passes(&more, noise, o) {
+                best
+            } else {
+                one.clone()
+            })
+        }
+        None => Some(best),
+    }
 }
 
 /// The lagged sensor term whose contribution (coefficient × its input's spread) is largest:
@@ -509,23 +546,24 @@ fn effect_findings(
     o: &DiagnoseOptions,
 ) -> Vec<Finding> {
     let mut out = vec![];
-    if let Some((m, gain)) = effect_gain(fam, has_lag, noise, o) {
-        let lagged = largest_lag(s, &m);
-        if let Some((i, tau_s)) = lagged {
-            out.push(Finding::Lag {
-                sensor: ds.sensor_names[i].clone(),
-                tau_s,
-                gain,
-            });
-        }
-    }
-    let Some((m, gain)) = effect_gain(fam, |m| spindle_spec(m).is_some(), noise, o) else {
+    let Some(m) = chosen_model(fam, noise, o) else {
         return out;
     };
+    if has_lag(&m)
+        && let Some((i, tau_s)) = largest_lag(s, &m)
+        && let Some((_, gain)) = family_gain(fam, has_lag, o)
+    {
+        out.push(Finding::Lag {
+            sensor: ds.sensor_names[i].clone(),
+            tau_s,
+            gain,
+        });
+    }
     let Some((idx, spec)) = spindle_spec(&m) else {
         return out;
     };
-    let Src::Spindle(exponent) = spec.src else {
+    let (Src::Spindle(exponent), Some((_, gain))) = (spec.src, family_gain(fam, has_spindle, o))
+    else {
         return out;
     };
     out.push(Finding::UnseenHeatSource {
@@ -535,7 +573,8 @@ fn effect_findings(
         coefficient: coefficient_of(s, &m.specs, idx).unwrap_or(0.0),
         gain,
     });
-    if let Some((m, gain)) = effect_gain(fam, has_asymmetry, noise, o)
+    if let Some((m, gain)) = family_gain(fam, has_asymmetry, o)
+        && passes(&gain, noise, o)
         && let Some((_, spec)) = spindle_spec(&m)
     {
         out.push(Finding::HeatingCoolingAsymmetry {

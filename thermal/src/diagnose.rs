@@ -178,17 +178,77 @@ pub fn diagnose(
     crate::baseline::static_fit(ds, o.fit.blocks)?;
     let screen = screen_sensors(ds, o);
     let refs = reference_temperatures(ds);
-    let inputs = Inputs::new(ds, &refs);
-    let base_pool = pool(ds, &o.fit)?;
+    // One unseen heat source is one spindle term: several, with their time constants, can
+    // stand in for any sensor's lag (every node of a linear network heated by the spindle
+    // is a sum of lagged spindle inputs), and the effect named would mean nothing.
+    let base_pool = Pool {
+        max_spindle_terms: 1,
+        ..pool(ds, &o.fit)?
+    };
+    let inputs = with_best_hold(ds, &refs, &base_pool, o);
+    let mut sensor_notes = screen.notes.clone();
+    if inputs.spindle_hold() != 0.5 {
+        sensor_notes.push(format!(
+            "spindle speed: a step's speed taken as {:.1} × its first reading + {:.1} × its second (better on held-out blocks than a change halfway between readings)",
+            inputs.spindle_hold(),
+            1.0 - inputs.spindle_hold()
+        ));
+    }
     let mut channels = vec![];
     for (c, y) in ds.displacements_um.iter().enumerate() {
         let search = searcher(&inputs, y, &o.fit);
         channels.push(diagnose_channel(ds, &search, &base_pool, &screen, o, c)?);
     }
     Ok(ThermalDiagnosis {
-        sensor_notes: screen.notes,
+        sensor_notes,
         channels,
     })
+}
+
+/// The timing of the speed readings is a property of the logger, not of the machine: a
+/// change halfway between readings (0.5), or a reading that holds until the next (1) or
+/// that holds since the one before (0). The one kept is the one whose simplest spindle
+/// model (static sensors plus one lagged spindle term, chosen forward) predicts the held-out
+/// blocks of every channel best.
+fn with_best_hold(
+    ds: &ThermalDataset,
+    refs: &[f64],
+    base_pool: &Pool,
+    o: &DiagnoseOptions,
+) -> Inputs {
+    if ds.spindle_rpm.is_none() || base_pool.spindle_exponents.is_empty() {
+        return Inputs::new(ds, refs);
+    }
+    let simple = Pool {
+        asymmetric: false,
+        ..base_pool.clone()
+    };
+    let all: Vec<Spec> = base_pool
+        .sensors
+        .iter()
+        .map(|&i| Spec::symmetric(Src::Sensor(i), 0.0))
+        .collect();
+    let score = |inputs: &Inputs| -> f64 {
+        ds.displacements_um
+            .iter()
+            .map(|y| {
+                let s = Search {
+                    sensor_lags: false,
+                    ..searcher(inputs, y, &o.fit)
+                };
+                s.forward(all.clone(), &simple, o.fit.max_terms + all.len())
+                    .map_or(f64::INFINITY, |m| m.score.total())
+            })
+            .sum()
+    };
+    [0.5, 1.0, 0.0]
+        .into_iter()
+        .map(|w| {
+            let inputs = Inputs::new(ds, refs).with_spindle_hold(w);
+            (score(&inputs), inputs)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or_else(|| Inputs::new(ds, refs), |(_, i)| i)
 }
 
 fn nonfinite(ds: &ThermalDataset, c: usize) -> ThermalError {
@@ -214,9 +274,9 @@ fn diagnose_channel(
     let s0 = s.score(&all).ok_or_else(err)?;
     let mut findings = vec![];
     let mut notes = vec![];
-    let dropped = noisy_findings(ds, s, &all, &s0, screen, o, &mut findings, &mut notes);
+    let noisy = noisy_findings(ds, s, &all, &s0, screen, o, &mut findings);
     let mut pool = base_pool.clone();
-    pool.sensors.retain(|i| !dropped.contains(i));
+    pool.sensors.retain(|i| !noisy.dropped.contains(i));
     let static_pool = Pool {
         spindle_exponents: vec![],
         asymmetric: false,
@@ -234,6 +294,7 @@ fn diagnose_channel(
     }
     let fam = families(s, &pool, &all, &s0, &s1, o).ok_or_else(err)?;
     let noise = short_term_noise(s.y);
+    undecided_noisy(ds, &noisy.undecided, &fam.best, &mut findings, &mut notes);
     findings.extend(effect_findings(ds, s, &fam, noise, o));
     let (m2, m) = (&fam.no_spindle, &fam.best);
     let ladder = vec![
@@ -285,8 +346,14 @@ fn clone_search<'a>(s: &Search<'a>) -> Search<'a> {
     }
 }
 
+/// A flagged sensor the static fit does not need, or kept for the extended model to decide.
+struct NoisyScreen {
+    dropped: Vec<usize>,
+    /// Flagged sensors the static fit needs: (sensor, noise ratio, jumps, static gain).
+    undecided: Vec<(usize, f64, usize, HeldOutGain)>,
+}
+
 /// A flagged sensor is named when the static fit does not lose without it.
-#[allow(clippy::too_many_arguments)]
 fn noisy_findings(
     ds: &ThermalDataset,
     s: &Search,
@@ -295,9 +362,11 @@ fn noisy_findings(
     screen: &SensorScreen,
     o: &DiagnoseOptions,
     findings: &mut Vec<Finding>,
-    notes: &mut Vec<String>,
-) -> Vec<usize> {
-    let mut dropped = vec![];
+) -> NoisyScreen {
+    let mut out = NoisyScreen {
+        dropped: vec![],
+        undecided: vec![],
+    };
     for &(i, ratio, nj) in &screen.flagged {
         let without: Vec<Spec> = all
             .iter()
@@ -308,23 +377,46 @@ fn noisy_findings(
             continue;
         };
         let gain = HeldOutGain::between(s0, &sw, &o.finding_rule);
-        let name = ds.sensor_names[i].clone();
         if gain.rms_after_um <= (1.0 + o.finding_rule.min_relative_gain) * gain.rms_before_um {
+            findings.push(Finding::NoisySensor {
+                sensor: ds.sensor_names[i].clone(),
+                noise_ratio: ratio,
+                jumps: nj,
+                gain,
+            });
+            out.dropped.push(i);
+        } else {
+            out.undecided.push((i, ratio, nj, gain));
+        }
+    }
+    out
+}
+
+/// A flagged sensor the static fit needs is named when the extended model does not use it
+/// (the static fit leaned on it for what lags or spindle heat explain); otherwise a note.
+fn undecided_noisy(
+    ds: &ThermalDataset,
+    undecided: &[(usize, f64, usize, HeldOutGain)],
+    best: &Selection,
+    findings: &mut Vec<Finding>,
+    notes: &mut Vec<String>,
+) {
+    for &(i, ratio, nj, gain) in undecided {
+        let name = ds.sensor_names[i].clone();
+        if best.specs.iter().all(|sp| sp.src != Src::Sensor(i)) {
             findings.push(Finding::NoisySensor {
                 sensor: name,
                 noise_ratio: ratio,
                 jumps: nj,
                 gain,
             });
-            dropped.push(i);
         } else {
             notes.push(format!(
-                "sensor {name} is noisy or jumps but carries information: the static fit's held-out RMS rises {:.3} → {:.3} µm without it",
+                "sensor {name} is noisy or jumps but carries information: the static fit's held-out RMS rises {:.3} → {:.3} µm without it, and the extended model uses it",
                 gain.rms_before_um, gain.rms_after_um
             ));
         }
     }
-    dropped
 }
 
 /// Collinear sensors: variance inflation above the limit in the static design (all sensors
@@ -408,6 +500,8 @@ fn families(
         from_static(pool),
         from_static(&symmetric),
         no_lags.forward(s1.specs.clone(), pool, o.fit.max_terms),
+        no_lags.forward(all.to_vec(), pool, o.fit.max_terms + all.len()),
+        s.forward(all.to_vec(), pool, o.fit.max_terms + all.len()),
         Some(s1.clone()),
         Some(Selection {
             specs: all.to_vec(),

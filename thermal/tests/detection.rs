@@ -85,35 +85,58 @@ fn check(rows: &[Row], min_detect: f64, max_false: f64) {
 }
 
 #[test]
-#[ignore = "below target: 6 runs per class, classes from 16.7 % (lag+unseen, asymmetry+noisy) to 100 % named, 16.7 % of none runs and up to 83 % of asymmetry+noisy runs name an effect not there (docs/methods.md)"]
+#[ignore = "below target: 6 runs per class, classes from 33 % (asymmetry+noisy) to 100 % named, 4 of 90 runs name an effect not there (docs/methods.md)"]
 fn hidden_effects_are_named_fast() {
     let rows = sweep(6, 1);
     check(&rows, 5.0 / 6.0, 0.05);
 }
 
-/// The default (CI) guard, ~15 s: the same 6 runs per class, held to what the code reaches
-/// now (not the targets): the unseen heat source and the noisy sensor named in 5 of 6 runs,
-/// and at most 1 of the 6 runs without effects naming one.
+/// The default (CI) guard, ~15-50 s: the same 6 runs per class, held to what the code
+/// reaches now (not the targets; docs/methods.md): each class named in at least as many runs
+/// as now, and no more runs naming an effect not there than now (4 of the 90).
 #[test]
 fn fast_sweep_holds_its_current_level() {
+    // (class, least runs of 6 with every effect named, most runs naming one not there)
+    const LEVEL: &[(&str, usize, usize)] = &[
+        ("none", 0, 0),
+        ("lag", 6, 0),
+        ("unseen", 6, 1),
+        ("asymmetry", 6, 0),
+        ("noisy", 6, 1),
+        ("collinear", 6, 0),
+        ("lag+unseen", 6, 1),
+        ("lag+asymmetry", 5, 0),
+        ("lag+noisy", 5, 0),
+        ("lag+collinear", 5, 0),
+        ("unseen+noisy", 5, 0),
+        ("unseen+collinear", 5, 1),
+        ("asymmetry+noisy", 2, 0),
+        ("asymmetry+collinear", 5, 0),
+        ("noisy+collinear", 4, 0),
+    ];
     let rows = sweep(6, 1);
     print_table(&rows);
     for r in &rows {
-        if r.class == "unseen" || r.class == "noisy" {
-            assert!(r.detected >= 5, "{}: {} of 6 named", r.class, r.detected);
-        }
-        if r.class == "none" {
-            assert!(
-                r.false_runs <= 1,
-                "none: {} of 6 runs name an effect",
-                r.false_runs
-            );
-        }
+        let Some(&(_, least, most)) = LEVEL.iter().find(|l| l.0 == r.class) else {
+            panic!("class {} has no held level", r.class);
+        };
+        assert!(
+            r.class == "none" || r.detected >= least,
+            "{}: {} of 6 named, held at {least}",
+            r.class,
+            r.detected
+        );
+        assert!(
+            r.false_runs <= most,
+            "{}: {} of 6 runs name an effect not there, held at {most}",
+            r.class,
+            r.false_runs
+        );
     }
 }
 
 #[test]
-#[ignore = "100 runs per class (~6 min): below target (≥ 95 % named, ≤ 2 % false): named 12-100 % by class, 13 % of none runs and up to 42 % of a class name an effect not there; table in docs/methods.md"]
+#[ignore = "100 runs per class (~5 min unloaded): below target (≥ 95 % named, ≤ 2 % false): named 45-100 % by class, 3.4 % of all runs (5 % of none runs) name an effect not there; table in docs/methods.md"]
 fn hidden_effects_are_named_sweep() {
     let rows = sweep(100, 100_000);
     check(&rows, 0.95, 0.02);
@@ -137,7 +160,7 @@ fn show_one_run() {
 /// Calibration dump: every candidate finding with its held-out statistics, thresholds off.
 /// THERMAL_DUMP="runs seed0 [1: default thresholds]" (calibrate on seeds apart from the reported 100 000+).
 #[test]
-#[ignore = "a calibration aid: THERMAL_DUMP='20 500000' cargo test ... dump_candidates -- --ignored --nocapture"]
+#[ignore = "a calibration aid: THERMAL_DUMP='20 500000 [1]' cargo test ... dump_candidates -- --ignored --nocapture"]
 fn dump_candidates() {
     let Ok(spec) = std::env::var("THERMAL_DUMP") else {
         return;

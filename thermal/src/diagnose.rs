@@ -4,7 +4,7 @@
 //! spindle heat, its heating/cooling asymmetry) and names an effect only when taking it out
 //! again of the extended model loses significantly on held-out time blocks.
 
-use crate::cv::{BlockStats, GainRule, HeldOutGain};
+use crate::cv::{BlockStats, Blocks, GainRule, HeldOutGain, predict_row};
 use crate::dataset::ThermalDataset;
 use crate::error::ThermalError;
 use crate::inputs::{Inputs, Spec, Src};
@@ -20,7 +20,11 @@ pub struct DiagnoseOptions {
     pub fit: FitOptions,
     /// What a named effect must gain on held-out blocks.
     pub finding_rule: GainRule,
-    /// Variance inflation above which sensors are collinear (30; calibrated on generated runs,
+    /// A sensor the others reproduce to within this many times its short-term noise is
+    /// collinear with them, whatever the variance inflation (1.3; see `redundancy`, calibrated
+    /// on seeds 500 000+).
+    pub redundant_noise_ratio: f64,
+    /// Variance inflation above which sensors are collinear (100; calibrated on generated runs,
     /// seeds 500 000+, see docs/methods.md).
     pub vif_limit: f64,
     /// Short-term noise, relative to the median sensor's, above which a sensor is noisy (5).
@@ -41,7 +45,8 @@ impl Default for DiagnoseOptions {
         Self {
             fit: FitOptions::default(),
             finding_rule: GainRule::default(),
-            vif_limit: 30.0,
+            vif_limit: 100.0,
+            redundant_noise_ratio: 1.3,
             noise_ratio_limit: 5.0,
             jump_scales: 10.0,
             unexplained_ratio: 3.0,
@@ -59,6 +64,10 @@ pub enum Finding {
     CollinearSensors {
         sensors: Vec<String>,
         max_vif: f64,
+        /// The smallest, over the group, RMS of a sensor's reading left by a least-squares
+        /// fit of the other sensors, relative to its own short-term noise (near 1: the others
+        /// reproduce it to its noise).
+        min_residual_noise_ratio: f64,
         gain: HeldOutGain,
     },
     /// A sensor whose readings carry noise or jumps the others do not and which the static
@@ -435,7 +444,10 @@ fn collinear_finding(
         .collect::<Option<_>>()?;
     let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
     let v = vifs(&refs);
-    let group: Vec<usize> = (0..sensors.len()).filter(|&k| v[k] > o.vif_limit).collect();
+    let red = redundancy(&refs);
+    let group: Vec<usize> = (0..sensors.len())
+        .filter(|&k| v[k] > o.vif_limit || red[k] <= o.redundant_noise_ratio)
+        .collect();
     if group.len() < 2 {
         return None;
     }
@@ -443,7 +455,9 @@ fn collinear_finding(
     // of the outcome: the gain of the chosen sensors over all is reported, not required.
     let gain = HeldOutGain::between(s0, &s1.score, &o.finding_rule);
     let max_vif = group.iter().map(|&k| v[k]).fold(0.0, f64::max);
+    let min_residual_noise_ratio = group.iter().map(|&k| red[k]).fold(f64::INFINITY, f64::min);
     Some(Finding::CollinearSensors {
+        min_residual_noise_ratio,
         sensors: group
             .iter()
             .map(|&k| ds.sensor_names[sensors[k]].clone())
@@ -451,6 +465,31 @@ fn collinear_finding(
         max_vif,
         gain,
     })
+}
+
+/// Per sensor, the RMS of its reading left by a least-squares fit (with an intercept) of the
+/// others, over its short-term noise: near 1 when the others reproduce it to its noise,
+/// whatever the range the temperatures span (the variance inflation grows with the range).
+fn redundancy(cols: &[&[f64]]) -> Vec<f64> {
+    (0..cols.len())
+        .map(|k| {
+            let others: Vec<&[f64]> = (0..cols.len())
+                .filter(|&j| j != k)
+                .map(|j| cols[j])
+                .collect();
+            let y = cols[k];
+            let whole = Blocks(std::iter::once(0..y.len()).collect());
+            let noise = short_term_noise(y).max(1e-12);
+            BlockStats::new(&others, y, &whole)
+                .coefficients(None)
+                .map_or(f64::INFINITY, |beta| {
+                    let ss: f64 = (0..y.len())
+                        .map(|i| (y[i] - predict_row(&beta, &others, i)).powi(2))
+                        .sum();
+                    (ss / y.len().max(1) as f64).sqrt() / noise
+                })
+        })
+        .collect()
 }
 
 /// The best model of each family: with everything, sensors with lags but no spindle heat,
@@ -741,9 +780,10 @@ pub fn describe(f: &Finding) -> String {
         Finding::CollinearSensors {
             sensors,
             max_vif,
+            min_residual_noise_ratio,
             gain,
         } => format!(
-            "collinear sensors {} (variance inflation up to {max_vif:.0}): their static coefficients change from block to block and mean nothing one by one; chosen sensors predict as well ({})",
+            "collinear sensors {} (variance inflation up to {max_vif:.0}; the others reproduce one to {min_residual_noise_ratio:.1}× its noise): their static coefficients change from block to block and mean nothing one by one; chosen sensors predict as well ({})",
             sensors.join(", "),
             gain_text(gain)
         ),

@@ -85,7 +85,7 @@ fn check(rows: &[Row], min_detect: f64, max_false: f64) {
 }
 
 #[test]
-#[ignore = "below target: 6 runs per class, classes from 33 % (asymmetry+noisy) to 100 % named, 4 of 90 runs name an effect not there (docs/methods.md)"]
+#[ignore = "below target: 6 runs per class, classes from 33 % (asymmetry+noisy) to 100 % named, 3 of 90 runs name an effect not there (docs/methods.md)"]
 fn hidden_effects_are_named_fast() {
     let rows = sweep(6, 1);
     check(&rows, 5.0 / 6.0, 0.05);
@@ -93,7 +93,7 @@ fn hidden_effects_are_named_fast() {
 
 /// The default (CI) guard, ~15-50 s: the same 6 runs per class, held to what the code
 /// reaches now (not the targets; docs/methods.md): each class named in at least as many runs
-/// as now, and no more runs naming an effect not there than now (4 of the 90).
+/// as now, and no more runs naming an effect not there than now (3 of the 90).
 #[test]
 fn fast_sweep_holds_its_current_level() {
     // (class, least runs of 6 with every effect named, most runs naming one not there)
@@ -104,15 +104,15 @@ fn fast_sweep_holds_its_current_level() {
         ("asymmetry", 6, 0),
         ("noisy", 6, 1),
         ("collinear", 6, 0),
-        ("lag+unseen", 6, 1),
+        ("lag+unseen", 6, 0),
         ("lag+asymmetry", 5, 0),
         ("lag+noisy", 5, 0),
-        ("lag+collinear", 5, 0),
+        ("lag+collinear", 6, 0),
         ("unseen+noisy", 5, 0),
         ("unseen+collinear", 5, 1),
         ("asymmetry+noisy", 2, 0),
         ("asymmetry+collinear", 5, 0),
-        ("noisy+collinear", 4, 0),
+        ("noisy+collinear", 6, 0),
     ];
     let rows = sweep(6, 1);
     print_table(&rows);
@@ -136,7 +136,7 @@ fn fast_sweep_holds_its_current_level() {
 }
 
 #[test]
-#[ignore = "100 runs per class (~5 min unloaded): below target (≥ 95 % named, ≤ 2 % false): named 45-100 % by class, 3.4 % of all runs (5 % of none runs) name an effect not there; table in docs/methods.md"]
+#[ignore = "100 runs per class (~5 min unloaded): below target (≥ 95 % named, ≤ 2 % false): named 45-100 % by class, 2.7 % of all runs (4 % of none runs) name an effect not there; table in docs/methods.md"]
 fn hidden_effects_are_named_sweep() {
     let rows = sweep(100, 100_000);
     check(&rows, 0.95, 0.02);

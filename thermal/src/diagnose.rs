@@ -4,7 +4,7 @@
 //! spindle heat, its heating/cooling asymmetry) and names an effect only when taking it out
 //! again of the extended model loses significantly on held-out time blocks.
 
-use crate::cv::{BlockStats, GainRule, HeldOutGain};
+use crate::cv::{BlockStats, Blocks, GainRule, HeldOutGain, predict_row};
 use crate::dataset::ThermalDataset;
 use crate::error::ThermalError;
 use crate::inputs::{Inputs, Spec, Src};
@@ -20,7 +20,12 @@ pub struct DiagnoseOptions {
     pub fit: FitOptions,
     /// What a named effect must gain on held-out blocks.
     pub finding_rule: GainRule,
-    /// Variance inflation above which sensors are collinear (100).
+    /// A sensor the others reproduce to within this many times its short-term noise is
+    /// collinear with them, whatever the variance inflation (1.3; see `redundancy`, calibrated
+    /// on seeds 500 000+).
+    pub redundant_noise_ratio: f64,
+    /// Variance inflation above which sensors are collinear (100; calibrated on generated runs,
+    /// seeds 500 000+, see docs/methods.md).
     pub vif_limit: f64,
     /// Short-term noise, relative to the median sensor's, above which a sensor is noisy (5).
     pub noise_ratio_limit: f64,
@@ -41,6 +46,7 @@ impl Default for DiagnoseOptions {
             fit: FitOptions::default(),
             finding_rule: GainRule::default(),
             vif_limit: 100.0,
+            redundant_noise_ratio: 1.3,
             noise_ratio_limit: 5.0,
             jump_scales: 10.0,
             unexplained_ratio: 3.0,
@@ -58,6 +64,10 @@ pub enum Finding {
     CollinearSensors {
         sensors: Vec<String>,
         max_vif: f64,
+        /// The smallest, over the group, RMS of a sensor's reading left by a least-squares
+        /// fit of the other sensors, relative to its own short-term noise (near 1: the others
+        /// reproduce it to its noise).
+        min_residual_noise_ratio: f64,
         gain: HeldOutGain,
     },
     /// A sensor whose readings carry noise or jumps the others do not and which the static
@@ -177,17 +187,77 @@ pub fn diagnose(
     crate::baseline::static_fit(ds, o.fit.blocks)?;
     let screen = screen_sensors(ds, o);
     let refs = reference_temperatures(ds);
-    let inputs = Inputs::new(ds, &refs);
-    let base_pool = pool(ds, &o.fit)?;
+    // One unseen heat source is one spindle term: several, with their time constants, can
+    // stand in for any sensor's lag (every node of a linear network heated by the spindle
+    // is a sum of lagged spindle inputs), and the effect named would mean nothing.
+    let base_pool = Pool {
+        max_spindle_terms: 1,
+        ..pool(ds, &o.fit)?
+    };
+    let inputs = with_best_hold(ds, &refs, &base_pool, o);
+    let mut sensor_notes = screen.notes.clone();
+    if inputs.spindle_hold() != 0.5 {
+        sensor_notes.push(format!(
+            "spindle speed: a step's speed taken as {:.1} × its first reading + {:.1} × its second (better on held-out blocks than a change halfway between readings)",
+            inputs.spindle_hold(),
+            1.0 - inputs.spindle_hold()
+        ));
+    }
     let mut channels = vec![];
     for (c, y) in ds.displacements_um.iter().enumerate() {
         let search = searcher(&inputs, y, &o.fit);
         channels.push(diagnose_channel(ds, &search, &base_pool, &screen, o, c)?);
     }
     Ok(ThermalDiagnosis {
-        sensor_notes: screen.notes,
+        sensor_notes,
         channels,
     })
+}
+
+/// The timing of the speed readings is a property of the logger, not of the machine: a
+/// change halfway between readings (0.5), or a reading that holds until the next (1) or
+/// that holds since the one before (0). The one kept is the one whose simplest spindle
+/// model (static sensors plus one lagged spindle term, chosen forward) predicts the held-out
+/// blocks of every channel best.
+fn with_best_hold(
+    ds: &ThermalDataset,
+    refs: &[f64],
+    base_pool: &Pool,
+    o: &DiagnoseOptions,
+) -> Inputs {
+    if ds.spindle_rpm.is_none() || base_pool.spindle_exponents.is_empty() {
+        return Inputs::new(ds, refs);
+    }
+    let simple = Pool {
+        asymmetric: false,
+        ..base_pool.clone()
+    };
+    let all: Vec<Spec> = base_pool
+        .sensors
+        .iter()
+        .map(|&i| Spec::symmetric(Src::Sensor(i), 0.0))
+        .collect();
+    let score = |inputs: &Inputs| -> f64 {
+        ds.displacements_um
+            .iter()
+            .map(|y| {
+                let s = Search {
+                    sensor_lags: false,
+                    ..searcher(inputs, y, &o.fit)
+                };
+                s.forward(all.clone(), &simple, o.fit.max_terms + all.len())
+                    .map_or(f64::INFINITY, |m| m.score.total())
+            })
+            .sum()
+    };
+    [0.5, 1.0, 0.0]
+        .into_iter()
+        .map(|w| {
+            let inputs = Inputs::new(ds, refs).with_spindle_hold(w);
+            (score(&inputs), inputs)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or_else(|| Inputs::new(ds, refs), |(_, i)| i)
 }
 
 fn nonfinite(ds: &ThermalDataset, c: usize) -> ThermalError {
@@ -213,9 +283,9 @@ fn diagnose_channel(
     let s0 = s.score(&all).ok_or_else(err)?;
     let mut findings = vec![];
     let mut notes = vec![];
-    let dropped = noisy_findings(ds, s, &all, &s0, screen, o, &mut findings, &mut notes);
+    let noisy = noisy_findings(ds, s, &all, &s0, screen, o, &mut findings);
     let mut pool = base_pool.clone();
-    pool.sensors.retain(|i| !dropped.contains(i));
+    pool.sensors.retain(|i| !noisy.dropped.contains(i));
     let static_pool = Pool {
         spindle_exponents: vec![],
         asymmetric: false,
@@ -231,38 +301,11 @@ fn diagnose_channel(
     if let Some(f) = collinear_finding(ds, s, &pool.sensors, &s0, &s1, o) {
         findings.push(f);
     }
-    let no_spindle = Pool {
-        spindle_exponents: vec![],
-        asymmetric: false,
-        ..pool.clone()
-    };
-    let m2 = s
-        .forward(vec![], &no_spindle, o.fit.max_terms)
-        .ok_or_else(err)?;
-    let m = s.select(&pool, o.fit.max_terms).ok_or_else(err)?;
-    let m = if m2.score.total() < m.score.total() {
-        m2.clone()
-    } else {
-        m
-    };
+    let fam = families(s, &pool, &all, &s0, &s1, o).ok_or_else(err)?;
     let noise = short_term_noise(s.y);
-    let big_enough = |g: &HeldOutGain| {
-        let explained = (g.rms_before_um.powi(2) - g.rms_after_um.powi(2))
-            .max(0.0)
-            .sqrt();
-        explained >= o.min_effect_noise_ratio * noise
-    };
-    findings.extend(
-        lag_findings(ds, s, &m, o)
-            .into_iter()
-            .chain(spindle_findings(s, &m, &m2, o))
-            .filter(|f| match f {
-                Finding::Lag { gain, .. }
-                | Finding::UnseenHeatSource { gain, .. }
-                | Finding::HeatingCoolingAsymmetry { gain, .. } => big_enough(gain),
-                _ => true,
-            }),
-    );
+    undecided_noisy(ds, &noisy.undecided, &fam.best, &mut findings, &mut notes);
+    findings.extend(effect_findings(ds, s, &fam, noise, o));
+    let (m2, m) = (&fam.no_spindle, &fam.best);
     let ladder = vec![
         Rung {
             model: "static, all sensors".into(),
@@ -312,8 +355,14 @@ fn clone_search<'a>(s: &Search<'a>) -> Search<'a> {
     }
 }
 
+/// A flagged sensor the static fit does not need, or kept for the extended model to decide.
+struct NoisyScreen {
+    dropped: Vec<usize>,
+    /// Flagged sensors the static fit needs: (sensor, noise ratio, jumps, static gain).
+    undecided: Vec<(usize, f64, usize, HeldOutGain)>,
+}
+
 /// A flagged sensor is named when the static fit does not lose without it.
-#[allow(clippy::too_many_arguments)]
 fn noisy_findings(
     ds: &ThermalDataset,
     s: &Search,
@@ -322,9 +371,11 @@ fn noisy_findings(
     screen: &SensorScreen,
     o: &DiagnoseOptions,
     findings: &mut Vec<Finding>,
-    notes: &mut Vec<String>,
-) -> Vec<usize> {
-    let mut dropped = vec![];
+) -> NoisyScreen {
+    let mut out = NoisyScreen {
+        dropped: vec![],
+        undecided: vec![],
+    };
     for &(i, ratio, nj) in &screen.flagged {
         let without: Vec<Spec> = all
             .iter()
@@ -335,23 +386,46 @@ fn noisy_findings(
             continue;
         };
         let gain = HeldOutGain::between(s0, &sw, &o.finding_rule);
-        let name = ds.sensor_names[i].clone();
         if gain.rms_after_um <= (1.0 + o.finding_rule.min_relative_gain) * gain.rms_before_um {
+            findings.push(Finding::NoisySensor {
+                sensor: ds.sensor_names[i].clone(),
+                noise_ratio: ratio,
+                jumps: nj,
+                gain,
+            });
+            out.dropped.push(i);
+        } else {
+            out.undecided.push((i, ratio, nj, gain));
+        }
+    }
+    out
+}
+
+/// A flagged sensor the static fit needs is named when the extended model does not use it
+/// (the static fit leaned on it for what lags or spindle heat explain); otherwise a note.
+fn undecided_noisy(
+    ds: &ThermalDataset,
+    undecided: &[(usize, f64, usize, HeldOutGain)],
+    best: &Selection,
+    findings: &mut Vec<Finding>,
+    notes: &mut Vec<String>,
+) {
+    for &(i, ratio, nj, gain) in undecided {
+        let name = ds.sensor_names[i].clone();
+        if best.specs.iter().all(|sp| sp.src != Src::Sensor(i)) {
             findings.push(Finding::NoisySensor {
                 sensor: name,
                 noise_ratio: ratio,
                 jumps: nj,
                 gain,
             });
-            dropped.push(i);
         } else {
             notes.push(format!(
-                "sensor {name} is noisy or jumps but carries information: the static fit's held-out RMS rises {:.3} → {:.3} µm without it",
+                "sensor {name} is noisy or jumps but carries information: the static fit's held-out RMS rises {:.3} → {:.3} µm without it, and the extended model uses it",
                 gain.rms_before_um, gain.rms_after_um
             ));
         }
     }
-    dropped
 }
 
 /// Collinear sensors: variance inflation above the limit in the static design (all sensors
@@ -370,7 +444,10 @@ fn collinear_finding(
         .collect::<Option<_>>()?;
     let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
     let v = vifs(&refs);
-    let group: Vec<usize> = (0..sensors.len()).filter(|&k| v[k] > o.vif_limit).collect();
+    let red = redundancy(&refs);
+    let group: Vec<usize> = (0..sensors.len())
+        .filter(|&k| v[k] > o.vif_limit || red[k] <= o.redundant_noise_ratio)
+        .collect();
     if group.len() < 2 {
         return None;
     }
@@ -378,7 +455,9 @@ fn collinear_finding(
     // of the outcome: the gain of the chosen sensors over all is reported, not required.
     let gain = HeldOutGain::between(s0, &s1.score, &o.finding_rule);
     let max_vif = group.iter().map(|&k| v[k]).fold(0.0, f64::max);
+    let min_residual_noise_ratio = group.iter().map(|&k| red[k]).fold(f64::INFINITY, f64::min);
     Some(Finding::CollinearSensors {
+        min_residual_noise_ratio,
         sensors: group
             .iter()
             .map(|&k| ds.sensor_names[sensors[k]].clone())
@@ -388,100 +467,254 @@ fn collinear_finding(
     })
 }
 
-/// Each lagged sensor of the model whose lag, set to 0 with the others searched again,
-/// loses significantly.
-fn lag_findings(
-    ds: &ThermalDataset,
-    s: &Search,
-    m: &Selection,
-    o: &DiagnoseOptions,
-) -> Vec<Finding> {
-    let mut out = vec![];
-    for (idx, spec) in m.specs.iter().enumerate() {
-        let Src::Sensor(i) = spec.src else { continue };
-        if spec.tau_heat_s == 0.0 {
-            continue;
-        }
-        let mut without = m.specs.clone();
-        without[idx] = Spec::symmetric(spec.src, 0.0);
-        let others = Search {
-            sensor_lags: true,
-            ..clone_search(s)
-        };
-        let Some(sw) = backfit_except(&others, &mut without, idx) else {
-            continue;
-        };
-        let gain = HeldOutGain::between(&sw, &m.score, &o.finding_rule);
-        if gain.significant {
-            out.push(Finding::Lag {
-                sensor: ds.sensor_names[i].clone(),
-                tau_s: spec.tau_heat_s,
-                gain,
-            });
-        }
-    }
-    out
+/// Per sensor, the RMS of its reading left by a least-squares fit (with an intercept) of the
+/// others, over its short-term noise: near 1 when the others reproduce it to its noise,
+/// whatever the range the temperatures span (the variance inflation grows with the range).
+fn redundancy(cols: &[&[f64]]) -> Vec<f64> {
+    (0..cols.len())
+        .map(|k| {
+            let others: Vec<&[f64]> = (0..cols.len())
+                .filter(|&j| j != k)
+                .map(|j| cols[j])
+                .collect();
+            let y = cols[k];
+            let whole = Blocks(std::iter::once(0..y.len()).collect());
+            let noise = short_term_noise(y).max(1e-12);
+            BlockStats::new(&others, y, &whole)
+                .coefficients(None)
+                .map_or(f64::INFINITY, |beta| {
+                    let ss: f64 = (0..y.len())
+                        .map(|i| (y[i] - predict_row(&beta, &others, i)).powi(2))
+                        .sum();
+                    (ss / y.len().max(1) as f64).sqrt() / noise
+                })
+        })
+        .collect()
 }
 
-fn backfit_except(s: &Search, specs: &mut [Spec], keep: usize) -> Option<crate::cv::CvScore> {
-    let mut score = s.score(specs)?;
-    for idx in (0..specs.len()).filter(|&i| i != keep) {
-        let (spec, sc) = s.refine(specs, idx);
-        if sc.total() < score.total() {
-            specs[idx] = spec;
-            score = sc;
-        }
-    }
-    Some(score)
+/// The best model of each family: with everything, sensors with lags but no spindle heat,
+/// no sensor lags, symmetric spindle heat only, static on chosen sensors, static on all.
+struct Families {
+    best: Selection,
+    no_spindle: Selection,
+    members: Vec<Selection>,
 }
 
-/// Spindle heat named when the best model without it loses significantly; its asymmetry
-/// when one time constant for both loses significantly.
-fn spindle_findings(
+fn families(
     s: &Search,
-    m: &Selection,
-    m2: &Selection,
+    pool: &Pool,
+    all: &[Spec],
+    s0: &crate::cv::CvScore,
+    s1: &Selection,
     o: &DiagnoseOptions,
-) -> Vec<Finding> {
-    let mut out = vec![];
-    let Some((idx, spec)) = m
-        .specs
+) -> Option<Families> {
+    let no_spindle_pool = Pool {
+        spindle_exponents: vec![],
+        asymmetric: false,
+        ..pool.clone()
+    };
+    // Each family searched from nothing and from the static chosen sensors: a greedy path
+    // from nothing can lock a sensor's lag in place of another sensor.
+    let from_static = |p: &Pool| s.forward(s1.specs.clone(), p, o.fit.max_terms);
+    let no_spindle = [
+        s.forward(vec![], &no_spindle_pool, o.fit.max_terms),
+        from_static(&no_spindle_pool),
+    ]
+    .into_iter()
+    .flatten()
+    .min_by(|a, b| a.score.total().total_cmp(&b.score.total()))?;
+    let no_lags = Search {
+        sensor_lags: false,
+        ..clone_search(s)
+    };
+    let symmetric = Pool {
+        asymmetric: false,
+        ..pool.clone()
+    };
+    let members: Vec<Selection> = [
+        s.select(pool, o.fit.max_terms),
+        Some(no_spindle.clone()),
+        no_lags.select(pool, o.fit.max_terms),
+        s.select(&symmetric, o.fit.max_terms),
+        from_static(pool),
+        from_static(&symmetric),
+        no_lags.forward(s1.specs.clone(), pool, o.fit.max_terms),
+        no_lags.forward(all.to_vec(), pool, o.fit.max_terms + all.len()),
+        s.forward(all.to_vec(), pool, o.fit.max_terms + all.len()),
+        Some(s1.clone()),
+        Some(Selection {
+            specs: all.to_vec(),
+            score: s0.clone(),
+        }),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let best = best_by_score(members.iter(), |_| true)?.clone();
+    Some(Families {
+        best,
+        no_spindle,
+        members,
+    })
+}
+
+fn best_by_score<'a>(
+    it: impl Iterator<Item = &'a Selection>,
+    keep: impl Fn(&Selection) -> bool,
+) -> Option<&'a Selection> {
+    it.filter(|m| keep(m))
+        .min_by(|a, b| a.score.total().total_cmp(&b.score.total()))
+}
+
+fn has_lag(m: &Selection) -> bool {
+    m.specs
         .iter()
+        .any(|sp| matches!(sp.src, Src::Sensor(_)) && sp.tau_heat_s > 0.0)
+}
+
+fn spindle_spec(m: &Selection) -> Option<(usize, Spec)> {
+    m.specs
+        .iter()
+        .copied()
         .enumerate()
         .find(|(_, sp)| matches!(sp.src, Src::Spindle(_)))
+}
+
+/// Heating and cooling time constants at least this far apart (ratio) to be called an
+/// asymmetry: closer ones are one time constant within what the held-out blocks resolve.
+const MIN_ASYMMETRY_RATIO: f64 = 1.5;
+
+fn has_asymmetry(m: &Selection) -> bool {
+    spindle_spec(m).is_some_and(|(_, sp)| {
+        let (a, b) = (
+            sp.tau_heat_s.max(sp.tau_cool_s),
+            sp.tau_heat_s.min(sp.tau_cool_s),
+        );
+        a >= MIN_ASYMMETRY_RATIO * b.max(1e-9)
+    })
+}
+
+/// The best model with an effect, and its gain over the best model without it.
+fn family_gain(
+    fam: &Families,
+    has: impl Fn(&Selection) -> bool,
+    o: &DiagnoseOptions,
+) -> Option<(Selection, HeldOutGain)> {
+    let with = best_by_score(fam.members.iter(), &has)?;
+    let without = best_by_score(fam.members.iter(), |m| !has(m))?;
+    let gain = HeldOutGain::between(&without.score, &with.score, &o.finding_rule);
+    Some((with.clone(), gain))
+}
+
+/// Whether a gain is a finding: it passes the finding rule on held-out blocks and explains
+/// an RMS, √(before² − after²), of at least `min_effect_noise_ratio` × the displacement's
+/// short-term noise.
+fn passes(gain: &HeldOutGain, noise: f64, o: &DiagnoseOptions) -> bool {
+    let explained = (gain.rms_before_um.powi(2) - gain.rms_after_um.powi(2))
+        .max(0.0)
+        .sqrt();
+    gain.significant && explained >= o.min_effect_noise_ratio * noise
+}
+
+fn has_spindle(m: &Selection) -> bool {
+    spindle_spec(m).is_some()
+}
+
+/// The smallest adequate model: nothing when no lag or spindle heat passes against the
+/// static fits; else lags alone or spindle heat alone (the better of the two on held-out
+/// blocks) when the best model with both does not pass against it; else the best model.
+/// Lags and spindle heat both follow the spindle's heat, so either can stand in for the
+/// other: the effect named is the one the data need, not every one that helps a little.
+fn chosen_model(fam: &Families, noise: f64, o: &DiagnoseOptions) -> Option<Selection> {
+    let dynamic = |m: &Selection| has_lag(m) || has_spindle(m);
+    let (best, gain) = family_gain(fam, dynamic, o)?;
+    if !passes(&gain, noise, o) {
+        return None;
+    }
+    let lag_only = best_by_score(fam.members.iter(), |m| has_lag(m) && !has_spindle(m));
+    let spindle_only = best_by_score(fam.members.iter(), |m| has_spindle(m) && !has_lag(m));
+    let single = [lag_only, spindle_only]
+        .into_iter()
+        .flatten()
+        .min_by(|a, b| a.score.total().total_cmp(&b.score.total()));
+    match single {
+        Some(one) => {
+            let more = HeldOutGain::between(&one.score, &best.score, &o.finding_rule);
+            Some(if passes(&more, noise, o) {
+                best
+            } else {
+                one.clone()
+            })
+        }
+        None => Some(best),
+    }
+}
+
+/// The lagged sensor term whose contribution (coefficient × its input's spread) is largest:
+/// a fast lag beside a slower one of the same sensor is a correction, not the lag.
+fn largest_lag(s: &Search, m: &Selection) -> Option<(usize, f64)> {
+    let cols = s.columns(&m.specs)?;
+    m.specs
+        .iter()
+        .enumerate()
+        .filter_map(|(idx, sp)| match sp.src {
+            Src::Sensor(i) if sp.tau_heat_s > 0.0 => {
+                let c = coefficient_of(s, &m.specs, idx)?;
+                let col = &cols[idx];
+                let mean = col.iter().sum::<f64>() / col.len().max(1) as f64;
+                let spread = col.iter().map(|v| (v - mean).abs()).sum::<f64>();
+                Some(((c * spread).abs(), i, sp.tau_heat_s))
+            }
+            _ => None,
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, i, t)| (i, t))
+}
+
+fn effect_findings(
+    ds: &ThermalDataset,
+    s: &Search,
+    fam: &Families,
+    noise: f64,
+    o: &DiagnoseOptions,
+) -> Vec<Finding> {
+    let mut out = vec![];
+    let Some(m) = chosen_model(fam, noise, o) else {
+        return out;
+    };
+    if has_lag(&m)
+        && let Some((i, tau_s)) = largest_lag(s, &m)
+        && let Some((_, gain)) = family_gain(fam, has_lag, o)
+    {
+        out.push(Finding::Lag {
+            sensor: ds.sensor_names[i].clone(),
+            tau_s,
+            gain,
+        });
+    }
+    let Some((idx, spec)) = spindle_spec(&m) else {
+        return out;
+    };
+    let (Src::Spindle(exponent), Some((_, gain))) = (spec.src, family_gain(fam, has_spindle, o))
     else {
         return out;
     };
-    let gain = HeldOutGain::between(&m2.score, &m.score, &o.finding_rule);
-    if !gain.significant {
-        return out;
-    }
-    let Src::Spindle(exponent) = spec.src else {
-        return out;
-    };
-    let coefficient = coefficient_of(s, &m.specs, idx).unwrap_or(0.0);
     out.push(Finding::UnseenHeatSource {
         exponent,
         tau_heat_s: spec.tau_heat_s,
         tau_cool_s: spec.tau_cool_s,
-        coefficient,
+        coefficient: coefficient_of(s, &m.specs, idx).unwrap_or(0.0),
         gain,
     });
-    if spec.is_asymmetric() {
-        let mut sym = m.specs.clone();
-        sym[idx] = Spec::symmetric(spec.src, (spec.tau_heat_s * spec.tau_cool_s).sqrt());
-        let (r, _) = s.refine(&sym, idx);
-        sym[idx] = r;
-        if let Some(ss) = s.backfit(&mut sym) {
-            let g = HeldOutGain::between(&ss, &m.score, &o.finding_rule);
-            if g.significant {
-                out.push(Finding::HeatingCoolingAsymmetry {
-                    tau_heat_s: spec.tau_heat_s,
-                    tau_cool_s: spec.tau_cool_s,
-                    gain: g,
-                });
-            }
-        }
+    if let Some((m, gain)) = family_gain(fam, has_asymmetry, o)
+        && passes(&gain, noise, o)
+        && let Some((_, spec)) = spindle_spec(&m)
+    {
+        out.push(Finding::HeatingCoolingAsymmetry {
+            tau_heat_s: spec.tau_heat_s,
+            tau_cool_s: spec.tau_cool_s,
+            gain,
+        });
     }
     out
 }
@@ -547,9 +780,10 @@ pub fn describe(f: &Finding) -> String {
         Finding::CollinearSensors {
             sensors,
             max_vif,
+            min_residual_noise_ratio,
             gain,
         } => format!(
-            "collinear sensors {} (variance inflation up to {max_vif:.0}): their static coefficients change from block to block and mean nothing one by one; chosen sensors predict as well ({})",
+            "collinear sensors {} (variance inflation up to {max_vif:.0}; the others reproduce one to {min_residual_noise_ratio:.1}× its noise): their static coefficients change from block to block and mean nothing one by one; chosen sensors predict as well ({})",
             sensors.join(", "),
             gain_text(gain)
         ),

@@ -5,7 +5,21 @@
 /// `tau_heat_s` applies while the input is above the lagged value (it is heating the
 /// lagged value), `tau_cool_s` while it is below. A time constant of 0 passes the input
 /// through. Each step is exact for an input held at the mean of its two readings.
+#[cfg(test)]
 pub(crate) fn lag(time_s: &[f64], x: &[f64], tau_heat_s: f64, tau_cool_s: f64) -> Vec<f64> {
+    lag_held(time_s, x, tau_heat_s, tau_cool_s, 0.5)
+}
+
+/// As [`lag`], with the input over a step taken as `w` × its first reading + (1 − `w`) × its
+/// second: 0.5 for a change halfway between readings, 1 for a reading that holds until the
+/// next one (a logged speed that changed at its reading).
+pub(crate) fn lag_held(
+    time_s: &[f64],
+    x: &[f64],
+    tau_heat_s: f64,
+    tau_cool_s: f64,
+    w: f64,
+) -> Vec<f64> {
     let mut out = Vec::with_capacity(x.len());
     let Some(&first) = x.first() else { return out };
     let mut y = first;
@@ -16,7 +30,7 @@ pub(crate) fn lag(time_s: &[f64], x: &[f64], tau_heat_s: f64, tau_cool_s: f64) -
         // A change between two readings happened, on average, halfway between them: the
         // input over the step is taken as the mean of its two ends (a speed logged at the
         // new value has run at it for about half the step).
-        let u = 0.5 * (x[k - 1] + x[k]);
+        let u = w * x[k - 1] + (1.0 - w) * x[k];
         y = if tau <= 0.0 {
             x[k]
         } else {

@@ -1,7 +1,7 @@
 //! The model's input columns: sensor temperature rises and spindle speed, through lags.
 
 use crate::dataset::ThermalDataset;
-use crate::filter::lag;
+use crate::filter::lag_held;
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::rc::Rc;
@@ -55,6 +55,9 @@ pub(crate) struct Inputs {
     rises: Vec<Vec<f64>>,
     /// Spindle speed in 1000 rpm.
     krpm: Option<Vec<f64>>,
+    /// Weight of a step's first speed reading in the speed over the step (0.5: a change
+    /// halfway between readings).
+    spindle_hold: f64,
     cache: RefCell<HashMap<Key, Rc<Vec<f64>>>>,
 }
 
@@ -75,8 +78,20 @@ impl Inputs {
             time_s: ds.time_s.clone(),
             rises,
             krpm,
+            spindle_hold: 0.5,
             cache: RefCell::new(HashMap::new()),
         }
+    }
+
+    /// The same inputs with the speed over a step weighted `w` on its first reading.
+    pub(crate) fn with_spindle_hold(mut self, w: f64) -> Self {
+        self.spindle_hold = w;
+        self.cache.borrow_mut().clear();
+        self
+    }
+
+    pub(crate) fn spindle_hold(&self) -> f64 {
+        self.spindle_hold
     }
 
     pub(crate) fn has_spindle(&self) -> bool {
@@ -100,7 +115,17 @@ impl Inputs {
             return Some(Rc::clone(c));
         }
         let raw = self.raw(spec.src)?;
-        let col = Rc::new(lag(&self.time_s, &raw, spec.tau_heat_s, spec.tau_cool_s));
+        let w = match spec.src {
+            Src::Spindle(_) => self.spindle_hold,
+            Src::Sensor(_) => 0.5,
+        };
+        let col = Rc::new(lag_held(
+            &self.time_s,
+            &raw,
+            spec.tau_heat_s,
+            spec.tau_cool_s,
+            w,
+        ));
         self.cache.borrow_mut().insert(spec.key(), Rc::clone(&col));
         Some(col)
     }

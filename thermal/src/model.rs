@@ -241,6 +241,7 @@ pub(crate) fn pool(ds: &ThermalDataset, opts: &FitOptions) -> Result<Pool, Therm
         sensors,
         spindle_exponents: spindle,
         asymmetric: opts.asymmetric,
+        max_spindle_terms: usize::MAX,
     })
 }
 

@@ -10,6 +10,8 @@ pub(crate) struct Pool {
     pub(crate) sensors: Vec<usize>,
     pub(crate) spindle_exponents: Vec<u32>,
     pub(crate) asymmetric: bool,
+    /// Most spindle terms in a model (the fit: any; the diagnosis: one heat source).
+    pub(crate) max_spindle_terms: usize,
 }
 
 /// The search for one displacement channel.
@@ -70,7 +72,7 @@ impl<'a> Search<'a> {
             .collect()
     }
 
-    fn symmetric_candidates(&self, pool: &Pool) -> Vec<Spec> {
+    fn symmetric_candidates(&self, sel: &[Spec], pool: &Pool) -> Vec<Spec> {
         let mut out = vec![];
         for &i in &pool.sensors {
             out.push(Spec::symmetric(Src::Sensor(i), 0.0));
@@ -82,7 +84,7 @@ impl<'a> Search<'a> {
                 );
             }
         }
-        if self.inputs.has_spindle() {
+        if self.inputs.has_spindle() && spindle_terms(sel) < pool.max_spindle_terms {
             for &p in &pool.spindle_exponents {
                 out.push(Spec::symmetric(Src::Spindle(p), 0.0));
                 out.extend(
@@ -114,7 +116,7 @@ impl<'a> Search<'a> {
     /// the best symmetric one of the same input.
     fn best_addition(&self, sel: &[Spec], pool: &Pool) -> Option<(Spec, CvScore)> {
         let cands: Vec<Spec> = self
-            .symmetric_candidates(pool)
+            .symmetric_candidates(sel, pool)
             .into_iter()
             .filter(|c| !sel.contains(c))
             .collect();
@@ -306,6 +308,13 @@ impl Search<'_> {
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(_, c)| c)
     }
+}
+
+fn spindle_terms(specs: &[Spec]) -> usize {
+    specs
+        .iter()
+        .filter(|s| matches!(s.src, Src::Spindle(_)))
+        .count()
 }
 
 fn with_tau(s: Spec, tau: f64, heat: bool) -> Spec {

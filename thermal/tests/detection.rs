@@ -85,35 +85,58 @@ fn check(rows: &[Row], min_detect: f64, max_false: f64) {
 }
 
 #[test]
-#[ignore = "below target: 6 runs per class, classes from 16.7 % (lag+unseen, asymmetry+noisy) to 100 % named, 16.7 % of none runs and up to 83 % of asymmetry+noisy runs name an effect not there (docs/methods.md)"]
+#[ignore = "below target: 6 runs per class, classes from 33 % (asymmetry+noisy) to 100 % named, 3 of 90 runs name an effect not there (docs/methods.md)"]
 fn hidden_effects_are_named_fast() {
     let rows = sweep(6, 1);
     check(&rows, 5.0 / 6.0, 0.05);
 }
 
-/// The default (CI) guard, ~15 s: the same 6 runs per class, held to what the code reaches
-/// now (not the targets): the unseen heat source and the noisy sensor named in 5 of 6 runs,
-/// and at most 1 of the 6 runs without effects naming one.
+/// The default (CI) guard, ~15-50 s: the same 6 runs per class, held to what the code
+/// reaches now (not the targets; docs/methods.md): each class named in at least as many runs
+/// as now, and no more runs naming an effect not there than now (3 of the 90).
 #[test]
 fn fast_sweep_holds_its_current_level() {
+    // (class, least runs of 6 with every effect named, most runs naming one not there)
+    const LEVEL: &[(&str, usize, usize)] = &[
+        ("none", 0, 0),
+        ("lag", 6, 0),
+        ("unseen", 6, 1),
+        ("asymmetry", 6, 0),
+        ("noisy", 6, 1),
+        ("collinear", 6, 0),
+        ("lag+unseen", 6, 0),
+        ("lag+asymmetry", 5, 0),
+        ("lag+noisy", 5, 0),
+        ("lag+collinear", 6, 0),
+        ("unseen+noisy", 5, 0),
+        ("unseen+collinear", 5, 1),
+        ("asymmetry+noisy", 2, 0),
+        ("asymmetry+collinear", 5, 0),
+        ("noisy+collinear", 6, 0),
+    ];
     let rows = sweep(6, 1);
     print_table(&rows);
     for r in &rows {
-        if r.class == "unseen" || r.class == "noisy" {
-            assert!(r.detected >= 5, "{}: {} of 6 named", r.class, r.detected);
-        }
-        if r.class == "none" {
-            assert!(
-                r.false_runs <= 1,
-                "none: {} of 6 runs name an effect",
-                r.false_runs
-            );
-        }
+        let Some(&(_, least, most)) = LEVEL.iter().find(|l| l.0 == r.class) else {
+            panic!("class {} has no held level", r.class);
+        };
+        assert!(
+            r.class == "none" || r.detected >= least,
+            "{}: {} of 6 named, held at {least}",
+            r.class,
+            r.detected
+        );
+        assert!(
+            r.false_runs <= most,
+            "{}: {} of 6 runs name an effect not there, held at {most}",
+            r.class,
+            r.false_runs
+        );
     }
 }
 
 #[test]
-#[ignore = "100 runs per class (~6 min): below target (≥ 95 % named, ≤ 2 % false): named 12-100 % by class, 13 % of none runs and up to 42 % of a class name an effect not there; table in docs/methods.md"]
+#[ignore = "100 runs per class (~5 min unloaded): below target (≥ 95 % named, ≤ 2 % false): named 45-100 % by class, 2.7 % of all runs (4 % of none runs) name an effect not there; table in docs/methods.md"]
 fn hidden_effects_are_named_sweep() {
     let rows = sweep(100, 100_000);
     check(&rows, 0.95, 0.02);
@@ -132,4 +155,39 @@ fn show_one_run() {
     let ds = ThermalDataset::from_csv(&run.csv).unwrap();
     let d = diagnose(&ds, &DiagnoseOptions::default()).unwrap();
     eprintln!("{}", d.render());
+}
+
+/// Calibration dump: every candidate finding with its held-out statistics, thresholds off.
+/// THERMAL_DUMP="runs seed0 [1: default thresholds]" (calibrate on seeds apart from the reported 100 000+).
+#[test]
+#[ignore = "a calibration aid: THERMAL_DUMP='20 500000 [1]' cargo test ... dump_candidates -- --ignored --nocapture"]
+fn dump_candidates() {
+    let Ok(spec) = std::env::var("THERMAL_DUMP") else {
+        return;
+    };
+    let v: Vec<u64> = spec
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let (runs, seed0) = (v[0], v[1]);
+    let mut opts = DiagnoseOptions::default();
+    if v.get(2) != Some(&1) {
+        opts.finding_rule.min_t = f64::NEG_INFINITY;
+        opts.min_effect_noise_ratio = 0.0;
+        opts.vif_limit = 1.0;
+    }
+    for (ci, class) in CLASSES.iter().enumerate() {
+        for r in 0..runs {
+            let seed = seed0 + 1000 * ci as u64 + r;
+            let run = generate(class, seed, 20.0, 60.0);
+            let ds = ThermalDataset::from_csv(&run.csv).unwrap();
+            let d = diagnose(&ds, &opts).unwrap();
+            let ch = &d.channels[0];
+            let line = serde_json::json!({
+                "class": class_name(class), "seed": seed, "noise": ch.noise_um,
+                "expect": expected_kinds(class), "findings": ch.findings, "ladder": ch.ladder,
+            });
+            println!("DUMP {line}");
+        }
+    }
 }

@@ -274,6 +274,25 @@ impl Drop for Reaped {
     }
 }
 
+/// `metrolog run --config CFG` with its stderr read line by line, once its live view listens:
+/// the daemon, its stderr lines, the lines seen so far and the line with the page's address.
+fn start_live(cfg: &Path) -> (Reaped, mpsc::Receiver<String>, Vec<String>, String) {
+    let mut daemon = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["run", "--config"])
+            .arg(cfg)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
+    let mut err = Vec::new();
+    let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
+    (daemon, err_rx, err, line)
+}
+
 fn sigterm(child: &Child) {
     let pid = libc::pid_t::try_from(child.id()).unwrap();
     // SAFETY: kill(2) on our own child's pid.
@@ -303,19 +322,7 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
 
-    let mut daemon = Reaped(
-        Command::new(env!("CARGO_BIN_EXE_metrolog"))
-            .args(["run", "--config"])
-            .arg(&cfg)
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
-    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
-    let mut err = Vec::new();
-    let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
+    let (mut daemon, err_rx, mut err, line) = start_live(&cfg);
     let addr = line
         .split("http://")
         .nth(1)
@@ -415,19 +422,7 @@ async fn the_page_shows_the_temperatures() {
     }
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, toml).unwrap();
-    let mut daemon = Reaped(
-        Command::new(env!("CARGO_BIN_EXE_metrolog"))
-            .args(["run", "--config"])
-            .arg(&cfg)
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
-    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
-    let mut err = Vec::new();
-    let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
+    let (mut daemon, err_rx, mut err, line) = start_live(&cfg);
     let url = line
         .split("page ")
         .nth(1)
@@ -621,19 +616,7 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
     let trajectory = trajectory_rows(&ports.join("trajectory.csv"));
-    let mut daemon = Reaped(
-        Command::new(env!("CARGO_BIN_EXE_metrolog"))
-            .args(["run", "--config"])
-            .arg(&cfg)
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
-    let err_rx = lines_of(daemon.0.stderr.take().unwrap());
-    let mut err = Vec::new();
-    let line = wait_line(&err_rx, "live view: operator page http://", &mut err);
+    let (mut daemon, err_rx, mut err, line) = start_live(&cfg);
     let url = line
         .split("page ")
         .nth(1)

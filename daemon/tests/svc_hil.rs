@@ -87,8 +87,16 @@ fn read_log(path: &Path) -> Value {
 }
 
 fn start_daemon(config: &Path) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(["run", "--config"])
+    start_daemon_notified(config, None)
+}
+
+/// The daemon, with systemd's `NOTIFY_SOCKET` at `notify` when given.
+fn start_daemon_notified(config: &Path, notify: Option<&Path>) -> Child {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_metrolog"));
+    if let Some(n) = notify {
+        cmd.env("NOTIFY_SOCKET", n);
+    }
+    cmd.args(["run", "--config"])
         .arg(config)
         .env("RUST_LOG", "info")
         .stdout(Stdio::null())
@@ -119,6 +127,69 @@ async fn wait_exit(child: &mut Child, limit: Duration) -> std::process::ExitStat
             panic!("metrolog run did not end within {limit:?}; stderr:\n{out}");
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// The poses the terminal lines tell ("pose k of 11 (target X … Y … Z … mm): …"), each
+/// target checked against the scenario's program (the simulator's, not the daemon's, table).
+fn pose_lines(stderr: &str, sc: &Scenario) -> std::collections::BTreeSet<u64> {
+    let n = sc.program.poses.len();
+    let mut told = std::collections::BTreeSet::new();
+    for line in stderr.lines().filter(|l| l.contains(" INFO ")) {
+        let Some(rest) = line.split(" pose ").nth(1) else {
+            continue;
+        };
+        let Some((k, rest)) = rest.split_once(&format!(" of {n}")) else {
+            continue;
+        };
+        let Ok(k) = k.parse::<u64>() else { continue };
+        if let Some(p) = (k as usize)
+            .checked_sub(1)
+            .and_then(|i| sc.program.poses.get(i))
+        {
+            let target = format!(
+                " (target X {:.3} Y {:.3} Z {:.3} mm): ",
+                p.x_mm, p.y_mm, p.z_mm
+            );
+            assert!(rest.starts_with(&target), "{line}: target {target}");
+        }
+        told.insert(k);
+    }
+    assert!(!told.is_empty(), "no pose lines: {stderr}");
+    told
+}
+
+/// systemd's notifications, read as they come from a socket the test binds (a full datagram
+/// queue would block the daemon's sends).
+struct Notifications {
+    listening: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: std::thread::JoinHandle<Vec<String>>,
+}
+
+impl Notifications {
+    fn listen(path: &Path) -> Notifications {
+        let sock = std::os::unix::net::UnixDatagram::bind(path).unwrap();
+        sock.set_read_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
+        let listening = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let on = listening.clone();
+        let thread = std::thread::spawn(move || {
+            let mut states = Vec::new();
+            let mut buf = vec![0u8; 65536];
+            while on.load(std::sync::atomic::Ordering::Relaxed) {
+                if let Ok(n) = sock.recv(&mut buf) {
+                    states.push(String::from_utf8_lossy(&buf[..n]).to_string());
+                }
+            }
+            states
+        });
+        Notifications { listening, thread }
+    }
+
+    fn stop(self) -> Vec<String> {
+        self.listening
+            .store(false, std::sync::atomic::Ordering::Relaxed);
+        self.thread.join().unwrap()
     }
 }
 
@@ -175,7 +246,9 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, toml).unwrap();
 
-    let mut child = start_daemon(&cfg);
+    let notify_path = dir.path().join("notify.sock");
+    let notify = Notifications::listen(&notify_path);
+    let mut child = start_daemon_notified(&cfg, Some(&notify_path));
     let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
     let status = wait_exit(&mut child, limit).await;
     let stderr = child.wait_with_output_stderr();
@@ -184,6 +257,17 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
         "metrolog run failed ({status}):\n{stderr}"
     );
     assert!(stderr.contains("program end"), "{stderr}");
+    let told = pose_lines(&stderr, &scenario());
+    let states = notify.stop();
+    // systemd's STATUS= leads with "pose k/N" once a pose is done, then the alarms (or ok),
+    // then the device faults; the stream defects are named apart.
+    assert!(
+        states.iter().any(|s| s.contains("STATUS=pose ")
+            && s.contains("/11, ")
+            && s.contains(", faults ")
+            && s.contains("stream defects ")),
+        "{states:?}"
+    );
     let record = sim.record();
     sim.shutdown().await;
     let log = the_log(&logs);
@@ -226,6 +310,10 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
     // same log replayed with the trigger placed at its arrival time shows what that did in
     // this run (printed: the evidence the timing model is the cause; docs/design.md).
     let poses = r["poses"].as_array().unwrap();
+    // One terminal line per pose that has values in the log, no more.
+    let logged: std::collections::BTreeSet<u64> =
+        poses.iter().filter_map(|p| p["pose"].as_u64()).collect();
+    assert_eq!(told, logged, "pose lines on stderr vs poses in the log");
     let (ok, wrong) = check_poses(poses, &record);
     let (delays, arrival_wrong) = arrival_model_in_this_run(&log, &record);
     println!(

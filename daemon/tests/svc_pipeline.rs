@@ -153,6 +153,7 @@ fn pipeline(seen: &Arc<Mutex<Seen>>, stop_at_program_end: bool) -> Pipeline {
             keep_poses: true,
             connect: None,
             disk_alarm: None,
+            trajectory: Vec::new(),
         },
         HostClock::new(),
         Box::new(Counting(DetectOnly::new(engine), seen.clone())),

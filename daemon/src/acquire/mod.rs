@@ -20,6 +20,7 @@ pub mod config;
 pub mod counts;
 pub mod pipeline;
 pub mod preflight;
+pub mod progress;
 pub mod recorder;
 pub mod run_log;
 pub mod service;

@@ -66,10 +66,34 @@ pub struct InstrumentStatus {
     /// The driver's own counters (latest snapshot, from the sink's [`RunCounts`]).
     pub driver: drivers::Counters,
     pub last_error: Option<String>,
+    /// Connected at least once this run (a device that is not connected now was unplugged).
+    #[serde(skip)]
+    pub was_connected: bool,
+    /// The status of this instrument's last pose value.
+    #[serde(skip)]
+    pub last_pose_status: Option<types::PoseStatus>,
 }
 
 impl InstrumentStatus {
-    /// Faults: every counted defect of the stream.
+    /// Device faults, as the operator page's "Faults" counts them: device errors and
+    /// disconnects.
+    pub fn device_faults(&self) -> u64 {
+        self.driver.device_errors + self.driver.disconnects
+    }
+
+    /// The alarm that holds on this instrument now, if any: unplugged, or what its last pose
+    /// value says (beam lost, datum lost, no samples).
+    pub fn alarm(&self) -> Option<String> {
+        if self.was_connected && !self.connected {
+            return Some("unplugged".to_string());
+        }
+        self.last_pose_status
+            .and_then(super::progress::alarm_of)
+            .map(str::to_string)
+    }
+
+    /// Stream defects: every counted defect of the stream (gaps, rejected frames, resyncs,
+    /// disconnects, dropped samples, device errors).
     pub fn faults(&self) -> u64 {
         let d = &self.driver;
         d.gaps
@@ -110,6 +134,9 @@ pub struct Status {
     pub nothing_connected: Option<String>,
     /// The low-disk alarm while it holds (`[storage] warn_free_gb`): the free space.
     pub low_disk: Option<String>,
+    /// Poses in the run's trajectory (0: none given).
+    #[serde(skip)]
+    pub trajectory_len: usize,
 }
 
 impl Status {
@@ -122,6 +149,25 @@ impl Status {
     }
     pub fn faults(&self) -> u64 {
         self.instruments.values().map(|s| s.faults()).sum()
+    }
+    /// Device errors and disconnects, all instruments (the operator page's "Faults").
+    pub fn device_faults(&self) -> u64 {
+        self.instruments.values().map(|s| s.device_faults()).sum()
+    }
+    /// The alarms that hold now, per instrument.
+    pub fn alarms(&self) -> Vec<(Instrument, String)> {
+        self.instruments
+            .iter()
+            .filter_map(|(i, s)| s.alarm().map(|a| (*i, a)))
+            .collect()
+    }
+    /// "pose k/N" (or "pose k", or "no pose yet").
+    fn pose_progress(&self) -> String {
+        match (self.last_pose, self.trajectory_len) {
+            (0, _) => "no pose yet".to_string(),
+            (k, 0) => format!("pose {k}"),
+            (k, n) => format!("pose {k}/{n}"),
+        }
     }
     /// Samples the drivers could not deliver or the devices never sent.
     pub fn lost(&self) -> u64 {
@@ -149,7 +195,10 @@ impl Status {
             failed.push_str(&format!("LOW DISK {d}; "));
         }
         format!(
-            "{failed}poses {} ({} ok), samples {}, faults {}, lost {}, connected: {}",
+            "{failed}{}, {}, faults {}; poses {} ({} ok), samples {}, stream defects {}, lost {}, connected: {}",
+            self.pose_progress(),
+            super::progress::alarms_text(&self.alarms()),
+            self.device_faults(),
             self.poses,
             self.poses_ok,
             self.samples(),
@@ -211,6 +260,8 @@ pub struct PipelineConfig {
     pub connect: Option<ConnectPolicy>,
     /// The low-disk alarm the storage check keeps (None: none shown).
     pub disk_alarm: Option<super::storage::DiskAlarm>,
+    /// The run's pose table: "pose k of N" and the targets in the terminal lines.
+    pub trajectory: Vec<metrolog_log::trajectory::TrajectoryRow>,
 }
 
 /// The pipeline: the sink and the run's state beside it (one per run).
@@ -286,6 +337,7 @@ impl RunState {
             } => {
                 let st = self.slot(instrument);
                 st.connected = true;
+                st.was_connected = true;
                 st.port = port;
                 st.identity = identity;
                 self.connected_again(instrument);
@@ -378,6 +430,7 @@ impl RunState {
         if poses.is_empty() {
             return;
         }
+        self.tell_poses(&poses);
         let now = self.clock.now_ns();
         for v in poses {
             if v.n > 0 && timed {
@@ -387,7 +440,8 @@ impl RunState {
                 }
             }
             self.status.last_pose = self.status.last_pose.max(v.pose);
-            self.slot(v.instrument);
+            let before = self.slot(v.instrument).last_pose_status.replace(v.status);
+            tell_alarm(v.instrument, v.pose, before, v.status);
             tracing::debug!(
                 instrument = v.instrument.name(),
                 pose = v.pose,
@@ -397,6 +451,18 @@ impl RunState {
             if self.cfg.keep_poses {
                 self.poses.push(v);
             }
+        }
+    }
+
+    /// One INFO line per pose finished in this batch (README, "Reading the run on the
+    /// terminal").
+    fn tell_poses(&self, poses: &[PoseMsg]) {
+        let mut done: Vec<u32> = poses.iter().map(|v| v.pose).collect();
+        done.sort_unstable();
+        done.dedup();
+        for k in done {
+            let line = super::progress::pose_line(k, &self.cfg.trajectory, poses);
+            tracing::info!("{line}");
         }
     }
 
@@ -441,6 +507,7 @@ impl RunState {
 
 impl Pipeline {
     pub fn new(cfg: PipelineConfig, clock: HostClock, sink: Box<dyn EventSink>) -> Pipeline {
+        let trajectory_len = cfg.trajectory.len();
         let instruments = cfg
             .instruments
             .iter()
@@ -453,6 +520,7 @@ impl Pipeline {
                 clock,
                 status: Status {
                     instruments,
+                    trajectory_len,
                     queue_capacity: QUEUE_CAPACITY,
                     ..Status::default()
                 },
@@ -598,6 +666,27 @@ impl Pipeline {
     }
 }
 
+/// A WARN line when a pose value starts an alarm on its instrument (beam lost, datum lost,
+/// no samples), an INFO line when the alarm is over.
+fn tell_alarm(
+    instrument: Instrument,
+    pose: u32,
+    before: Option<types::PoseStatus>,
+    now: types::PoseStatus,
+) {
+    use super::progress::alarm_of;
+    let (was, is) = (before.and_then(alarm_of), alarm_of(now));
+    if was == is {
+        return;
+    }
+    let name = instrument.name();
+    match (was, is) {
+        (_, Some(a)) => tracing::warn!("{name}: {a} at pose {pose}"),
+        (Some(a), None) => tracing::info!("{name}: {a} is over at pose {pose}"),
+        (None, None) => {}
+    }
+}
+
 /// Start the pipeline on its own thread (with its own single-threaded runtime), so writing the
 /// log never competes with the drivers' tasks.
 pub fn spawn(
@@ -683,6 +772,7 @@ mod tests {
                 keep_poses: true,
                 connect: None,
                 disk_alarm: None,
+                trajectory: Vec::new(),
             },
             HostClock::new(),
             Box::new(sink),
@@ -749,7 +839,7 @@ mod tests {
         assert_eq!(p.status(2).queue_max, 7);
         assert_eq!(
             st.summary(),
-            "poses 0 (0 ok), samples 0, faults 0, lost 0, connected: none"
+            "no pose yet, ok, faults 0; poses 0 (0 ok), samples 0, stream defects 0, lost 0, connected: none"
         );
     }
 
@@ -800,6 +890,55 @@ mod tests {
         assert!(st.summary().ends_with("connected: psd"));
     }
 
+    #[test]
+    fn the_status_line_leads_with_pose_k_of_n_and_the_alarms() {
+        let sink = Scripted {
+            // One batch per event: the connect and disconnect finish no pose.
+            batches: VecDeque::from([
+                vec![],
+                vec![],
+                vec![pose(
+                    Instrument::Interferometer,
+                    2,
+                    PoseStatus::DatumLost,
+                    150,
+                )],
+                vec![pose(Instrument::Interferometer, 3, PoseStatus::Ok, 150)],
+            ]),
+            ..Scripted::default()
+        };
+        let mut p = pipeline(sink, false);
+        p.state.status.trajectory_len = 129;
+        p.handle(DriverEvent::Connected {
+            instrument: Instrument::Psd,
+            port: "/dev/psd".into(),
+            identity: "PSD-2".into(),
+        });
+        assert!(
+            p.status(0)
+                .summary()
+                .starts_with("no pose yet, ok, faults 0; ")
+        );
+        p.handle(DriverEvent::Disconnected {
+            instrument: Instrument::Psd,
+            port: "/dev/psd".into(),
+            reason: DriverError::EndOfFile,
+        });
+        p.handle(sample(Instrument::Interferometer, 0));
+        let line = p.status(0).summary();
+        assert!(
+            line.starts_with("pose 2/129, interferometer datum lost, psd unplugged, faults 0; "),
+            "{line}"
+        );
+        // A good value ends the interferometer's alarm; the PSD stays unplugged.
+        p.handle(sample(Instrument::Interferometer, 1));
+        let line = p.status(0).summary();
+        assert!(
+            line.starts_with("pose 3/129, psd unplugged, faults 0; "),
+            "{line}"
+        );
+    }
+
     fn with_policy(wait: bool) -> Pipeline {
         let mut p = pipeline(Scripted::default(), false);
         p.state.cfg.connect = Some(ConnectPolicy {
@@ -843,12 +982,12 @@ mod tests {
         let mut p = pipeline(Scripted::default(), false);
         let alarm = super::super::storage::DiskAlarm::default();
         p.state.cfg.disk_alarm = Some(alarm.clone());
-        assert!(p.status(0).summary().starts_with("poses 0"));
+        assert!(p.status(0).summary().starts_with("no pose yet, ok"));
         *alarm.lock().unwrap() = Some("1.23 GB free".into());
         assert!(
             p.status(0)
                 .summary()
-                .starts_with("LOW DISK 1.23 GB free; poses 0"),
+                .starts_with("LOW DISK 1.23 GB free; no pose yet"),
             "{}",
             p.status(0).summary()
         );
@@ -966,6 +1105,14 @@ mod tests {
             2 + 4 + 1 + 1 + 3 + 1
         );
         assert_eq!(st.faults(), 12);
+        // The page's "Faults": device errors and disconnects only.
+        assert_eq!(st.device_faults(), 2);
+        assert!(st.summary().contains("faults 2; "), "{}", st.summary());
+        assert!(
+            st.summary().contains("stream defects 12, "),
+            "{}",
+            st.summary()
+        );
         // dropped + samples missing in gaps
         assert_eq!(st.lost(), 8);
         // The status holds what the sink counted, no count of its own.
@@ -1011,7 +1158,7 @@ mod tests {
         );
         assert_eq!(
             st.summary(),
-            "poses 3 (2 ok), samples 3, faults 0, lost 0, connected: none"
+            "pose 4, capball no samples, faults 0; poses 3 (2 ok), samples 3, stream defects 0, lost 0, connected: none"
         );
 
         // The dwells closed at the end count too, and every value is kept.
@@ -1068,8 +1215,9 @@ mod tests {
         // What arrived is still counted as received.
         assert_eq!(st.instruments[&Instrument::Interferometer].received, 2);
         assert!(
-            st.summary()
-                .starts_with("LOG WRITE FAILED, run stopped (no space left on device); poses 0"),
+            st.summary().starts_with(
+                "LOG WRITE FAILED, run stopped (no space left on device); no pose yet"
+            ),
             "{}",
             st.summary()
         );

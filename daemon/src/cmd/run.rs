@@ -253,6 +253,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
             keep_poses: opts.keep_poses,
             connect: Some(connect_policy(cfg)),
             disk_alarm: Some(disk_alarm),
+            trajectory: trajectory_rows(cfg),
         },
         clock,
         Box::new(recorder),
@@ -386,6 +387,15 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     })
 }
 
+/// The run's pose table (empty without a trajectory).
+fn trajectory_rows(cfg: &Config) -> Vec<metrolog_log::trajectory::TrajectoryRow> {
+    cfg.run
+        .trajectory
+        .iter()
+        .flat_map(|t| t.rows.iter().cloned())
+        .collect()
+}
+
 /// The live view of `[live]`, if configured. One that cannot start is reported and left out:
 /// the measurement runs without it.
 async fn start_live(cfg: &Config, log_path: &std::path::Path) -> Option<crate::live::LiveView> {
@@ -402,12 +412,7 @@ async fn start_live(cfg: &Config, log_path: &std::path::Path) -> Option<crate::l
             .iter()
             .flat_map(|t| t.sensors.iter().map(|s| s.name.clone()))
             .collect(),
-        trajectory: cfg
-            .run
-            .trajectory
-            .iter()
-            .flat_map(|t| t.rows.iter().cloned())
-            .collect(),
+        trajectory: trajectory_rows(cfg),
     };
     match crate::live::LiveView::start(live, run).await {
         Ok(l) => Some(l),

@@ -82,7 +82,7 @@ impl InstrumentStatus {
     }
 
     /// The alarm that holds on this instrument now, if any: unplugged, or what its last pose
-    /// value says (beam lost, datum lost, no samples).
+    /// value says (beam lost, datum lost).
     pub fn alarm(&self) -> Option<String> {
         if self.was_connected && !self.connected {
             return Some("unplugged".to_string());
@@ -666,8 +666,8 @@ impl Pipeline {
     }
 }
 
-/// A WARN line when a pose value starts an alarm on its instrument (beam lost, datum lost,
-/// no samples), an INFO line when the alarm is over.
+/// A WARN line when a pose value starts an alarm on its instrument (beam lost, datum lost),
+/// an INFO line when the alarm is over.
 fn tell_alarm(
     instrument: Instrument,
     pose: u32,
@@ -1158,7 +1158,7 @@ mod tests {
         );
         assert_eq!(
             st.summary(),
-            "pose 4, capball no samples, faults 0; poses 3 (2 ok), samples 3, stream defects 0, lost 0, connected: none"
+            "pose 4, ok, faults 0; poses 3 (2 ok), samples 3, stream defects 0, lost 0, connected: none"
         );
 
         // The dwells closed at the end count too, and every value is kept.

@@ -48,11 +48,15 @@ pub fn pose_line(pose: u32, trajectory: &[TrajectoryRow], values: &[PoseMsg]) ->
 }
 
 /// The alarm a pose value raises on its instrument, if any (`None` for a good value).
+/// `device_away` raises none: every reversal point without a dwell gives it (a false alarm
+/// every few poses), and an unplugged device is told by its connection ("unplugged").
 pub fn alarm_of(status: PoseStatus) -> Option<&'static str> {
     match status {
-        PoseStatus::Ok | PoseStatus::NeverSteady | PoseStatus::TriggerMissing => None,
+        PoseStatus::Ok
+        | PoseStatus::NeverSteady
+        | PoseStatus::TriggerMissing
+        | PoseStatus::DeviceAway => None,
         PoseStatus::BeamInvalid => Some("beam lost"),
-        PoseStatus::DeviceAway => Some("no samples"),
         PoseStatus::DatumLost => Some("datum lost"),
     }
 }
@@ -135,5 +139,6 @@ mod tests {
         assert_eq!(alarms_text(&a), "psd unplugged, interferometer datum lost");
         assert_eq!(alarm_of(PoseStatus::DatumLost), Some("datum lost"));
         assert_eq!(alarm_of(PoseStatus::Ok), None);
+        assert_eq!(alarm_of(PoseStatus::DeviceAway), None);
     }
 }

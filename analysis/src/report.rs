@@ -22,8 +22,12 @@ pub fn demo_report(path: &Path) -> Result<String, AnalysisError> {
     let log = LogContents::read(path)?;
     let mut s = String::new();
     let _ = writeln!(s, "Analysis of {}", path.display());
-    if let Some(e) = &log.summary.error {
-        let _ = writeln!(s, "  (log read up to damage: {e})");
+    if let Some(d) = log.damage() {
+        let _ = writeln!(
+            s,
+            "BUILT ON PART OF THE RUN: the log is damaged: {d}; the ISO 230-2, CapBall and PSD \
+             results below use the readings before the damage only"
+        );
     }
     positioning_section(&log, &mut s);
     capball_section(&log, &mut s);

@@ -462,6 +462,50 @@ fn psd_segment_straightness() {
     assert_eq!(s.error_names(), ("EXZ".to_string(), "EYZ".to_string()));
 }
 
+/// The bytes of an MCAP file up to its DataEnd record: every chunk whole, the summary and
+/// footer gone (a log torn after its last chunk was written).
+fn torn_after_the_data(file: &[u8]) -> Vec<u8> {
+    const DATA_END: u8 = 0x0F;
+    let mut at = 8;
+    while at + 9 <= file.len() {
+        let len = u64::from_le_bytes(file[at + 1..at + 9].try_into().expect("8 bytes")) as usize;
+        if file[at] == DATA_END {
+            return file[..at].to_vec();
+        }
+        at += 9 + len;
+    }
+    panic!("the test log has no DataEnd record");
+}
+
+/// CapBall and PSD results from a damaged log say in their header that they are built on
+/// part of the run (the positioning reports did; the CapBall ones said nothing on stdout).
+#[test]
+fn capball_and_psd_results_of_a_damaged_log_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_log(dir.path(), &default_spec());
+    let torn = dir.path().join("torn.mcap");
+    std::fs::write(&torn, torn_after_the_data(&std::fs::read(&path).unwrap())).unwrap();
+    const NOTE: &str = "BUILT ON PART OF THE RUN: the log is damaged";
+    let r = analysis::demo_report(&torn).unwrap();
+    assert!(r.contains(NOTE), "{r}");
+    assert!(r.contains("CapBall identification (39 poses"), "{r}");
+    assert!(r.contains("PSD straightness along Z"), "{r}");
+    let t = torn.to_str().unwrap();
+    let (ok, out, err) = metrolog(&["identify", "capball", t]);
+    assert!(ok, "{err}");
+    assert!(out.starts_with(NOTE), "{out}");
+    let (ok, out, err) = metrolog(&["identify", "capball", t, "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v["log_damage"].is_string(), "{out}");
+    // The intact log: no note, `log_damage` null.
+    let (ok, out, err) = metrolog(&["identify", "capball", path.to_str().unwrap(), "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v["log_damage"].is_null(), "{out}");
+    assert!(!analysis::demo_report(&path).unwrap().contains(NOTE));
+}
+
 #[test]
 fn demo_report_has_every_part() {
     let dir = tempfile::tempdir().unwrap();

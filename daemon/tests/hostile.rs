@@ -271,6 +271,62 @@ const CASES: &[Case] = &[
         0,
         &["not determined"],
     ),
+    // Volumetric: grid and table values within a machine's travel and a physical error; a
+    // machine without errors gives zeros, never NaN; a failed run writes no table.
+    case(
+        "volumetric --machine {x}/models/machine_3axis.toml --errors {x}/models/component_errors.csv --grid 0:1e308:3,0:400:9,0:300:7 --out {o}/comp.csv --siemens {o}/cec.ini",
+        1,
+        &["grid", "100000 mm"],
+    ),
+    case(
+        "volumetric --machine {x}/models/machine_3axis.toml --errors {c}/volumetric-value-1e300.csv --grid 0:500:11,0:400:9,0:300:7 --out {o}/comp.csv",
+        1,
+        &["row 3", "value 1e300"],
+    ),
+    case(
+        "volumetric --machine {x}/models/machine_3axis.toml --errors {c}/volumetric-position-1e300.csv --grid 0:500:11,0:400:9,0:300:7 --out {o}/comp.csv",
+        1,
+        &["row 3", "position_mm"],
+    ),
+    case(
+        "volumetric --machine {x}/models/machine_3axis.toml --errors {c}/volumetric-zero.csv --grid 0:500:11,0:400:9,0:300:7 --out {o}/comp.csv --siemens {o}/cec.ini",
+        0,
+        &["largest volumetric error 0.00"],
+    ),
+    case(
+        "volumetric --machine {x}/models/machine_3axis.toml --errors {c}/volumetric-zero.csv --grid 100:100:1,0:0:1,0:0:1 --out {o}/comp.csv --json",
+        0,
+        &["max_norm_um"],
+    ),
+    // A thermal test with every column constant: no spread to fit, no NaN in any result.
+    case(
+        "thermal fit {c}/thermal-constant.csv -o {o}/model.json",
+        0,
+        &["held-out RMS 0.000"],
+    ),
+    case("thermal diagnose {c}/thermal-constant.csv", 0, &[]),
+    case("thermal diagnose {c}/thermal-constant.csv --json", 0, &[]),
+    case(
+        "analyze thermal {c}/thermal-constant.csv --probes ch1,ch1,ch2,ch2,ch1 --probe-spacing-mm 100",
+        0,
+        &["ETVE"],
+    ),
+    case(
+        "analyze thermal {c}/thermal-constant.csv --json",
+        0,
+        &["etve_um"],
+    ),
+    // PSD frame readings without any spread (every reading 0.5 µm): zeros, never NaN.
+    case(
+        "identify psd {c}/psd-constant.csv --reference 1",
+        0,
+        &["straightness ranges"],
+    ),
+    case(
+        "identify psd {c}/psd-constant.csv --reference 1 --json",
+        0,
+        &["errors"],
+    ),
     case("diagnose {c}/positioning-flat.csv", 0, &[]),
     case("report {c}/positioning-flat.csv -o {o}/report.html", 0, &[]),
     #[cfg(feature = "plot")]

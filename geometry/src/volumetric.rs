@@ -51,6 +51,9 @@ pub enum VolumetricError {
         "grid `{0}`: expected three ranges like `0:500:11,0:400:9,0:300:7` (min:max:count per axis)"
     )]
     BadGrid(String),
+    /// grid `{0}`: every min and max must be within ±100000 mm (a machine's travel)
+    #[error("grid `{0}`: every min and max must be within ±100000 mm (a machine's travel)")]
+    GridRange(String),
     /// the machine has no linear axis {0}: the volumetric model needs X, Y and Z
     #[error("the machine has no linear axis {0}: the volumetric model needs X, Y and Z")]
     MissingAxis(char),
@@ -65,6 +68,12 @@ pub enum VolumetricError {
     )]
     NotFinite(&'static str),
 }
+
+/// The largest axis position (mm) a grid or an error table may hold: a machine's travel.
+pub const MAX_POSITION_MM: f64 = 100_000.0;
+
+/// The largest component error value (µm or µrad) a table may hold.
+pub const MAX_ERROR_VALUE: f64 = 1_000_000.0;
 
 /// A smooth function of an axis position.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -248,6 +257,14 @@ impl ComponentErrors {
                     row,
                     msg: format!("value `{v_s}` is not a finite number"),
                 })?;
+            if v.abs() > MAX_ERROR_VALUE {
+                return Err(VolumetricError::BadRow {
+                    row,
+                    msg: format!(
+                        "value {v_s} is beyond ±{MAX_ERROR_VALUE} (µm or µrad: 1 m or 1 rad)"
+                    ),
+                });
+            }
             if is_sq {
                 sq.insert(name, v);
             } else {
@@ -256,6 +273,12 @@ impl ComponentErrors {
                     row,
                     msg: format!("position_mm `{p_s}` is not a finite number (only squareness rows leave it empty)"),
                 })?;
+                if p.abs() > MAX_POSITION_MM {
+                    return Err(VolumetricError::BadRow {
+                        row,
+                        msg: format!("position_mm {p_s} is beyond ±{MAX_POSITION_MM} mm"),
+                    });
+                }
                 points.entry(name).or_default().push((p, v));
             }
         }
@@ -367,6 +390,9 @@ impl GridSpec {
             let n: usize = f[2].trim().parse().map_err(|_| bad())?;
             if !a.is_finite() || !b.is_finite() || n == 0 || (n > 1 && b <= a) || n > 10_000 {
                 return Err(bad());
+            }
+            if a.abs() > MAX_POSITION_MM || b.abs() > MAX_POSITION_MM {
+                return Err(VolumetricError::GridRange(s.to_string()));
             }
             ranges[i] = (a, b, n);
         }
@@ -503,6 +529,14 @@ pub fn volumetric_grid(
             })
         })
         .collect();
+    // A machine description with an absurd tool offset or axis geometry can still overflow:
+    // nothing non-finite goes into a table.
+    if out
+        .iter()
+        .any(|p| p.error_um.iter().any(|v| !v.is_finite()))
+    {
+        return Err(VolumetricError::NotFinite("a volumetric error of the grid"));
+    }
     Ok(out)
 }
 

@@ -122,6 +122,22 @@ fn csv_errors_are_clear() {
     let e = ComponentErrors::from_csv("error,position_mm,value\nEXX,,1\nEXX,2,1\n").unwrap_err();
     assert!(e.to_string().contains("position_mm"), "{e}");
     assert!(ComponentErrors::from_csv("error,pos,value\n").is_err());
+    // Finite but beyond any machine (issue 27: 1e300 overflowed to an infinite table).
+    let e =
+        ComponentErrors::from_csv("error,position_mm,value\nEXX,0,0\nEXX,500,1e300\n").unwrap_err();
+    assert!(
+        e.to_string().contains("row 3") && e.to_string().contains("beyond"),
+        "{e}"
+    );
+    let e =
+        ComponentErrors::from_csv("error,position_mm,value\nEXX,-2e5,0\nEXX,0,1\n").unwrap_err();
+    assert!(
+        e.to_string().contains("row 2") && e.to_string().contains("position_mm"),
+        "{e}"
+    );
+    let e = GridSpec::parse("0:1e308:3,0:1:2,0:1:2").unwrap_err();
+    assert!(matches!(e, VolumetricError::GridRange(_)), "{e}");
+    assert!(GridSpec::parse("-100000:100000:3,0:1:2,0:1:2").is_ok());
     assert!(GridSpec::parse("0:100:11,0:100:11").is_err());
     assert!(GridSpec::parse("0:100:11,0:100:0,0:1:2").is_err());
     assert_eq!(

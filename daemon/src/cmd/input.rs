@@ -62,6 +62,20 @@ pub struct CapballInput {
     pub machine_name: Option<String>,
     /// Poses of a log left out, with their status.
     pub skipped: Vec<(u32, String)>,
+    /// Where a damaged log is damaged (the records are those before the damage).
+    pub damage: Option<String>,
+}
+
+impl CapballInput {
+    /// The header line of a result built on a damaged log, when it is.
+    pub fn damage_note(&self) -> Option<String> {
+        self.damage.as_ref().map(|d| {
+            format!(
+                "BUILT ON PART OF THE RUN: the log is damaged: {d}; the CapBall result uses the \
+                 poses before the damage only"
+            )
+        })
+    }
 }
 
 /// The CapBall records of a CSV dataset or an MCAP log (the poses that hold the tool on the
@@ -77,6 +91,7 @@ pub fn load_capball(path: &Path, machine: Option<Machine>) -> anyhow::Result<Cap
             )
         };
         let log = read_contents(path, "reading").with_context(context)?;
+        let damage = log.damage();
         return Ok(match machine {
             Some(machine) => {
                 let cb = metrolog_analysis::capball::capball_from_contents(&log, &machine)
@@ -86,6 +101,7 @@ pub fn load_capball(path: &Path, machine: Option<Machine>) -> anyhow::Result<Cap
                     machine,
                     machine_name: None,
                     skipped: cb.skipped,
+                    damage,
                 }
             }
             None => {
@@ -96,6 +112,7 @@ pub fn load_capball(path: &Path, machine: Option<Machine>) -> anyhow::Result<Cap
                     machine: cb.machine,
                     machine_name: Some(cb.machine_name),
                     skipped: cb.skipped,
+                    damage,
                 }
             }
         });
@@ -111,6 +128,7 @@ pub fn load_capball(path: &Path, machine: Option<Machine>) -> anyhow::Result<Cap
         machine,
         machine_name: None,
         skipped: Vec::new(),
+        damage: None,
     })
 }
 

@@ -14,12 +14,14 @@ use geometry::capball::CapballSetup;
 /// record at one fixed pose.
 pub fn diagnose_path(path: &Path, drift: Option<&Path>) -> anyhow::Result<CapballDiagnosis> {
     let input = crate::cmd::input::load_capball(path, None)?;
+    let mut notes: Vec<String> = input.damage_note().into_iter().collect();
+    notes.extend(
+        input
+            .skipped
+            .iter()
+            .map(|(pose, status)| format!("CapBall pose {pose} skipped ({status})")),
+    );
     let (recs, machine) = (input.records, input.machine);
-    let mut notes: Vec<String> = input
-        .skipped
-        .iter()
-        .map(|(pose, status)| format!("CapBall pose {pose} skipped ({status})"))
-        .collect();
     if let Some(name) = &input.machine_name {
         notes.push(format!("machine: {name}"));
     }
@@ -51,7 +53,8 @@ pub fn diagnose_path(path: &Path, drift: Option<&Path>) -> anyhow::Result<Capbal
         &Options::default(),
     )
     .with_context(|| format!("diagnosing {}", path.display()))?;
-    d.report.notes.extend(notes);
+    notes.append(&mut d.report.notes);
+    d.report.notes = notes;
     Ok(d)
 }
 

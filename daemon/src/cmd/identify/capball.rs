@@ -44,6 +44,11 @@ pub fn run(a: CapballArgs) -> anyhow::Result<()> {
     if let Some(name) = &input.machine_name {
         eprintln!("{}: machine {name}", a.data.display());
     }
+    let damage = input.damage.clone();
+    // A result built on a damaged log says so before anything else (JSON: `log_damage`).
+    if let Some(note) = input.damage_note().filter(|_| !a.json) {
+        println!("{note}");
+    }
     let (machine, recs) = (input.machine, input.records);
     if a.mc.uncertainty.is_some() {
         return capball_mc::run(&a.data, &machine, &recs, &a.mc, a.json);
@@ -123,7 +128,7 @@ pub fn run(a: CapballArgs) -> anyhow::Result<()> {
             .collect();
         println!(
             "{}",
-            serde_json::to_string_pretty(&serde_json::json!({ "runs": v }))?
+            serde_json::to_string_pretty(&serde_json::json!({ "runs": v, "log_damage": damage }))?
         );
         return Ok(());
     }

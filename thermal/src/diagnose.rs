@@ -438,10 +438,18 @@ fn collinear_finding(
     s1: &Selection,
     o: &DiagnoseOptions,
 ) -> Option<Finding> {
-    let cols: Vec<Vec<f64>> = sensors
+    let all: Vec<Vec<f64>> = sensors
         .iter()
         .map(|&i| s.inputs.raw(Src::Sensor(i)))
         .collect::<Option<_>>()?;
+    // A sensor whose reading never changes carries nothing to be collinear with: its variance
+    // inflation is the clamp's 10¹², not a property of the machine (kept out of the group).
+    let (sensors, cols): (Vec<usize>, Vec<Vec<f64>>) = sensors
+        .iter()
+        .copied()
+        .zip(all)
+        .filter(|(_, c)| c.iter().any(|v| *v != c[0]))
+        .unzip();
     let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
     let v = vifs(&refs);
     let red = redundancy(&refs);

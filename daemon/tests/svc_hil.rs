@@ -845,21 +845,13 @@ fn retention_frees_a_small_file_system_oldest_run_first() {
             .set_modified(now - age)
             .unwrap();
     }
-    let cfg = dir.path().join("m.toml");
-    std::fs::write(
-        &cfg,
-        format!(
+    let (out, err) = run_config(
+        dir.path(),
+        &format!(
             "[run]\nmachine = \"m\"\noutput_dir = {:?}\nconnect_timeout_s = 1\n[storage]\nmin_free_gb = 0.0025\nwarn_free_gb = 0\n[interferometer]\nport = \"/dev/null\"\n",
             logs.display().to_string()
         ),
-    )
-    .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(["run", "--config"])
-        .arg(&cfg)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
+    );
     assert_eq!(
         out.status.code(),
         Some(metrolog::exit::NOTHING_CONNECTED as i32),
@@ -900,21 +892,13 @@ fn a_full_disk_refuses_the_start_without_an_empty_log() {
     // Fill it (the write stops at ENOSPC).
     let filler = logs.join("other-data.bin");
     let _ = std::fs::write(&filler, vec![1u8; 2 << 20]);
-    let cfg = dir.path().join("m.toml");
-    std::fs::write(
-        &cfg,
-        format!(
+    let (out, err) = run_config(
+        dir.path(),
+        &format!(
             "[run]\nmachine = \"m\"\noutput_dir = {:?}\n[interferometer]\nport = \"/dev/null\"\n",
             logs.display().to_string()
         ),
-    )
-    .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(["run", "--config"])
-        .arg(&cfg)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
+    );
     assert_eq!(
         out.status.code(),
         Some(metrolog::exit::CANT_CREATE as i32),
@@ -929,4 +913,17 @@ fn a_full_disk_refuses_the_start_without_an_empty_log() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(names, ["other-data.bin"]);
+}
+
+/// `metrolog run` on the config `text`, written to `dir/m.toml`: its output and its stderr.
+fn run_config(dir: &Path, text: &str) -> (std::process::Output, String) {
+    let cfg = dir.join("m.toml");
+    std::fs::write(&cfg, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out, err)
 }

@@ -613,7 +613,15 @@ pub fn siemens_cec(
 
 /// One (input, output) table sampled along the grid line through the grid's first corner;
 /// the constant correction at that corner goes into the X-input tables.
-fn cec_table(points: &[GridPoint], n: [usize; 3], input: usize, out: usize) -> Vec<f64> {
+/// The table of `out` along `input`: the correction at each point of that axis, the others at
+/// their first point. The `base` table (the first axis with more than one point) holds the
+/// correction at the grid's first point too; the others hold differences from it.
+fn cec_table(
+    points: &[GridPoint],
+    n: [usize; 3],
+    (input, base): (usize, usize),
+    out: usize,
+) -> Vec<f64> {
     let idx = |i: usize, j: usize, k: usize| (i * n[1] + j) * n[2] + k;
     let corr = |i: usize, j: usize, k: usize| -points[idx(i, j, k)].error_um[out];
     (0..n[input])
@@ -623,7 +631,7 @@ fn cec_table(points: &[GridPoint], n: [usize; 3], input: usize, out: usize) -> V
                 1 => (0, q, 0),
                 _ => (0, 0, q),
             };
-            if input == 0 {
+            if input == base {
                 corr(i, j, k)
             } else {
                 corr(i, j, k) - corr(0, 0, 0)
@@ -656,9 +664,17 @@ pub fn siemens_cec_for(
     check_cec_input(points, grid, o)?;
     let n = [grid.ranges[0].2, grid.ranges[1].2, grid.ranges[2].2];
     let xyz = |a: usize| "XYZ".as_bytes()[a] as char;
+    // An axis with one grid point has no table (a step of 0 is no table a control takes): the
+    // correction does not vary along it, and its constant goes into the first axis that has more.
+    let Some(base) = (0..3).find(|&a| n[a] > 1) else {
+        return Err(VolumetricError::BadGrid(
+            "one point on every axis: an interpolatory table needs two points along an axis".into(),
+        ));
+    };
     let mut all: Vec<(usize, usize, Vec<f64>)> = (0..3)
+        .filter(|&i| n[i] > 1)
         .flat_map(|i| (0..3).map(move |o| (i, o)))
-        .map(|(i, out)| (i, out, cec_table(points, n, i, out)))
+        .map(|(i, out)| (i, out, cec_table(points, n, (i, base), out)))
         .collect();
     let size = |v: &[f64]| v.iter().fold(0.0f64, |a, x| a.max(x.abs()));
     let mut omitted = Vec::new();
@@ -702,11 +718,7 @@ pub fn siemens_cec_for(
     ini.push_str("CHANDATA(1)\n");
     for (t, (input, out, vals)) in all.iter().enumerate() {
         let (min, max, cnt) = grid.ranges[*input];
-        let step = if cnt > 1 {
-            (max - min) / (cnt - 1) as f64
-        } else {
-            0.0
-        };
+        let step = (max - min) / (cnt - 1) as f64;
         let _ = writeln!(
             ini,
             "; table {t}: correction of {} from the position of {}",

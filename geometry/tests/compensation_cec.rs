@@ -118,3 +118,85 @@ fn cec_refuses_names_outside_the_syntax_and_non_finite_values() {
         assert!(matches!(e, VolumetricError::NotFinite(_)), "{e}");
     }
 }
+
+/// The corrections a control reads from a CEC file at a point: for each output axis, the sum
+/// over its tables of the table's value interpolated linearly at the input axis' position
+/// (K3 §4.4), written here from the file's text alone. Positions in mm, corrections in µm.
+fn control_correction(ini: &str, names: [&str; 3], q_mm: [f64; 3]) -> [f64; 3] {
+    let value = |key: &str, t: usize| -> &str {
+        let pre = format!("{key}[{t}]=");
+        ini.lines()
+            .find_map(|l| l.strip_prefix(pre.as_str()))
+            .unwrap_or_else(|| panic!("no {pre} in the file"))
+    };
+    let axis = |s: &str| names.iter().position(|n| s == format!("({n})")).unwrap();
+    let mut out = [0.0; 3];
+    for t in numbers(ini, "$AN_CEC_INPUT_AXIS[") {
+        let (input, output) = (
+            axis(value("$AN_CEC_INPUT_AXIS", t)),
+            axis(value("$AN_CEC_OUTPUT_AXIS", t)),
+        );
+        let step: f64 = value("$AN_CEC_STEP", t).parse().unwrap();
+        let min: f64 = value("$AN_CEC_MIN", t).parse().unwrap();
+        assert!(step > 0.0, "table {t}: step {step}");
+        let points: Vec<f64> = (0..)
+            .map_while(|p| {
+                let pre = format!("$AN_CEC[{t},{p}]=");
+                ini.lines()
+                    .find_map(|l| l.strip_prefix(pre.as_str()))
+                    .map(|v| v.parse::<f64>().unwrap())
+            })
+            .collect();
+        let s = ((q_mm[input] - min) / step).clamp(0.0, (points.len() - 1) as f64);
+        let (i, f) = (s.floor() as usize, s - s.floor());
+        let v = if i + 1 < points.len() {
+            points[i] * (1.0 - f) + points[i + 1] * f
+        } else {
+            points[i]
+        };
+        out[output] += v * 1e3;
+    }
+    out
+}
+
+/// A grid with one point along an axis (a plane of a 3D machine): that axis has no table (a
+/// step of 0 is no table), and the file still gives every grid point its correction, as read
+/// by the interpolation a control does. One point on every axis is refused.
+#[test]
+fn a_grid_with_one_point_along_an_axis_writes_no_table_for_it() {
+    let m = Machine::from_chain("WYFXZT").unwrap();
+    let e = ComponentErrors::from_csv(
+        "error,position_mm,value\nEXX,0,2\nEXX,400,8\nEYX,0,0\nEYX,200,3\nEYX,400,0\nEZY,0,4\nEZY,300,-5\nEXZ,0,1\nEXZ,200,-1\n",
+    )
+    .unwrap();
+    let names = ["AX1", "AX2", "AX3"];
+    for spec in ["0:400:5,150:150:1,0:200:3", "250:250:1,150:150:1,0:200:3"] {
+        let g = GridSpec::parse(spec).unwrap();
+        let pts = volumetric_grid(&m, &e, &g).unwrap();
+        let cec = siemens_cec(&pts, &g, names).expect("CEC tables");
+        assert!(!cec.ini.contains("_STEP[0]=0.000000"), "{}", cec.ini);
+        assert!(
+            !cec.ini.contains("=(AX2)\n$AN_CEC_OUTPUT"),
+            "no table along Y: {}",
+            cec.ini
+        );
+        for p in &pts {
+            let c = control_correction(&cec.ini, names, p.pos_mm);
+            for k in 0..3 {
+                assert!(
+                    (c[k] + p.error_um[k]).abs() < 2e-3,
+                    "{spec} at {:?}: correction {c:?}, error {:?}",
+                    p.pos_mm,
+                    p.error_um
+                );
+            }
+        }
+    }
+    let g = GridSpec::parse("0:0:1,150:150:1,10:10:1").unwrap();
+    let pts = volumetric_grid(&m, &e, &g).unwrap();
+    let err = siemens_cec(&pts, &g, names).expect_err("one point");
+    assert!(
+        err.to_string().contains("two points along an axis"),
+        "{err}"
+    );
+}

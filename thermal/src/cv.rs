@@ -277,6 +277,9 @@ pub struct HeldOutGain {
 }
 
 impl HeldOutGain {
+    /// The smallest held-out RMS gain that counts, µm.
+    pub const MIN_GAIN_UM: f64 = 1e-6;
+
     pub(crate) fn between(before: &CvScore, after: &CvScore, rule: &GainRule) -> Self {
         let floor =
             1e-12 * (before.total() + after.total()) / before.sse.len().max(1) as f64 + 1e-300;
@@ -298,7 +301,11 @@ impl HeldOutGain {
             0.0
         };
         let (rb, ra) = (before.rms(), after.rms());
-        let significant = t >= rule.min_t && ra <= (1.0 - rule.min_relative_gain) * rb;
+        // A gain below a picometre is rounding: no displacement sensor resolves it, and a
+        // constant channel (RMS 1e-12 µm) would otherwise take terms that fit its noise.
+        let significant = t >= rule.min_t
+            && ra <= (1.0 - rule.min_relative_gain) * rb
+            && rb - ra > Self::MIN_GAIN_UM;
         Self {
             rms_before_um: rb,
             rms_after_um: ra,

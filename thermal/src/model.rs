@@ -221,8 +221,12 @@ pub(crate) fn reference_temperatures(ds: &ThermalDataset) -> Vec<f64> {
 }
 
 pub(crate) fn pool(ds: &ThermalDataset, opts: &FitOptions) -> Result<Pool, ThermalError> {
+    // A sensor whose reading never changes is the intercept again: a term of it can only fit
+    // rounding noise, and it was chosen once per step (the same zero term listed six times).
     let sensors = match &opts.sensors {
-        None => (0..ds.sensor_names.len()).collect(),
+        None => (0..ds.sensor_names.len())
+            .filter(|&i| varies(&ds.temperatures_c[i]))
+            .collect(),
         Some(names) => names
             .iter()
             .map(|n| {
@@ -232,7 +236,7 @@ pub(crate) fn pool(ds: &ThermalDataset, opts: &FitOptions) -> Result<Pool, Therm
             })
             .collect::<Result<_, _>>()?,
     };
-    let spindle = if ds.spindle_rpm.is_some() {
+    let spindle = if ds.spindle_rpm.as_deref().is_some_and(varies) {
         opts.spindle_exponents.clone()
     } else {
         vec![]
@@ -243,6 +247,11 @@ pub(crate) fn pool(ds: &ThermalDataset, opts: &FitOptions) -> Result<Pool, Therm
         asymmetric: opts.asymmetric,
         max_spindle_terms: usize::MAX,
     })
+}
+
+/// Whether a column holds two different values.
+fn varies(v: &[f64]) -> bool {
+    v.iter().any(|x| Some(x) != v.first())
 }
 
 fn channel_model(

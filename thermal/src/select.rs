@@ -261,6 +261,10 @@ impl<'a> Search<'a> {
             let mut trial = specs.clone();
             trial.push(cand);
             let (refined, s) = self.refine(&trial, trial.len() - 1);
+            if specs.contains(&refined) {
+                // Refined onto a term the model has: nothing new to add.
+                break;
+            }
             *trial.last_mut()? = refined;
             let gain = HeldOutGain::between(&score, &s, &self.rule);
             if !gain.significant {

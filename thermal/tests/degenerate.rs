@@ -22,3 +22,46 @@ fn constant_temperatures_name_no_collinear_sensors() {
         d.render()
     );
 }
+
+/// A fit never lists a term twice, and never a sensor (or a spindle speed) that does not
+/// change: it is the intercept again, and it was chosen once per selection step (the same
+/// zero-coefficient term of a constant sensor listed six times). A sensor that changes and
+/// explains the displacement is kept.
+#[test]
+fn a_fit_holds_no_term_of_a_constant_input_and_no_term_twice() {
+    let mut csv = String::from("time_s,spindle_rpm,ch1_um,ch2_um,t1_c,t2_c,t3_c\n");
+    for k in 0..200 {
+        let t3 = 20.0 + 2.0 * (k as f64 / 40.0).sin();
+        let noise = 0.01 * ((k * 7919) % 13) as f64;
+        csv += &format!("{},0,1,{},20,20,{t3}\n", 60 * k, 3.0 * (t3 - 20.0) + noise);
+    }
+    let ds = ThermalDataset::from_csv(&csv).expect("reads");
+    let m = thermal::fit(&ds, &thermal::FitOptions::default()).expect("fits");
+    for ch in &m.channels {
+        let names: Vec<String> = ch
+            .terms
+            .iter()
+            .map(|t| serde_json::to_string(&(&t.input, t.tau_heat_s, t.tau_cool_s)).unwrap())
+            .collect();
+        let mut uniq = names.clone();
+        uniq.sort();
+        uniq.dedup();
+        assert_eq!(uniq.len(), names.len(), "{}: {names:?}", ch.channel);
+        for n in &names {
+            assert!(
+                !n.contains("\"t1\"") && !n.contains("\"t2\"") && !n.contains("spindle"),
+                "{}: a constant input in {n}",
+                ch.channel
+            );
+        }
+    }
+    assert!(m.channels[0].terms.is_empty(), "{:?}", m.channels[0].terms);
+    assert!(
+        m.channels[1]
+            .terms
+            .iter()
+            .any(|t| serde_json::to_string(&t.input).unwrap().contains("\"t3\"")),
+        "{:?}",
+        m.channels[1].terms
+    );
+}

@@ -48,3 +48,62 @@ pub fn positioning_path(text: &str) -> Option<Vec<String>> {
     }
     Some(outputs)
 }
+
+/// CSV text → the positioning reader → a compensation table in every dialect and mode the
+/// dialect takes → the controller files and the before/after verification. Never panics; for
+/// an accepted file, no file text holds a NaN or an infinity, every file name is a plain name
+/// (no path), and no file line holds a control character (a newline in a name would inject a
+/// line). Returns the files written (`None`: the reader refused the text).
+pub fn compensation_path(text: &str) -> Option<Vec<(String, String)>> {
+    use positioning::compensation::{Dialect, Mode, Options, build, verify};
+    let (data, _notes) = PositioningData::from_csv_str_noted(text).ok()?;
+    let mut files = vec![];
+    for dialect in [
+        Dialect::LinuxCnc,
+        Dialect::Sinumerik,
+        Dialect::Fanuc,
+        Dialect::Heidenhain,
+    ] {
+        for mode in [Mode::Mean, Mode::Backlash, Mode::Bidirectional] {
+            let o = Options {
+                dialect,
+                mode,
+                spacing_mm: None,
+                reference_mm: None,
+                axis_name: None,
+                axis_number: 1,
+                point_limit: None,
+            };
+            let Ok(t) = build(&data, &o) else { continue };
+            let v = verify(&data, &t);
+            let summary = format!("{v:?}");
+            for (name, body) in &t.files {
+                check_controller_file(name, body, text);
+            }
+            if let Some(w) = non_finite_word(&summary) {
+                panic!(
+                    "`{w}` in the verification of an accepted file:\n{summary}\n--- input:\n{text}"
+                );
+            }
+            files.extend(t.files);
+        }
+    }
+    Some(files)
+}
+
+fn check_controller_file(name: &str, body: &str, input: &str) {
+    let plain = !name.is_empty()
+        && !name.contains(['/', '\\'])
+        && name != ".."
+        && name.chars().all(|c| !c.is_control());
+    assert!(plain, "file name {name:?} of an accepted file:\n{input}");
+    if let Some(w) = non_finite_word(body) {
+        panic!("`{w}` in {name} of an accepted file:\n{body}\n--- input:\n{input}");
+    }
+    if let Some(l) = body
+        .lines()
+        .find(|l| l.chars().any(|c| c.is_control() && c != '\t' && c != '\r'))
+    {
+        panic!("a control character in {name}: {l:?}\n--- input:\n{input}");
+    }
+}

@@ -6,7 +6,7 @@
 //! `positioning_path` cargo-fuzz target (`protocol/fuzz`), through
 //! `metrolog_analysis::fuzzcheck::positioning_path`.
 
-use metrolog_analysis::fuzzcheck::{non_finite_word, positioning_path};
+use metrolog_analysis::fuzzcheck::{compensation_path, non_finite_word, positioning_path};
 use proptest::prelude::*;
 
 /// A cell of a deviation or a position: mostly plausible numbers, sometimes extreme ones the
@@ -105,6 +105,14 @@ proptest! {
             ACCEPTED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         }
         TRIED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// The same files to the controller tables of every dialect and mode (the
+    /// `compensation_path` fuzz target): no NaN or infinity, no path in a file name, no
+    /// control character in a line of a file a control loads.
+    #[test]
+    fn controller_files_of_accepted_runs_hold_finite_numbers_only(text in csv()) {
+        let _ = compensation_path(&text);
     }
 }
 

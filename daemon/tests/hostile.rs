@@ -173,6 +173,29 @@ const CASES: &[Case] = &[
         1,
         &["coverage_probability"],
     ),
+    // Found by tests/sweep/hostile_sweep.py: model values each finite but too large to
+    // average ("b = -inf °C u = inf °C"), a tool offset of 1e308 ("largest volumetric error
+    // inf µm"), a reading uncertainty of 1e308 ("u inf inf inf").
+    case(
+        "uncertainty {c}/budget-mean-1e308.toml",
+        1,
+        &["not a finite number", "too large"],
+    ),
+    case(
+        "volumetric --errors {x}/models/component_errors.csv --machine {c}/machine-tool-offset-1e308.toml --grid 0:400:3,0:300:3,0:200:3 --out {o}/t.csv",
+        1,
+        &["tool_offset_mm", "100000 mm"],
+    ),
+    case(
+        "identify psd {x}/models/psd_readings.csv --reference 0 --sigma-um 1e308",
+        1,
+        &["--sigma-um", "5000"],
+    ),
+    case(
+        "identify capball {x}/models/capball_identification.csv --uncertainty mc --sensor-u-um 1e308,1,1",
+        1,
+        &["--sensor-u-um", "10000"],
+    ),
     // Budget expressions: depth limits, not a stack overflow.
     case(
         "uncertainty {c}/budget-nested-30000.toml",

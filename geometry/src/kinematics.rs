@@ -47,6 +47,26 @@ pub enum KinematicsError {
     /// machine description is not valid TOML: {0}
     #[error("machine description is not valid TOML: {0}")]
     Toml(String),
+    /// {what} = {value:?}: every length must be a finite number within ±100000 mm
+    #[error(
+        "{what} = {value:?}: every length must be a finite number within ±100000 mm (a machine's size)"
+    )]
+    OutOfRange { what: String, value: [f64; 3] },
+}
+
+/// The largest length (mm) a machine description may hold: tool offsets and pivots.
+pub const MAX_LENGTH_MM: f64 = 100_000.0;
+
+/// A length triple of a machine description within [`MAX_LENGTH_MM`].
+fn check_length(what: impl Fn() -> String, v: [f64; 3]) -> Result<(), KinematicsError> {
+    if v.iter().all(|x| x.is_finite() && x.abs() <= MAX_LENGTH_MM) {
+        Ok(())
+    } else {
+        Err(KinematicsError::OutOfRange {
+            what: what(),
+            value: v,
+        })
+    }
 }
 
 /// One of the six ISO axes.
@@ -305,6 +325,7 @@ impl Machine {
 
     pub fn from_config(cfg: &MachineConfig) -> Result<Self, KinematicsError> {
         let bad = || KinematicsError::BadChain(cfg.chain.clone());
+        check_length(|| "tool_offset_mm".into(), cfg.tool_offset_mm)?;
         let chars: Vec<char> = cfg
             .chain
             .trim()
@@ -334,7 +355,7 @@ impl Machine {
             let dir = match ac.direction {
                 Some(d) => {
                     let v = Vector3::from(d);
-                    if v.norm().is_nan() || v.norm() <= 1e-12 {
+                    if !v.norm().is_finite() || v.norm() <= 1e-12 {
                         return Err(KinematicsError::ZeroDirection {
                             axis: c.to_string(),
                             dir: d,
@@ -344,11 +365,13 @@ impl Machine {
                 }
                 None => axis.nominal_direction(),
             };
+            let pivot = ac.pivot_mm.unwrap_or([0.0; 3]);
+            check_length(|| format!("axes.{c}.pivot_mm"), pivot)?;
             Ok(Joint {
                 axis,
                 side,
                 direction: dir,
-                pivot_mm: Vector3::from(ac.pivot_mm.unwrap_or([0.0; 3])),
+                pivot_mm: Vector3::from(pivot),
             })
         };
         // Workpiece branch written W..F: reverse it to read frame → workpiece.

@@ -238,7 +238,13 @@ def limit():
     os.setsid()
 
 
-def run_one(binary, args, work: Path):
+def echoed(out: str, m, inp_text: str) -> bool:
+    """Whether the word is the input's own text echoed (a budget's title), not a number."""
+    ctx = out[max(0, m.start() - 12):m.end() + 12]
+    return len(ctx) > 8 and ctx in inp_text
+
+
+def run_one(binary, args, work: Path, inp_text=""):
     """Runs one command line in `work` (its cwd); the findings, if any."""
     out_dir = work / "out"
     out_dir.mkdir()
@@ -260,7 +266,8 @@ def run_one(binary, args, work: Path):
     if p.returncode == 0:
         s = p.stdout.decode(errors="replace")
         m = NONFINITE.search(s)
-        if m and "nan" not in " ".join(args).lower() and "inf" not in " ".join(args).lower():
+        if m and not echoed(s, m, inp_text) and not any(
+                w in " ".join(args).lower() for w in ("nan", "inf")):
             bad.append(f"non-finite in stdout: …{s[max(0, m.start() - 60):m.end() + 20]!r}")
     for f in out_dir.rglob("*"):
         if p.returncode != 0:
@@ -322,7 +329,8 @@ def one(binary, i, cmd, data, label, keep):
             inp.write_bytes(data)
         args = expand(cmd, inp, work)
         args = [x.replace("{n}", NAMES[i % len(NAMES)]) for x in args]
-        bad, code, err = run_one(binary, args, work)
+        text = data.decode(errors="replace") if data is not None else ""
+        bad, code, err = run_one(binary, args, work, text)
         if bad and keep:
             d = Path(keep) / f"case{i:05}"
             d.mkdir(parents=True, exist_ok=True)

@@ -71,8 +71,14 @@ fn triple(s: &str, what: &str) -> anyhow::Result<[f64; 3]> {
         .collect::<Result<_, _>>()
         .map_err(|_| anyhow::anyhow!("{what} `{s}`: expected three numbers x,y,z (µm)"))?;
     match v.as_slice() {
-        [x, y, z] if v.iter().all(|u| u.is_finite() && *u >= 0.0) => Ok([*x, *y, *z]),
-        _ => anyhow::bail!("{what} `{s}`: expected three numbers x,y,z ≥ 0 (µm)"),
+        // A standard uncertainty beyond 10 mm is no CapBall's (its sensors span a few 100 µm).
+        [x, y, z]
+            if v.iter()
+                .all(|u| u.is_finite() && (0.0..=10_000.0).contains(u)) =>
+        {
+            Ok([*x, *y, *z])
+        }
+        _ => anyhow::bail!("{what} `{s}`: expected three numbers x,y,z from 0 to 10000 µm"),
     }
 }
 

@@ -48,8 +48,12 @@ pub fn run(a: PsdArgs) -> anyhow::Result<()> {
         }
         None => PsdLayout::paper(),
     };
-    if !(a.sigma_um.is_finite() && a.sigma_um >= 0.0) {
-        anyhow::bail!("--sigma-um {}: must be a non-negative number", a.sigma_um);
+    // A reading's uncertainty cannot exceed half the diode (10 mm × 10 mm).
+    if !(a.sigma_um.is_finite() && (0.0..=5000.0).contains(&a.sigma_um)) {
+        anyhow::bail!(
+            "--sigma-um {}: must be a number from 0 to 5000 µm (half the PSD's 10 mm)",
+            a.sigma_um
+        );
     }
     let runs = psd_frame::parse_readings_csv(&layout, &read_csv(&a.data)?)
         .with_context(|| format!("{}", a.data.display()))?;

@@ -84,6 +84,11 @@ pub struct TempSensor {
     /// Where it sits on the machine, in words (kept in the run's metadata).
     #[serde(default)]
     pub location: String,
+    /// A channel that is no temperature (e.g. `spindle_rpm`, the spindle drive's speed on an
+    /// analogue input of the module): its unit per count, used instead of `scale_c` and
+    /// `offset_c`. Its value is logged with the temperatures, in that unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
 }
 
 /// What the daemon configures for a Modbus RTU temperature module: meant to be its
@@ -212,11 +217,15 @@ impl ModbusTempConfig {
         let mut valid = registers.len() == self.sensors.len();
         let values = registers
             .iter()
-            .map(|&r| {
+            .enumerate()
+            .map(|(i, &r)| {
                 let raw = r as i16;
+                let own = self.sensors.get(i).and_then(|s| s.scale);
                 if self.fault_values.contains(&raw) {
                     valid = false;
                     f64::NAN
+                } else if let Some(scale) = own {
+                    raw as f64 * scale
                 } else {
                     raw as f64 * self.scale_c + self.offset_c
                 }

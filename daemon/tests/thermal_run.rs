@@ -1,7 +1,7 @@
 //! A thermal run through the real daemon (`metrolog run`, the binary) against the simulator:
 //! the simulated thermal machine (a two-node heat network integrated numerically, sim/thermal.rs)
-//! seen by the CapBall at the measuring pose, visited every 5 min for 4 h of machine time
-//! (compressed 720×), and the simulated Modbus module serving the head and air temperatures
+//! seen by the CapBall at the measuring pose, visited every 3 min for 4 h of machine time
+//! (compressed 480×), and the simulated Modbus module serving the head and air temperatures
 //! and the spindle speed. `metrolog thermal fit` on the log must find the machine's thermal
 //! sensitivities and the column's time constant, computed here in closed form from the
 //! simulator's parameters (not by the analysis code):
@@ -65,11 +65,13 @@ fn run_daemon(dir: &Path) -> PathBuf {
     let plan = plan_thermal(&ThermalPlanOptions {
         measure: [120.0, 80.0, 100.0, 0.0, 0.0],
         park: [120.0, 80.0, 160.0, 0.0, 0.0],
-        every_s: 300.0,
+        every_s: 180.0,
         duration_s: 4.0 * 3600.0,
         dwell_s: 0.2 * scale,
-        move_s: 0.1 * scale,
-        spindle: vec![(0.0, 4000.0), (7200.0, 0.0)],
+        move_s: 0.08 * scale,
+        // At rest for the first 15 min (the references are taken there), 4000 rpm for 2 h,
+        // then cooling.
+        spindle: vec![(900.0, 4000.0), (8100.0, 0.0)],
     })
     .unwrap();
     let scenario = thermal_scenario(&plan, machine(), scale);
@@ -146,34 +148,41 @@ fn thermal_fit_recovers_the_simulated_machines_sensitivities_and_time_constant()
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    // 49 visits of the measuring pose; the spindle speed came from the module's channel.
-    assert!(text.contains("49 samples"), "{text}");
+    // 81 visits of the measuring pose; the spindle speed came from the module's channel.
+    assert!(text.contains("81 samples"), "{text}");
     assert!(text.contains(", spindle speed"), "{text}");
     let model: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&model_path).unwrap()).unwrap();
 
-    // Expected values in closed form from the simulator's parameters.
+    // Expected values in closed form from the simulator's parameters. Measured: ez −1.200
+    // (−1.200), ex +1.095 µm/K (+1.091), τ 38.1 min (37.9); tolerances 2 %, 3 %, 5 %. (With
+    // the spindle started at time 0 the references were taken on a warming head and ex came out
+    // +10 %, τ +14 %: the run starts at rest.)
     let m = machine();
     let g = m.head_column_w_per_k + m.column_air_w_per_k;
     let tau_column_s = m.column_j_per_k / g;
     let ex_per_k = m.column_um_per_k[0] * m.head_column_w_per_k / g;
     let ez_per_k = m.head_um_per_k[2];
+    eprintln!(
+        "{text}\nexpected: capball_ez {ez_per_k:+.3} µm/K no lag; capball_ex {ex_per_k:+.3} µm/K, τ {:.1} min",
+        tau_column_s / 60.0
+    );
 
     let (k, th, tc) = term(&model, "capball_ez", "spindle_head").expect(&text);
     assert!(
-        (k - ez_per_k).abs() < 0.05 * ez_per_k.abs(),
+        (k - ez_per_k).abs() < 0.02 * ez_per_k.abs(),
         "ez: {k} µm/K vs {ez_per_k}\n{text}"
     );
     assert!(th < 120.0 && tc < 120.0, "ez lags {th} / {tc} s\n{text}");
 
     let (k, th, tc) = term(&model, "capball_ex", "spindle_head").expect(&text);
     assert!(
-        (k - ex_per_k).abs() < 0.10 * ex_per_k,
+        (k - ex_per_k).abs() < 0.03 * ex_per_k,
         "ex: {k} µm/K vs {ex_per_k}\n{text}"
     );
     for tau in [th, tc] {
         assert!(
-            (tau - tau_column_s).abs() < 0.15 * tau_column_s,
+            (tau - tau_column_s).abs() < 0.05 * tau_column_s,
             "ex: τ {tau} s vs {tau_column_s} s\n{text}"
         );
     }

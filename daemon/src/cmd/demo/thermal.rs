@@ -375,7 +375,9 @@ mod tests {
         let machine = s.program_duration_s() * THERMAL_TIME_SCALE;
         let planned = plan.cycles.last().unwrap().park_s;
         assert!(
-            (machine - planned - 0.4 * THERMAL_TIME_SCALE).abs() < 1e-6,
+            (machine - planned - (s.program.lead_in_s + s.program.lead_out_s) * THERMAL_TIME_SCALE)
+                .abs()
+                < 1e-6,
             "{machine} vs {planned}"
         );
         assert!(s.program_duration_s() < 32.0, "{}", s.program_duration_s());

@@ -34,6 +34,9 @@ pub struct Args {
     /// Where the demo puts its config, port links and MCAP log.
     #[arg(long, value_name = "DIR", default_value = "./metrolog-demo")]
     pub out: PathBuf,
+    /// Run only the thermal segment (the thermal run, time compressed, and its analyses).
+    #[arg(long)]
+    pub thermal_only: bool,
 }
 
 /// How long the instruments may take to connect and stream before the program starts.
@@ -50,6 +53,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
+    if args.thermal_only {
+        let log = rt.block_on(thermal::demo_segment(&out))?;
+        thermal::print_analyses(&log, &out);
+        return Ok(());
+    }
     let (report, truth, home_x_mm) = rt.block_on(demo(out.clone()))?;
     // Poses without a dwell (the reversal moves of the ISO 230-2 cycles) are not measured.
     let reversals: Vec<u32> = Scenario::demo()

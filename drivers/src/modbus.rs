@@ -670,6 +670,21 @@ mod tests {
     }
 
     #[test]
+    fn a_channel_with_its_own_scale_ignores_the_modules() {
+        // The spindle speed on an analogue input, 1 rpm per count, beside 0.01 °C channels.
+        let c = toml_like(
+            r#"{"port": "x", "unit": 1, "scale_c": 0.01, "offset_c": 5.0,
+                "sensors": [{"name": "head"}, {"name": "spindle_rpm", "scale": 1.0}]}"#,
+        );
+        let (v, ok) = c.convert(&[1500, 4000]);
+        assert!(ok && (v[0] - 20.0).abs() < 1e-12, "{v:?}");
+        assert_eq!(v[1], 4000.0);
+        // A fault value is a fault on that channel too.
+        let (v, ok) = c.convert(&[1500, 0x8000]);
+        assert!(!ok && v[1].is_nan());
+    }
+
+    #[test]
     fn config_rejects_unknown_fields_and_bad_values() {
         assert!(
             serde_json::from_str::<ModbusTempConfig>(

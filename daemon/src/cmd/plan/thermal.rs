@@ -153,10 +153,19 @@ impl ThermalPlan {
     /// G53 machine coordinates, M68 E0 pose index, M64/M65 P0 trigger, G4 dwell, S/M3/M5).
     pub fn linuxcnc_program(&self, feed_mm_min: f64) -> String {
         let o = &self.options;
+        // A and C only on a machine that has them (a pose given with them, or not at 0).
+        let rotary = [o.measure, o.park]
+            .iter()
+            .any(|p| p[3] != 0.0 || p[4] != 0.0);
         let mv = |p: [f64; 5]| {
+            let ac = if rotary {
+                format!(" A{:.3} C{:.3}", p[3], p[4])
+            } else {
+                String::new()
+            };
             format!(
-                "G53 G1 X{:.3} Y{:.3} Z{:.3} A{:.3} C{:.3} F{feed_mm_min:.0}",
-                p[0], p[1], p[2], p[3], p[4]
+                "G53 G1 X{:.3} Y{:.3} Z{:.3}{ac} F{feed_mm_min:.0}",
+                p[0], p[1], p[2]
             )
         };
         let speed = |rpm: f64| {
@@ -214,10 +223,20 @@ impl ThermalPlan {
 #[derive(Debug, clap::Args)]
 pub struct ThermalArgs {
     /// Measuring pose: X,Y,Z[,A,C] machine coordinates (mm, degrees).
-    #[arg(long, value_delimiter = ',', num_args = 3..=5, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub pose: Vec<f64>,
     /// Park pose between visits: X,Y,Z[,A,C].
-    #[arg(long, value_delimiter = ',', num_args = 3..=5, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub park: Vec<f64>,
     /// Minutes from one visit to the next.
     #[arg(long, default_value_t = 10.0)]

@@ -248,3 +248,21 @@ fn missing_and_unknown_keys_and_sensor_lists() {
     assert_eq!(e.line(), Some(4), "{e}");
     assert!(e.to_string().contains("timeout_s = 0.3"), "{e}");
 }
+
+#[test]
+fn a_channel_may_have_its_own_scale() {
+    // The spindle speed on an analogue input of the module: rpm per count.
+    let section = SECTION.replace("name = \"bed\"", "name = \"spindle_rpm\"\nscale = 1.0");
+    let c = parse(&section).unwrap();
+    let t = c.temperature.as_ref().unwrap();
+    assert_eq!((t.sensors[0].scale, t.sensors[1].scale), (None, Some(1.0)));
+    let e = error_at(
+        "name = \"bed\"",
+        "name = \"bed\"\nscale = 0.0",
+        "scale = 0.0",
+    );
+    assert!(
+        e.contains("scale = 0 must be a finite number other than 0"),
+        "{e}"
+    );
+}

@@ -84,6 +84,11 @@ pub struct TempSensor {
     /// Where it sits on the machine, in words (kept in the run's metadata).
     #[serde(default)]
     pub location: String,
+    /// A channel that is no temperature (e.g. `spindle_rpm`, the spindle drive's speed on an
+    /// analogue input of the module): its unit per count, used instead of `scale_c` and
+    /// `offset_c`. Its value is logged with the temperatures, in that unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
 }
 
 /// What the daemon configures for a Modbus RTU temperature module: meant to be its
@@ -212,11 +217,15 @@ impl ModbusTempConfig {
         let mut valid = registers.len() == self.sensors.len();
         let values = registers
             .iter()
-            .map(|&r| {
+            .enumerate()
+            .map(|(i, &r)| {
                 let raw = r as i16;
+                let own = self.sensors.get(i).and_then(|s| s.scale);
                 if self.fault_values.contains(&raw) {
                     valid = false;
                     f64::NAN
+                } else if let Some(scale) = own {
+                    raw as f64 * scale
                 } else {
                     raw as f64 * self.scale_c + self.offset_c
                 }
@@ -658,6 +667,21 @@ mod tests {
         assert!((v[0] - 21.5).abs() < 1e-12 && (v[1] + 5.2).abs() < 1e-12 && v[2].is_nan());
         let (v, ok) = c.convert(&[0x7FFE, 0, 1]);
         assert!(ok && (v[0] - 3276.6).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_channel_with_its_own_scale_ignores_the_modules() {
+        // The spindle speed on an analogue input, 1 rpm per count, beside 0.01 °C channels.
+        let c = toml_like(
+            r#"{"port": "x", "unit": 1, "scale_c": 0.01, "offset_c": 5.0,
+                "sensors": [{"name": "head"}, {"name": "spindle_rpm", "scale": 1.0}]}"#,
+        );
+        let (v, ok) = c.convert(&[1500, 4000]);
+        assert!(ok && (v[0] - 20.0).abs() < 1e-12, "{v:?}");
+        assert_eq!(v[1], 4000.0);
+        // A fault value is a fault on that channel too.
+        let (v, ok) = c.convert(&[1500, 0x8000]);
+        assert!(!ok && v[1].is_nan());
     }
 
     #[test]

@@ -87,6 +87,7 @@ mod pty;
 pub mod record;
 pub mod scenario;
 mod shared;
+pub mod thermal;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -264,6 +265,25 @@ impl SimHandle {
     pub async fn program_done(&self) {
         let mut rx = self.shared.program.subscribe();
         let _ = rx.wait_for(|p| p.done).await;
+    }
+
+    /// The channels of a simulated temperature module ([`modbus::ModbusModule::start`]) on
+    /// this machine: each `[thermal]` sensor's node temperature (°C), then the spindle speed
+    /// (rpm, [`thermal::SPINDLE_CHANNEL`]), at the machine time of the instant the module
+    /// answers (scaled from the program start; at rest before it). `None` without `[thermal]`.
+    pub fn thermal_channels(&self) -> Option<modbus::Temperatures> {
+        self.shared.world.thermal.as_ref()?;
+        let shared = self.shared.clone();
+        Some(Arc::new(move |_| {
+            let w = &shared.world;
+            let started = shared.program.borrow().started;
+            let s = started.map_or(0.0, |st| {
+                Instant::now().saturating_duration_since(st).as_secs_f64()
+            });
+            w.thermal
+                .as_ref()
+                .map_or_else(Vec::new, |t| t.channels(s * w.scenario.time_scale))
+        }))
     }
 
     /// Real seconds the program takes from its start to the program-end frame.

@@ -41,6 +41,9 @@ pub struct ModbusModuleConfig {
     pub fault_value: u16,
     /// Sets the 3.5-character gap (the pty itself ignores the baud rate).
     pub baud: u32,
+    /// Per channel, a scale (its unit per count, no offset) instead of `scale_c`: a channel
+    /// that is no temperature, e.g. the spindle speed on an analogue input. Empty: none.
+    pub channel_scales: Vec<Option<f64>>,
 }
 
 impl Default for ModbusModuleConfig {
@@ -54,6 +57,7 @@ impl Default for ModbusModuleConfig {
             offset_c: 0.0,
             fault_value: 0x8000,
             baud: 9600,
+            channel_scales: Vec::new(),
         }
     }
 }
@@ -264,7 +268,7 @@ impl Slave {
             let first = (req.start - c.start_register) as usize;
             (first..first + req.count as usize)
                 .map(|i| match temps.get(i).copied().flatten() {
-                    Some(t) if t.is_finite() => encode(t, c),
+                    Some(t) if t.is_finite() => encode(t, c, i),
                     _ => c.fault_value,
                 })
                 .collect::<Vec<u16>>()
@@ -298,8 +302,11 @@ impl Slave {
 }
 
 /// A temperature as the module's register: signed 16 bit, clamped short of the fault values.
-fn encode(t: f64, c: &ModbusModuleConfig) -> u16 {
-    let raw = ((t - c.offset_c) / c.scale_c).round();
+fn encode(t: f64, c: &ModbusModuleConfig, channel: usize) -> u16 {
+    let raw = match c.channel_scales.get(channel).copied().flatten() {
+        Some(scale) => (t / scale).round(),
+        None => ((t - c.offset_c) / c.scale_c).round(),
+    };
     (raw.clamp(-32767.0, 32766.0) as i16) as u16
 }
 

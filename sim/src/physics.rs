@@ -294,6 +294,8 @@ pub struct World {
     pub schedule: Schedule,
     pub visits: Vec<AxisVisit>,
     pub capball_truth: std::sync::Arc<dyn CapballTruth>,
+    /// The thermal machine integrated over the program (machine time), when the scenario has one.
+    pub thermal: Option<crate::thermal::ThermalTrack>,
     sensor_n: M3,
 }
 
@@ -306,11 +308,18 @@ impl World {
         let schedule = Schedule::new(&scenario.program);
         let visits = draw_visits(&scenario, rng);
         let sensor_n = normalised_directions(&scenario.capball);
+        // Integrated a little past the program end (the devices stream on after it).
+        let end_s = (schedule.end_s + 60.0) * scenario.time_scale;
+        let thermal = scenario
+            .thermal
+            .clone()
+            .map(|m| crate::thermal::ThermalTrack::new(m, end_s));
         World {
             scenario,
             schedule,
             visits,
             capball_truth,
+            thermal,
             sensor_n,
         }
     }
@@ -379,7 +388,8 @@ impl World {
     /// measured during a move (the host drops those samples); the blend keeps the stream
     /// moving smoothly at two model evaluations per move instead of one per sample.
     pub fn capball_error_um(&self, ph: Phase, t_s: f64) -> [f64; 3] {
-        match ph {
+        let d = self.thermal_um(t_s);
+        let e = match ph {
             Phase::Moving { to, frac } => {
                 let a = self.capball_truth.error_um(&self.previous(to), t_s);
                 let b = self.capball_truth.error_um(&self.pose(to), t_s);
@@ -387,7 +397,16 @@ impl World {
                 [0, 1, 2].map(|i| a[i] + (b[i] - a[i]) * k)
             }
             _ => self.capball_truth.error_um(&self.coords(ph), t_s),
-        }
+        };
+        [0, 1, 2].map(|k| e[k] + d[k])
+    }
+
+    /// The thermal machine's displacement of the tool against the workpiece at scaled time
+    /// `t_s`, machine frame, µm (zero without `[thermal]`).
+    pub fn thermal_um(&self, t_s: f64) -> [f64; 3] {
+        self.thermal
+            .as_ref()
+            .map_or([0.0; 3], |t| t.displacement_um(t_s))
     }
 
     /// Damped oscillation after the exact stop, µm (before gain).
@@ -474,7 +493,7 @@ impl World {
         use protocol::can::TriggerEvent as E;
         let mut v = vec![(0.0, E::ProgramStart, 0)];
         for (i, p) in self.schedule.poses.iter().enumerate() {
-            let pose = (i + 1) as u16;
+            let pose = self.scenario.program.poses[i].number(i);
             v.push((p.motion_start_s, E::MotionStart, pose));
             v.push((p.exact_stop_s, E::ExactStop, pose));
             v.push((p.dwell_end_s, E::DwellEnd, pose));
@@ -500,8 +519,11 @@ impl World {
                 / if t >= scale { 2.0 } else { 1.0 + t / scale };
             let (air_c, _, _, mat) = self.environment(t);
             let (px, py) = self.psd_spot_um(&c);
+            let d = self.thermal_um(t);
+            let (px, py) = (px + d[0], py + d[1]);
+            let e = self.capball_truth.error_um(&c, t);
             out.push(crate::record::PoseTruth {
-                pose: (i + 1) as u16,
+                pose: self.scenario.program.poses[i].number(i),
                 x_mm: c.x_mm,
                 y_mm: c.y_mm,
                 z_mm: c.z_mm,
@@ -515,7 +537,7 @@ impl World {
                 direction: v.direction,
                 deviation_um: dev,
                 deviation_rate_um_per_s: rate,
-                capball_e_um: self.capball_truth.error_um(&c, t),
+                capball_e_um: [0, 1, 2].map(|k| e[k] + d[k]),
                 psd_x_um: px,
                 psd_y_um: py,
                 material_c: mat.iter().sum::<f64>() / mat.len().max(1) as f64,

@@ -57,6 +57,11 @@ pub struct Scenario {
     pub trigger: TriggerAdapter,
     #[serde(default)]
     pub faults: Faults,
+    /// The machine's thermal behaviour ([`crate::thermal`]): heat sources, a heat network, the
+    /// displacement they cause at the measuring pose (added to what the CapBall and the PSD
+    /// read) and the temperature module's channels. None: the machine stays at its start.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thermal: Option<crate::thermal::ThermalMachine>,
 }
 
 fn record_cap() -> usize {
@@ -135,6 +140,10 @@ pub struct Coords {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PoseRow {
+    /// The pose number the trigger frames carry (default: the row's, `i + 1`). Rows may share
+    /// one (a thermal run returns to its measuring pose); they must then share coordinates.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose: Option<u16>,
     #[serde(default)]
     pub x_mm: f64,
     #[serde(default)]
@@ -154,6 +163,11 @@ pub struct PoseRow {
 }
 
 impl PoseRow {
+    /// The pose number of row `i` (0-based).
+    pub fn number(&self, i: usize) -> u16 {
+        self.pose.unwrap_or((i + 1) as u16)
+    }
+
     pub fn coords(&self) -> Coords {
         Coords {
             x_mm: self.x_mm,
@@ -758,6 +772,9 @@ impl Scenario {
         if !finite_pos(self.psd.sum_pa) {
             return bad("psd.sum_pa must be > 0".into());
         }
+        if let Some(t) = &self.thermal {
+            t.check().map_err(ScenarioError::Invalid)?;
+        }
         self.validate_faults()
     }
 
@@ -798,6 +815,17 @@ impl Scenario {
                 if !v.is_finite() {
                     return bad(format!("pose {}: coordinates must be finite", i + 1));
                 }
+            }
+            let n = r.number(i);
+            if n == 0 {
+                return bad(format!("row {}: pose number 0 is the program's", i + 1));
+            }
+            let first = p.poses.iter().enumerate().find(|(j, q)| q.number(*j) == n);
+            if first.is_some_and(|(_, q)| q.coords() != r.coords()) {
+                return bad(format!(
+                    "row {}: pose {n} is given again at other coordinates",
+                    i + 1
+                ));
             }
         }
         Ok(())
@@ -935,10 +963,14 @@ impl Scenario {
     /// The pose table as the CSV the daemon is configured with (`pose,x_mm,y_mm,z_mm,a_deg,c_deg`).
     pub fn trajectory_csv(&self) -> String {
         let mut s = String::from("pose,x_mm,y_mm,z_mm,a_deg,c_deg\n");
+        let mut seen = std::collections::BTreeSet::new();
         for (i, r) in self.program.poses.iter().enumerate() {
+            if !seen.insert(r.number(i)) {
+                continue;
+            }
             s.push_str(&format!(
                 "{},{},{},{},{},{}\n",
-                i + 1,
+                r.number(i),
                 r.x_mm,
                 r.y_mm,
                 r.z_mm,

@@ -40,6 +40,7 @@ fn host_conversions_recover_the_truth_at_every_pose() {
     sc.capball.truth.pose_noise_um = 0.0;
     sc.capball.truth.cyclic_drift = None;
     let row = |x: f64, y: f64, z: f64, a: f64, c: f64| PoseRow {
+        pose: None,
         x_mm: x,
         y_mm: y,
         z_mm: z,

@@ -32,6 +32,7 @@ fn driver_config(port: &str, unit: u8, channels: usize) -> ModbusTempConfig {
             .map(|i| TempSensor {
                 name: format!("t{i}"),
                 location: String::new(),
+                scale: None,
             })
             .collect(),
         scale_c: 0.1,

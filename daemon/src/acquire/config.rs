@@ -1027,6 +1027,7 @@ struct RawSensor {
     name: Spanned<String>,
     #[serde(default)]
     location: String,
+    scale: Option<Spanned<f64>>,
 }
 
 /// Seconds one poll takes on the wire at `baud` for `channels` registers: the request
@@ -1128,9 +1129,19 @@ impl Ctx<'_> {
                     ),
                 ));
             }
+            let scale = match s.scale {
+                Some(v) if !(v.get_ref().is_finite() && *v.get_ref() != 0.0) => {
+                    return Err(self.err(
+                        v.span(),
+                        format!("scale = {} must be a finite number other than 0 (the channel's unit per count)", v.get_ref()),
+                    ));
+                }
+                v => v.map(Spanned::into_inner),
+            };
             out.push(drivers::TempSensor {
                 name: s.name.into_inner(),
                 location: s.location.trim().to_string(),
+                scale,
             });
         }
         Ok(out)

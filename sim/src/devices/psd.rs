@@ -78,6 +78,9 @@ impl Psd2 {
         let t = ctx.slow_t(at);
         let c = w.coords(ph);
         let (mut x, mut y) = w.psd_spot_um(&c);
+        let d = w.thermal_um(t);
+        x += d[0];
+        y += d[1];
         let ring = w.ringing_um(ph) * self.cfg.ringing_gain;
         x += ring + self.noise.sample(ctx.rng);
         y += 0.6 * ring + self.noise.sample(ctx.rng);

@@ -134,6 +134,7 @@ pub fn quick() -> Scenario {
     s.program.move_s = 0.1;
     s.program.dwell_s = 0.3;
     let row = |x: f64| PoseRow {
+        pose: None,
         x_mm: x,
         y_mm: 0.0,
         z_mm: 0.0,

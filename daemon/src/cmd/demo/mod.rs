@@ -5,8 +5,10 @@
 //! run` runs (real drivers, real pipeline, real MCAP writer) through the scenario's CNC program:
 //! an ISO 230-2 style interferometer run on one axis, a CapBall pose sequence and a PSD segment.
 //! Then it compares every steady value with the simulation's true value and prints a report.
-//! Last, it closes the compensation loop ([`verify`]): the LinuxCNC table of the run, loaded
-//! into the simulated axis, and the positioning run measured again with it.
+//! Then it closes the compensation loop ([`verify`]): the LinuxCNC table of the run, loaded
+//! into the simulated axis, and the positioning run measured again with it. Last, a thermal
+//! run of the simulated thermal machine, time compressed ([`thermal`]), and the thermal model
+//! fitted to its log.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -24,6 +26,7 @@ use crate::cmd::run::{Acquire, RunReport, acquire};
 use metrolog_log::topics::PoseMsg;
 use types::PoseStatus;
 
+pub mod thermal;
 pub mod verify;
 
 #[derive(Debug, clap::Args)]
@@ -31,6 +34,9 @@ pub struct Args {
     /// Where the demo puts its config, port links and MCAP log.
     #[arg(long, value_name = "DIR", default_value = "./metrolog-demo")]
     pub out: PathBuf,
+    /// Run only the thermal segment (the thermal run, time compressed, and its analyses).
+    #[arg(long)]
+    pub thermal_only: bool,
 }
 
 /// How long the instruments may take to connect and stream before the program starts.
@@ -47,6 +53,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
+    if args.thermal_only {
+        let log = rt.block_on(thermal::demo_segment(&out))?;
+        thermal::print_analyses(&log, &out);
+        return Ok(());
+    }
     let (report, truth, home_x_mm) = rt.block_on(demo(out.clone()))?;
     // Poses without a dwell (the reversal moves of the ISO 230-2 cycles) are not measured.
     let reversals: Vec<u32> = Scenario::demo()
@@ -62,6 +73,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     print_capball_truth();
     let l = rt.block_on(verify::compensate_and_verify(&report.log_path, &out))?;
     print_loop(&l);
+    let log = rt.block_on(thermal::demo_segment(&out))?;
+    thermal::print_analyses(&log, &out);
     Ok(())
 }
 

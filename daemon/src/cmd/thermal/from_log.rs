@@ -10,6 +10,12 @@
 //! there, interpolated linearly in time between the readings either side. A sensor that has
 //! no reading for some visit (an open sensor) is left out, with a note; a visit without a value
 //! of every instrument is left out.
+//!
+//! A channel named `spindle_rpm` (the spindle drive's speed on an analogue input of the
+//! module, its own `scale`) is the spindle speed, not a temperature: per visit, the root mean
+//! square of its readings since the previous visit's window ended (through this window), so
+//! that its square is the mean of rpm² over the step (bearing friction heat grows with it),
+//! whatever the speed did between two visits.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -210,6 +216,7 @@ fn build(
     path: &Path,
 ) -> anyhow::Result<thermal::ThermalDataset> {
     // Visits with a value of every column; their temperatures per channel.
+    let spin = names.iter().position(|n| n == SPINDLE_CHANNEL);
     let rows: Vec<(&Visit, u64, Vec<Option<f64>>)> = vs
         .iter()
         .filter(|v| columns.iter().all(|c| v.values.contains_key(c)))
@@ -222,11 +229,15 @@ fn build(
             (v, mid, t)
         })
         .collect();
+    let spindle_rpm = match spin {
+        Some(i) => Some(spindle_per_visit(&rows, temps, i, path)?),
+        None => None,
+    };
     let kept: Vec<usize> = (0..names.len())
-        .filter(|&i| rows.iter().all(|(_, _, t)| t[i].is_some()))
+        .filter(|&i| Some(i) != spin && rows.iter().all(|(_, _, t)| t[i].is_some()))
         .collect();
     let dropped: Vec<&str> = (0..names.len())
-        .filter(|i| !kept.contains(i))
+        .filter(|i| !kept.contains(i) && Some(*i) != spin)
         .map(|i| names[i].as_str())
         .collect();
     if !dropped.is_empty() {
@@ -246,7 +257,7 @@ fn build(
             .iter()
             .map(|r| (r.1 - t0) as f64 * 1e-9 * scale)
             .collect(),
-        spindle_rpm: None,
+        spindle_rpm,
         sensor_names: kept.iter().map(|&i| names[i].clone()).collect(),
         temperatures_c: kept
             .iter()
@@ -268,4 +279,41 @@ fn build(
         ds.len()
     );
     Ok(ds)
+}
+
+/// The module channel that carries the spindle speed (rpm), not a temperature.
+pub const SPINDLE_CHANNEL: &str = "spindle_rpm";
+
+/// Channel `i` per row: the root mean square of its readings after the previous row's window
+/// through this row's (the first row: its window), else its value at the row's time.
+fn spindle_per_visit(
+    rows: &[(&Visit, u64, Vec<Option<f64>>)],
+    temps: &[(u64, Vec<f64>)],
+    i: usize,
+    path: &Path,
+) -> anyhow::Result<Vec<f64>> {
+    let mut out = Vec::with_capacity(rows.len());
+    let mut after = None;
+    for (v, _, at) in rows {
+        let inside: Vec<f64> = temps
+            .iter()
+            .filter(|(t, _)| after.map_or(*t >= v.from_ns, |a| *t > a) && *t <= v.to_ns)
+            .filter_map(|(_, x)| x.get(i).copied().filter(|x| x.is_finite()))
+            .collect();
+        let value = if inside.is_empty() {
+            at[i]
+        } else {
+            Some((inside.iter().map(|x| x * x).sum::<f64>() / inside.len() as f64).sqrt())
+        };
+        let Some(value) = value else {
+            anyhow::bail!(
+                "{}: `{SPINDLE_CHANNEL}` has no reading near the visit at {} ns",
+                path.display(),
+                v.from_ns
+            );
+        };
+        out.push(value);
+        after = Some(v.to_ns);
+    }
+    Ok(out)
 }

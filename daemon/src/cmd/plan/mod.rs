@@ -1,6 +1,9 @@
 //! `metrolog plan positioning`: the ISO 230-2 test of one axis — targets, cycle, the
 //! trajectory the daemon runs with and the part program in a controller's dialect
-//! (`docs/methods.md` "Planning a positioning test").
+//! (`docs/methods.md` "Planning a positioning test"). `metrolog plan thermal`: a thermal run
+//! ([`thermal`]).
+
+pub mod thermal;
 
 use std::path::PathBuf;
 
@@ -12,6 +15,9 @@ use positioning::plan::{Dialect, PlanOptions, plan};
 pub enum Command {
     /// Plan an ISO 230-2 positioning test: trajectory CSV and part program.
     Positioning(PositioningArgs),
+    /// Plan a thermal run: the measuring pose every N minutes for H hours, a spindle speed
+    /// schedule, the trajectory CSV and the part program (LinuxCNC).
+    Thermal(thermal::ThermalArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -64,7 +70,10 @@ pub struct PositioningArgs {
 }
 
 pub fn run(c: Command) -> anyhow::Result<()> {
-    let Command::Positioning(a) = c;
+    let a = match c {
+        Command::Positioning(a) => a,
+        Command::Thermal(a) => return thermal::run(a),
+    };
     let o = PlanOptions {
         axis: a.axis.to_ascii_uppercase(),
         from_mm: a.from,

@@ -205,6 +205,8 @@ impl Collected {
             DriverEvent::Connected { identity, .. } => self.connected.push(identity),
             DriverEvent::Disconnected { reason, .. } => self.disconnected.push(reason.to_string()),
             DriverEvent::Error { error, .. } => self.errors.push(error.to_string()),
+            // A datum change is told as an error line would be.
+            DriverEvent::Datum { change, .. } => self.errors.push(change.text),
             DriverEvent::Counters { counters, .. } => self.counters = Some(counters),
         }
     }

@@ -146,6 +146,7 @@ impl Rig {
             DriverEvent::Connected { instrument, .. }
             | DriverEvent::Disconnected { instrument, .. }
             | DriverEvent::Error { instrument, .. }
+            | DriverEvent::Datum { instrument, .. }
             | DriverEvent::Counters { instrument, .. } => *instrument,
         };
         self.by.entry(i).or_default().push(ev);
@@ -684,6 +685,7 @@ async fn device_found_streaming_mid_frame_is_taken_over_cleanly() {
             DriverEvent::Connected { instrument, .. }
             | DriverEvent::Disconnected { instrument, .. }
             | DriverEvent::Error { instrument, .. }
+            | DriverEvent::Datum { instrument, .. }
             | DriverEvent::Counters { instrument, .. } => *instrument,
             DriverEvent::Trigger(_) => Instrument::Trigger,
         };

@@ -205,8 +205,9 @@ pub const DATUM_NOTE_KEY: &str = "datum_note";
 /// A run whose interferometer lost its datum (beam interrupted, reconnect, a service start
 /// mid-program: pose values `datum_lost`, docs/design.md "Datum epochs") holds lengths against
 /// more than one zero. Accepted when every lost epoch was re-referenced at the run's reference
-/// pose (its `/event` record): the `datum_lost` values are missing readings, noted with their
-/// poses (returned). Refused, saying why, when a lost epoch was never re-referenced (the
+/// pose (its `/event` record) or a later epoch was: the `datum_lost` values are missing
+/// readings, noted with their poses (returned). Refused, saying why, when a lost epoch was
+/// never re-referenced, nor any after it (the
 /// lengths after the loss are from another zero) or when `ok` values come from an epoch that
 /// was not the run's nor re-referenced.
 fn check_datum_epochs(
@@ -241,7 +242,11 @@ fn check_datum_epochs(
     let (Some(first), Some(last)) = (lost.first(), lost.last()) else {
         return Ok(None);
     };
-    if let Some(p) = lost.iter().find(|p| !referenced(p.datum_epoch)) {
+    // A lost value is a missing reading when the loss was recovered: its epoch, or a later
+    // one, was re-referenced (a service started mid-program loses epoch 0 and re-references
+    // epoch 1).
+    let recovered = |e: u32| log.rereferences.iter().any(|r| r.epoch >= e);
+    if let Some(p) = lost.iter().find(|p| !recovered(p.datum_epoch)) {
         return Err(refuse_lost(log, visits, traj, p.pose, lost.len()));
     }
     let refs: Vec<String> = log
@@ -587,6 +592,62 @@ mod tests {
             d.readings
                 .iter()
                 .all(|r| (r.deviation_um - 0.25).abs() < 1e-9)
+        );
+    }
+
+    /// Up 10, 20, 30, down to 0 (the reference pose), up again twice; the datum lost from pose
+    /// 2 (epoch 1): poses 2-4 `datum_lost`; `epoch 1 referenced at pose 4` when `referenced`.
+    fn epoch_log(referenced: bool) -> LogContents {
+        let xs = [10.0, 20.0, 30.0, 0.0, 10.0, 20.0, 30.0, 20.0, 10.0, 0.0];
+        let mut l = log(&xs, |_, x| Some(x * 1000.0));
+        for p in l.poses.iter_mut().filter(|p| p.msg.pose >= 2) {
+            p.msg.datum_epoch = 1;
+            if p.msg.pose <= 4 {
+                p.msg.status = PoseStatus::DatumLost;
+                p.msg.mean.clear();
+            }
+        }
+        if referenced {
+            l.rereferences
+                .push(crate::contents::Rereference { epoch: 1, pose: 4 });
+        }
+        l
+    }
+
+    #[test]
+    fn a_re_referenced_run_is_taken_with_its_lost_poses_missing_and_noted() {
+        let d =
+            positioning_from_contents(&epoch_log(true), &PositioningOptions::default()).unwrap();
+        let note = &d.metadata[DATUM_NOTE_KEY];
+        assert!(
+            note.starts_with("3 pose value(s) between poses 2 and 4 are datum_lost")
+                && note.contains("epoch 1 at pose 4"),
+            "{note}"
+        );
+        // Pose 1 (10 up) and poses 5-9: 10 up, 20 up, 20 down, 10 down.
+        assert_eq!(d.readings.len(), 5);
+    }
+
+    #[test]
+    fn ok_values_of_an_epoch_never_re_referenced_refuse_the_run() {
+        let mut l = epoch_log(false);
+        let e = positioning_from_contents(&l, &PositioningOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("mixes datum epochs without a reference: pose 5 is ok in datum epoch 1"),
+            "{e}"
+        );
+        // Its lost values alone (no ok value of epoch 1): the loss is named.
+        for p in l.poses.iter_mut().filter(|p| p.msg.pose >= 5) {
+            p.msg.status = PoseStatus::DatumLost;
+        }
+        let e = positioning_from_contents(&l, &PositioningOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("lost its datum at pose 2") && e.contains("never re-referenced"),
+            "{e}"
         );
     }
 }

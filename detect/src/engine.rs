@@ -109,7 +109,8 @@ impl Epochs {
 
     /// Whether values measured in `epoch` with clean samples are against the run's zero.
     fn trusted(&self, epoch: u32) -> bool {
-        !self.refused.contains(&epoch) && !(epoch == 0 && self.epoch0_foreign)
+        let foreign = epoch == 0 && self.epoch0_foreign;
+        !(self.refused.contains(&epoch) || foreign)
     }
 
     /// The epoch of `v`; a value not against the run's zero becomes `datum_lost`: one not

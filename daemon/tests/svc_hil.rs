@@ -1135,15 +1135,15 @@ async fn datum_li80_unplug_is_re_referenced_at_the_reference_pose() {
         "metrolog run failed ({status}):\n{stderr}"
     );
     let states = notify.stop();
+    let record = sim.record();
+    sim.shutdown().await;
+    assert_re_referenced(&the_log(&logs), &record, &sc, &stderr);
     assert!(
         states
             .iter()
             .any(|s| s.contains("interferometer datum lost (epoch 1): re-reference")),
         "{states:?}"
     );
-    let record = sim.record();
-    sim.shutdown().await;
-    assert_re_referenced(&the_log(&logs), &record, &sc, &stderr);
 }
 
 /// A 0.3 s beam interruption in pose 3 (the device's own "datum lost" flag): the same.

@@ -1103,6 +1103,7 @@ fn assert_re_referenced(log: &Path, record: &sim::Record, sc: &Scenario, stderr:
     assert!(!after.is_empty(), "{li:?}");
     assert!(after.iter().all(|v| v.1 == "ok" && v.2 == 1), "{li:?}");
     println!("interferometer values: {li:?}\nok per instrument: {ok:?}");
+    print_alarm_lines(stderr);
     let (success, out, err) = analyze_positioning(log);
     assert!(
         success,
@@ -1208,6 +1209,11 @@ async fn datum_service_restart_mid_program_is_re_referenced() {
         .find(|p| p.extension().is_some_and(|e| e == "mcap") && *p != first_log)
         .expect("the restarted service's log");
     assert_re_referenced(&log, &record, &sc, &stderr);
+    // The killed service's log: its prefix reads, and its ok values are right too.
+    let killed = metrolog_analysis::LogContents::read(&first_log).unwrap();
+    let (ok, wrong) = wrong_ok_values(&killed, &record, &sc);
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    println!("the killed service's log: ok per instrument {ok:?}");
 }
 
 /// The CB-3 and the PSD unplugged (pose 2 and pose 4): their zero is physical (no host tare),
@@ -1270,4 +1276,15 @@ async fn datum_capball_and_psd_unplugs_keep_their_values_right() {
         "{stderr}"
     );
     println!("ok per instrument: {ok:?}");
+    print_alarm_lines(&stderr);
+}
+
+/// The WARN and ERROR lines of a run (what the operator was told), for the test's output.
+fn print_alarm_lines(stderr: &str) {
+    for l in stderr
+        .lines()
+        .filter(|l| l.contains("WARN") || l.contains("ERROR"))
+    {
+        println!("  told: {l}");
+    }
 }

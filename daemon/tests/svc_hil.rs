@@ -1104,6 +1104,14 @@ fn assert_re_referenced(log: &Path, record: &sim::Record, sc: &Scenario, stderr:
     assert!(after.iter().all(|v| v.1 == "ok" && v.2 == 1), "{li:?}");
     println!("interferometer values: {li:?}\nok per instrument: {ok:?}");
     print_alarm_lines(stderr);
+    // The epochs come from the logged samples and triggers alone: a replay gives every pose
+    // value again, byte for byte.
+    let rep = metrolog::cmd::replay::replay(log, &Default::default()).unwrap();
+    assert_eq!(
+        (rep.identical, rep.replayed.len()),
+        (rep.logged.len(), rep.logged.len()),
+        "replay differs"
+    );
     let (success, out, err) = analyze_positioning(log);
     assert!(
         success,

@@ -1307,4 +1307,47 @@ mod tests {
         );
         assert_eq!((out.status.poses, out.status.poses_ok), (1, 1));
     }
+
+    /// The datum commands the triggers give the LI-80 driver: a first trigger that is not the
+    /// program start loses the datum; the exact stop of a reference pose asks for `DATUM`
+    /// after the settle time, every motion start cancels one waiting; nothing else.
+    #[test]
+    fn triggers_steer_the_interferometer_datum() {
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+        let d = DatumControl {
+            commands: tx,
+            reference_poses: vec![7],
+            settle: Duration::from_millis(200),
+        };
+        let trig = |event, pose| Trigger {
+            event,
+            pose,
+            nc_ms: 0,
+            host_ns: 0,
+        };
+        let mut got = |t: Trigger, first: bool| {
+            d.on_trigger(&t, first);
+            rx.try_recv().ok()
+        };
+        assert_eq!(got(trig(TriggerEvent::ProgramStart, 0), true), None);
+        assert_eq!(got(trig(TriggerEvent::ExactStop, 6), false), None);
+        assert_eq!(got(trig(TriggerEvent::DwellEnd, 7), false), None);
+        assert_eq!(
+            got(trig(TriggerEvent::ExactStop, 7), false),
+            Some(drivers::Li80Command::Reference {
+                pose: 7,
+                settle: Duration::from_millis(200)
+            })
+        );
+        assert_eq!(
+            got(trig(TriggerEvent::MotionStart, 8), false),
+            Some(drivers::Li80Command::Moving)
+        );
+        match got(trig(TriggerEvent::DwellEnd, 5), true) {
+            Some(drivers::Li80Command::LoseDatum { reason }) => {
+                assert!(reason.contains("started mid-program"), "{reason}")
+            }
+            other => panic!("{other:?}"),
+        }
+    }
 }

@@ -72,8 +72,34 @@ pub struct LogContents {
     /// answer, `time_ns`), one per connection, in file order.
     pub instrument_records: Vec<BTreeMap<String, String>>,
     pub summary: ReadSummary,
+    /// The interferometer's re-references (`/event` records of kind `datum`), in log order.
+    pub rereferences: Vec<Rereference>,
     /// Messages that did not decode (counted, skipped).
     pub undecodable: u64,
+}
+
+/// A re-reference of the interferometer's datum, from its `/event` record
+/// (`epoch <k> referenced at pose <p>: …`, docs/log-format.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Rereference {
+    pub epoch: u32,
+    pub pose: u32,
+}
+
+impl Rereference {
+    fn of(e: &metrolog_log::topics::EventMsg) -> Option<Rereference> {
+        if e.kind != metrolog_log::topics::EventKind::Datum {
+            return None;
+        }
+        let rest = e.text.strip_prefix("epoch ")?;
+        let (epoch, rest) = rest.split_once(' ')?;
+        let rest = rest.strip_prefix("referenced at pose ")?;
+        let pose = rest.split(':').next()?;
+        Some(Rereference {
+            epoch: epoch.parse().ok()?,
+            pose: pose.trim().parse().ok()?,
+        })
+    }
 }
 
 impl LogContents {
@@ -122,11 +148,16 @@ impl LogContents {
                 log_ns,
                 data,
             } => {
-                if topic != "/pose" && topic != "/interferometer/environment" {
+                if topic != "/pose" && topic != "/interferometer/environment" && topic != "/event" {
                     return;
                 }
                 match decode_message(topic, encoding, log_ns, data) {
                     Ok(Some(LogMessage::Pose(msg))) => c.poses.push(LoggedPose { log_ns, msg }),
+                    Ok(Some(LogMessage::Event(e))) => {
+                        if let Some(r) = Rereference::of(&e) {
+                            c.rereferences.push(r);
+                        }
+                    }
                     Ok(Some(LogMessage::Samples(samples))) => {
                         c.environment.extend(samples.iter().filter_map(|s| {
                             match Decoded::from_sample(s) {

@@ -110,7 +110,7 @@ pub fn positioning_from_contents(
     let datum_x_mm = datum_x_mm(log, opts)?;
     let time_scale = time_scale(log)?;
     let visits = visits(&traj, lo, hi, datum_x_mm);
-    refuse_lost_datum(log, &traj, &visits, &values)?;
+    let datum_note = check_datum_epochs(log, &traj, &visits, &values)?;
     let targets = measured_targets(&traj, &visits, &values);
     if targets.len() < 2 {
         return Err(no_data(
@@ -176,6 +176,9 @@ pub fn positioning_from_contents(
         format!("{}-{}", traj[lo].pose, traj[hi].pose),
     );
     metadata.insert("datum_x_mm".into(), datum_x_mm.to_string());
+    if let Some(n) = datum_note {
+        metadata.insert(DATUM_NOTE_KEY.into(), n);
+    }
     if let Some(a) = alpha {
         metadata.insert("alpha_um_per_m_k".into(), a.to_string());
     }
@@ -195,29 +198,79 @@ pub fn positioning_from_contents(
     Ok(data)
 }
 
-/// A run whose interferometer lost its datum (beam interrupted, reconnect or restart: pose
-/// values `datum_lost`) holds lengths against two zeros; its deviations after the loss are
-/// meaningless (a reconnect re-zeroes the LI-80 wherever the axis stands). The run is refused
-/// with the pose where it happened and the range before it, rather than evaluated with the
-/// poses after it silently missing.
-fn refuse_lost_datum(
+/// Key of the positioning data's metadata that notes the datum epochs a run went through
+/// (shown among the report's notes).
+pub const DATUM_NOTE_KEY: &str = "datum_note";
+
+/// A run whose interferometer lost its datum (beam interrupted, reconnect, a service start
+/// mid-program: pose values `datum_lost`, docs/design.md "Datum epochs") holds lengths against
+/// more than one zero. Accepted when every lost epoch was re-referenced at the run's reference
+/// pose (its `/event` record) or a later epoch was: the `datum_lost` values are missing
+/// readings, noted with their poses (returned). Refused, saying why, when a lost epoch was
+/// never re-referenced, nor any after it (the
+/// lengths after the loss are from another zero) or when `ok` values come from an epoch that
+/// was not the run's nor re-referenced.
+fn check_datum_epochs(
     log: &LogContents,
     traj: &[TrajectoryRow],
     visits: &[(usize, Direction)],
     values: &BTreeMap<u32, &PoseMsg>,
-) -> Result<(), AnalysisError> {
-    let lost: Vec<u32> = visits
+) -> Result<Option<String>, AnalysisError> {
+    let in_run: Vec<&PoseMsg> = visits
         .iter()
-        .map(|(i, _)| traj[*i].pose)
-        .filter(|pose| {
-            values
-                .get(pose)
-                .is_some_and(|p| p.status == types::PoseStatus::DatumLost)
-        })
+        .filter_map(|(i, _)| values.get(&traj[*i].pose).copied())
         .collect();
-    let Some(&first) = lost.first() else {
-        return Ok(());
+    let referenced = |e: u32| log.rereferences.iter().any(|r| r.epoch == e);
+    if let Some(p) = in_run
+        .iter()
+        .find(|p| is_ok(p) && p.datum_epoch != 0 && !referenced(p.datum_epoch))
+    {
+        return Err(no_data(
+            log,
+            format!(
+                "the run mixes datum epochs without a reference: pose {} is ok in datum epoch {}, which was never re-referenced (no `epoch {} referenced` record in /event)",
+                p.pose, p.datum_epoch, p.datum_epoch
+            ),
+            "evaluate the poses of one epoch with --poses A-B, or measure the run again",
+        ));
+    }
+    let lost: Vec<&PoseMsg> = in_run
+        .iter()
+        .copied()
+        .filter(|p| p.status == types::PoseStatus::DatumLost)
+        .collect();
+    let (Some(first), Some(last)) = (lost.first(), lost.last()) else {
+        return Ok(None);
     };
+    // A lost value is a missing reading when the loss was recovered: its epoch, or a later
+    // one, was re-referenced (a service started mid-program loses epoch 0 and re-references
+    // epoch 1).
+    let recovered = |e: u32| log.rereferences.iter().any(|r| r.epoch >= e);
+    if let Some(p) = lost.iter().find(|p| !recovered(p.datum_epoch)) {
+        return Err(refuse_lost(log, visits, traj, p.pose, lost.len()));
+    }
+    let refs: Vec<String> = log
+        .rereferences
+        .iter()
+        .map(|r| format!("epoch {} at pose {}", r.epoch, r.pose))
+        .collect();
+    Ok(Some(format!(
+        "{} pose value(s) between poses {} and {} are datum_lost (the interferometer's datum was lost and re-referenced: {}): they are missing readings, the reference visits included",
+        lost.len(),
+        first.pose,
+        last.pose,
+        refs.join(", ")
+    )))
+}
+
+/// The refusal of a run whose datum was lost at pose `first` and never re-referenced.
+fn refuse_lost(
+    log: &LogContents,
+    visits: &[(usize, Direction)],
+    traj: &[TrajectoryRow],
+    first: u32,
+    n_lost: usize,
+) -> AnalysisError {
     let start = visits.first().map_or(first, |(i, _)| traj[*i].pose);
     let before = if first > start + 1 {
         format!(
@@ -227,16 +280,15 @@ fn refuse_lost_datum(
     } else {
         String::new()
     };
-    Err(no_data(
+    no_data(
         log,
         format!(
-            "the interferometer lost its datum at pose {first} ({} pose value(s) of the run are datum_lost): the lengths after it are measured from another zero and cannot be compared with the ones before",
-            lost.len()
+            "the interferometer lost its datum at pose {first} ({n_lost} pose value(s) of the run are datum_lost) and it was never re-referenced: the lengths after it are measured from another zero and cannot be compared with the ones before",
         ),
         &format!(
-            "{before}re-reference the interferometer (DATUM at the home position) and measure the run again"
+            "{before}give the run a reference pose ([run] reference_pose, a pose at the datum position) so the daemon re-references there, and measure the run again"
         ),
-    ))
+    )
 }
 
 /// What the report's header reads from a log: the sensor (the positions are the
@@ -451,6 +503,7 @@ mod tests {
                     std: BTreeMap::new(),
                     t_first_ns: no as u64 * 1_000_000_000,
                     t_last_ns: no as u64 * 1_000_000_000,
+                    datum_epoch: 0,
                 },
             });
         }
@@ -539,6 +592,62 @@ mod tests {
             d.readings
                 .iter()
                 .all(|r| (r.deviation_um - 0.25).abs() < 1e-9)
+        );
+    }
+
+    /// Up 10, 20, 30, down to 0 (the reference pose), up again twice; the datum lost from pose
+    /// 2 (epoch 1): poses 2-4 `datum_lost`; `epoch 1 referenced at pose 4` when `referenced`.
+    fn epoch_log(referenced: bool) -> LogContents {
+        let xs = [10.0, 20.0, 30.0, 0.0, 10.0, 20.0, 30.0, 20.0, 10.0, 0.0];
+        let mut l = log(&xs, |_, x| Some(x * 1000.0));
+        for p in l.poses.iter_mut().filter(|p| p.msg.pose >= 2) {
+            p.msg.datum_epoch = 1;
+            if p.msg.pose <= 4 {
+                p.msg.status = PoseStatus::DatumLost;
+                p.msg.mean.clear();
+            }
+        }
+        if referenced {
+            l.rereferences
+                .push(crate::contents::Rereference { epoch: 1, pose: 4 });
+        }
+        l
+    }
+
+    #[test]
+    fn a_re_referenced_run_is_taken_with_its_lost_poses_missing_and_noted() {
+        let d =
+            positioning_from_contents(&epoch_log(true), &PositioningOptions::default()).unwrap();
+        let note = &d.metadata[DATUM_NOTE_KEY];
+        assert!(
+            note.starts_with("3 pose value(s) between poses 2 and 4 are datum_lost")
+                && note.contains("epoch 1 at pose 4"),
+            "{note}"
+        );
+        // Pose 1 (10 up) and poses 5-9: 10 up, 20 up, 20 down, 10 down.
+        assert_eq!(d.readings.len(), 5);
+    }
+
+    #[test]
+    fn ok_values_of_an_epoch_never_re_referenced_refuse_the_run() {
+        let mut l = epoch_log(false);
+        let e = positioning_from_contents(&l, &PositioningOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("mixes datum epochs without a reference: pose 5 is ok in datum epoch 1"),
+            "{e}"
+        );
+        // Its lost values alone (no ok value of epoch 1): the loss is named.
+        for p in l.poses.iter_mut().filter(|p| p.msg.pose >= 5) {
+            p.msg.status = PoseStatus::DatumLost;
+        }
+        let e = positioning_from_contents(&l, &PositioningOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("lost its datum at pose 2") && e.contains("never re-referenced"),
+            "{e}"
         );
     }
 }

@@ -206,6 +206,9 @@ pub fn analyze_positioning_given(
             missing.len()
         ));
     }
+    if let Some(n) = data.metadata.get(crate::positioning::DATUM_NOTE_KEY) {
+        notes.push(n.clone());
+    }
     if !data.has_times {
         notes.push(
             "no time_s column: row order stands in for time; the default reference cycle is the \

@@ -130,6 +130,7 @@ fn value(inst: Instrument, pose_no: u32, t_ns: u64, ch: &[(&str, f64)]) -> PoseM
         std: ch.iter().map(|(k, _)| (k.to_string(), 0.01)).collect(),
         t_first_ns: t_ns,
         t_last_ns: t_ns + 150_000_000,
+        datum_epoch: 0,
     }
 }
 
@@ -143,6 +144,7 @@ fn no_value(inst: Instrument, pose_no: u32, t_ns: u64, st: PoseStatus) -> PoseMs
         std: BTreeMap::new(),
         t_first_ns: t_ns,
         t_last_ns: t_ns,
+        datum_epoch: 0,
     }
 }
 

@@ -682,6 +682,11 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
     );
     assert_fits(&dom);
     assert!(dom.contains("data-kind=\"disconnected\" data-instrument=\"psd\""));
+    // The beam break's loss of datum is in the faults list too (its `/event` of kind datum).
+    assert!(
+        dom.contains("data-kind=\"datum lost\" data-instrument=\"interferometer\""),
+        "no datum lost in the faults list: {dom}"
+    );
     sigterm(&daemon.0);
     let status = daemon.0.wait().unwrap();
     drain(&err_rx, &mut err);

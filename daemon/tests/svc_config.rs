@@ -466,3 +466,67 @@ fn storage_policy_is_read_and_its_mistakes_reported_together() {
         );
     }
 }
+
+/// `reference_pose`: poses of the trajectory at the interferometer's datum position (X 0),
+/// one or a list; every other case named at its line.
+#[test]
+fn reference_poses_must_be_trajectory_poses_at_the_datum_position() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("p.csv"),
+        "pose,x_mm,y_mm,z_mm\n1,0,0,0\n2,100,0,0\n3,0,0,0\n",
+    )
+    .unwrap();
+    let with = |keys: &str, traj: bool| {
+        let t = if traj { "trajectory = \"p.csv\"\n" } else { "" };
+        GOOD.replace("stop_at", &format!("{t}{keys}\nstop_at"))
+    };
+    let parse_in = |text: &str| Config::parse(&dir.path().join("m.toml"), text);
+    let c = parse_in(&with("reference_pose = 3", true)).unwrap();
+    assert_eq!(c.run.reference_poses, vec![3]);
+    assert_eq!(c.run.reference_settle_s, 0.2);
+    let c = parse_in(&with(
+        "reference_pose = [1, 3]\nreference_settle_s = 0.5",
+        true,
+    ))
+    .unwrap();
+    assert_eq!(
+        (c.run.reference_poses, c.run.reference_settle_s),
+        (vec![1, 3], 0.5)
+    );
+    assert!(parse(GOOD).unwrap().run.reference_poses.is_empty());
+    for (keys, traj, want) in [
+        (
+            "reference_pose = [1, 2]",
+            true,
+            "reference_pose 2 has target X 100 mm, not the interferometer's datum position",
+        ),
+        (
+            "reference_pose = 4",
+            true,
+            "reference_pose 4 is not a pose of the trajectory (1 to 3)",
+        ),
+        (
+            "reference_pose = 1",
+            false,
+            "reference_pose needs a trajectory",
+        ),
+        (
+            "reference_pose = 1\nreference_settle_s = 0",
+            true,
+            "reference_settle_s = 0 must be above 0",
+        ),
+    ] {
+        let text = with(keys, traj);
+        let e = parse_in(&text).unwrap_err();
+        assert!(e.to_string().contains(want), "{keys}: {e}");
+        let last = keys.lines().last().unwrap();
+        assert_eq!(e.line(), Some(line_of(&text, last)), "{keys}: {e}");
+    }
+    let text = with("reference_pose = 1", true).replace(
+        "[interferometer]\nport = \"/dev/metrolog-li80\"\nrate_hz = 1000\nalpha_um_per_m_k = 11.7\n",
+        "",
+    );
+    let e = parse_in(&text).unwrap_err().to_string();
+    assert!(e.contains("there is no [interferometer]"), "{e}");
+}

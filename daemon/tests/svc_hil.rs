@@ -927,3 +927,372 @@ fn run_config(dir: &Path, text: &str) -> (std::process::Output, String) {
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     (out, err)
 }
+
+// ---------------------------------------------------------------------------------------------
+// Datum epochs (issue 26, docs/design.md "Datum epochs"): reconnects, a beam break and a
+// service restart mid-program, with reference poses at X 0.
+
+/// Three bidirectional cycles over X 100 and 200 mm (0 → 100 → 200 → 300 → 200 → 100 → 0),
+/// poses 1, 7, 13, 19 at X 0 (the datum position) with a longer dwell: the reference poses.
+/// No stream faults; the scenario's other settings as [`scenario`].
+fn datum_scenario() -> Scenario {
+    let mut s = scenario();
+    s.faults = Default::default();
+    let row = s.program.poses[0];
+    let cycle = [0.0, 100.0, 200.0, 300.0, 200.0, 100.0];
+    let mut poses: Vec<sim::scenario::PoseRow> = (0..3)
+        .flat_map(|_| cycle)
+        .chain([0.0])
+        .map(|x_mm| sim::scenario::PoseRow {
+            x_mm,
+            y_mm: 0.0,
+            z_mm: 0.0,
+            dwell_s: (x_mm == 0.0).then_some(0.8),
+            ..row
+        })
+        .collect();
+    poses[0].move_s = Some(0.1);
+    s.program.poses = poses;
+    s
+}
+
+const REFERENCE_POSES: &str = "reference_pose = [1, 7, 13, 19]\nreference_settle_s = 0.2\n";
+
+/// Program time of pose `k`'s motion start plus `after_s`.
+fn during_pose(sc: &Scenario, k: usize, after_s: f64) -> f64 {
+    sim::Schedule::new(&sc.program).poses[k - 1].motion_start_s + after_s
+}
+
+/// The simulator and a daemon config for it with the reference poses (and `stop`: end at the
+/// program end).
+fn datum_setup(sc: Scenario, dir: &Path, stop: bool) -> (sim::SimHandle, PathBuf, PathBuf) {
+    let ports = dir.join("ports");
+    let logs = dir.join("logs");
+    std::fs::create_dir_all(&ports).unwrap();
+    let sim = sim::Sim::start(sc, &ports).unwrap();
+    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, stop)
+        .unwrap()
+        .replacen(
+            "stop_at_program_end",
+            &format!("{REFERENCE_POSES}stop_at_program_end"),
+            1,
+        );
+    let cfg = dir.join("metrolog.toml");
+    std::fs::write(&cfg, toml).unwrap();
+    (sim, cfg, logs)
+}
+
+/// Every `ok` value of the log against the simulation's truth, the interferometer's by its
+/// datum epoch: epoch 0 from home, a re-referenced epoch from where the axis stood when the
+/// simulated LI-80 took that `DATUM` (its record, the truth's deviation at that visit moved by
+/// its drift to that instant). The DATUM must fall inside the reference pose's dwell, after
+/// the exact stop (the axis stood). Returns the `ok` values per instrument and the wrong ones.
+fn wrong_ok_values(
+    log: &metrolog_analysis::LogContents,
+    record: &sim::Record,
+    sc: &Scenario,
+) -> (std::collections::BTreeMap<&'static str, usize>, Vec<String>) {
+    let home_x_mm = sc.program.home.x_mm;
+    let start = record.program_started_s.unwrap_or(0.0);
+    let truth = |k: u32| {
+        record
+            .truth
+            .iter()
+            .find(|t| u32::from(t.pose) == k)
+            .unwrap()
+    };
+    let length = |k: u32, at_s: f64| {
+        let t = truth(k);
+        (t.x_mm - home_x_mm) * 1e3 + t.deviation_um + t.deviation_rate_um_per_s * (at_s - t.eval_s)
+    };
+    let mut zero = std::collections::BTreeMap::from([(0u32, 0.0)]);
+    for r in &log.rereferences {
+        let t = truth(r.pose);
+        let datum_s = record
+            .interferometer
+            .datums_s
+            .iter()
+            .map(|d| d - start)
+            .find(|d| *d > t.exact_stop_s && *d < t.dwell_end_s)
+            .unwrap_or_else(|| panic!("no DATUM in pose {}'s dwell: {r:?}", r.pose));
+        zero.insert(r.epoch, length(r.pose, datum_s));
+    }
+    let mut ok = std::collections::BTreeMap::new();
+    let mut wrong = Vec::new();
+    for p in log.poses.iter().map(|p| &p.msg) {
+        if p.status != types::PoseStatus::Ok {
+            continue;
+        }
+        *ok.entry(p.instrument.name()).or_default() += 1;
+        let t = truth(p.pose);
+        let m = |k: &str| p.mean[k];
+        let (err, tol) = match p.instrument {
+            types::Instrument::Interferometer => match zero.get(&p.datum_epoch) {
+                Some(z) => (
+                    (m("position_um") - (length(p.pose, t.eval_s) - z)).abs(),
+                    0.5,
+                ),
+                None => (f64::INFINITY, 0.0),
+            },
+            types::Instrument::Capball => (
+                (0..3)
+                    .map(|i| (m(["ex_um", "ey_um", "ez_um"][i]) - t.capball_e_um[i]).powi(2))
+                    .sum::<f64>()
+                    .sqrt(),
+                0.1,
+            ),
+            _ => (
+                ((m("x_um") - t.psd_x_um).powi(2) + (m("y_um") - t.psd_y_um).powi(2)).sqrt(),
+                0.1,
+            ),
+        };
+        if err >= tol {
+            wrong.push(format!("{p:?}: {err} µm from the truth"));
+        }
+    }
+    (ok, wrong)
+}
+
+/// The interferometer's pose values: (pose, status, epoch).
+fn li80_values(log: &metrolog_analysis::LogContents) -> Vec<(u32, &'static str, u32)> {
+    log.poses
+        .iter()
+        .map(|p| &p.msg)
+        .filter(|p| p.instrument == types::Instrument::Interferometer)
+        .map(|p| (p.pose, p.status.name(), p.datum_epoch))
+        .collect()
+}
+
+/// `metrolog analyze positioning LOG`: exit status, stdout, stderr.
+fn analyze_positioning(log: &Path) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["analyze", "positioning"])
+        .arg(log)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// After a lost datum the interferometer's values are `datum_lost` up to the reference visit,
+/// `ok` and right from the next pose on, in epoch 1; the operator was told (ERROR, then WARN
+/// with the pose); the positioning analysis takes the run with the lost poses as missing.
+fn assert_re_referenced(log: &Path, record: &sim::Record, sc: &Scenario, stderr: &str) {
+    let contents = metrolog_analysis::LogContents::read(log).unwrap();
+    let li = li80_values(&contents);
+    let (ok, wrong) = wrong_ok_values(&contents, record, sc);
+    assert!(wrong.is_empty(), "{}\n{li:?}", wrong.join("\n"));
+    assert!(
+        stderr.contains("the interferometer's datum is lost; datum epoch 1 begins"),
+        "{stderr}"
+    );
+    let r = contents.rereferences.first().unwrap_or_else(|| {
+        panic!("no re-reference in /event: {li:?}\n{stderr}");
+    });
+    assert_eq!(r.epoch, 1, "{:?}", contents.rereferences);
+    assert!(
+        stderr.contains(&format!("interferometer re-referenced at pose {}", r.pose)),
+        "{stderr}"
+    );
+    // The reference visit is not a measurement; every pose after it is ok in epoch 1.
+    assert!(li.contains(&(r.pose, "datum_lost", 1)), "{li:?}");
+    let after: Vec<_> = li.iter().filter(|v| v.0 > r.pose).collect();
+    assert!(!after.is_empty(), "{li:?}");
+    assert!(after.iter().all(|v| v.1 == "ok" && v.2 == 1), "{li:?}");
+    println!("interferometer values: {li:?}\nok per instrument: {ok:?}");
+    print_alarm_lines(stderr);
+    // The epochs come from the logged samples and triggers alone: a replay gives every pose
+    // value again, byte for byte.
+    let rep = metrolog::cmd::replay::replay(log, &Default::default()).unwrap();
+    assert_eq!(
+        (rep.identical, rep.replayed.len()),
+        (rep.logged.len(), rep.logged.len()),
+        "replay differs"
+    );
+    let (success, out, err) = analyze_positioning(log);
+    assert!(
+        success,
+        "analyze positioning refused the re-referenced run: {err}"
+    );
+    assert!(out.contains("are datum_lost"), "{out}");
+    println!("analyze positioning:\n{out}");
+}
+
+/// The LI-80 unplugged for 0.4 s during pose 2: epoch 1 from the reconnect, re-referenced at
+/// the next reference pose reached after it; the page/`STATUS=` alarm says `datum lost`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn datum_li80_unplug_is_re_referenced_at_the_reference_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = datum_scenario();
+    sc.faults.unplugs = vec![Unplug {
+        device: Device::Interferometer,
+        at_s: during_pose(&sc, 2, 0.05),
+        duration_s: 0.4,
+    }];
+    let (sim, cfg, logs) = datum_setup(sc.clone(), dir.path(), true);
+    let notify_path = dir.path().join("notify.sock");
+    let notify = Notifications::listen(&notify_path);
+    let mut child = start_daemon_notified(&cfg, Some(&notify_path));
+    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
+    let status = wait_exit(&mut child, limit).await;
+    let stderr = child.wait_with_output_stderr();
+    assert!(
+        status.success(),
+        "metrolog run failed ({status}):\n{stderr}"
+    );
+    let states = notify.stop();
+    let record = sim.record();
+    sim.shutdown().await;
+    assert_re_referenced(&the_log(&logs), &record, &sc, &stderr);
+    assert!(
+        states
+            .iter()
+            .any(|s| s.contains("interferometer datum lost (epoch 1): re-reference")),
+        "{states:?}"
+    );
+}
+
+/// A 0.3 s beam interruption in pose 3 (the device's own "datum lost" flag): the same.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn datum_beam_break_is_re_referenced_at_the_reference_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = datum_scenario();
+    sc.faults.beam_interruptions = vec![sim::scenario::Timed {
+        at_s: during_pose(&sc, 3, 0.2),
+        duration_s: 0.3,
+    }];
+    let (sim, cfg, logs) = datum_setup(sc.clone(), dir.path(), true);
+    let mut child = start_daemon(&cfg);
+    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
+    let status = wait_exit(&mut child, limit).await;
+    let stderr = child.wait_with_output_stderr();
+    assert!(
+        status.success(),
+        "metrolog run failed ({status}):\n{stderr}"
+    );
+    assert!(stderr.contains("interferometer beam lost"), "{stderr}");
+    let record = sim.record();
+    sim.shutdown().await;
+    assert_re_referenced(&the_log(&logs), &record, &sc, &stderr);
+}
+
+/// The service SIGKILLed once the first pose value is in its log, and started again while the
+/// program goes on: the new service's first trigger is not the program start, so the datum it
+/// took at connect is not the run's (epoch 1, lost) until the next reference pose. Its log
+/// has no ok interferometer value before that, and right ones after.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn datum_service_restart_mid_program_is_re_referenced() {
+    let dir = tempfile::tempdir().unwrap();
+    let sc = datum_scenario();
+    let (sim, cfg, logs) = datum_setup(sc.clone(), dir.path(), true);
+    let mut first = start_daemon(&cfg);
+    tokio::time::timeout(Duration::from_secs(60), sim.wait_program_started())
+        .await
+        .expect("the program started");
+    let seen = wait_for_topic(&logs, "/pose", Duration::from_secs(60)).await;
+    assert!(seen, "no /pose in the first run's log");
+    first.kill().unwrap();
+    let _ = first.wait();
+    let first_log = the_log(&logs);
+    let mut second = start_daemon(&cfg);
+    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
+    let status = wait_exit(&mut second, limit).await;
+    let stderr = second.wait_with_output_stderr();
+    assert!(
+        status.success(),
+        "the restarted run failed ({status}):\n{stderr}"
+    );
+    assert!(
+        stderr.contains("the service started mid-program"),
+        "{stderr}"
+    );
+    let record = sim.record();
+    sim.shutdown().await;
+    let log = std::fs::read_dir(&logs)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap") && *p != first_log)
+        .expect("the restarted service's log");
+    assert_re_referenced(&log, &record, &sc, &stderr);
+    // The killed service's log: its prefix reads, and its ok values are right too.
+    let killed = metrolog_analysis::LogContents::read(&first_log).unwrap();
+    let (ok, wrong) = wrong_ok_values(&killed, &record, &sc);
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    println!("the killed service's log: ok per instrument {ok:?}");
+}
+
+/// The CB-3 and the PSD unplugged (pose 2 and pose 4): their zero is physical (no host tare),
+/// so their values after the reconnect are ok and next to the truth; the interferometer keeps
+/// its datum (no datum_lost anywhere).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn datum_capball_and_psd_unplugs_keep_their_values_right() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut sc = datum_scenario();
+    sc.faults.unplugs = vec![
+        Unplug {
+            device: Device::Capball,
+            at_s: during_pose(&sc, 2, 0.05),
+            duration_s: 0.4,
+        },
+        Unplug {
+            device: Device::Psd,
+            at_s: during_pose(&sc, 4, 0.05),
+            duration_s: 0.4,
+        },
+    ];
+    let (sim, cfg, logs) = datum_setup(sc.clone(), dir.path(), true);
+    let mut child = start_daemon(&cfg);
+    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
+    let status = wait_exit(&mut child, limit).await;
+    let stderr = child.wait_with_output_stderr();
+    assert!(
+        status.success(),
+        "metrolog run failed ({status}):\n{stderr}"
+    );
+    let record = sim.record();
+    sim.shutdown().await;
+    let contents = metrolog_analysis::LogContents::read(&the_log(&logs)).unwrap();
+    let (ok, wrong) = wrong_ok_values(&contents, &record, &sc);
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    // Both came back and gave ok values after their unplug (poses 8 on: after pose 7).
+    for inst in [types::Instrument::Capball, types::Instrument::Psd] {
+        let late_ok = contents
+            .poses
+            .iter()
+            .filter(|p| p.msg.instrument == inst && p.msg.pose >= 8)
+            .filter(|p| p.msg.status == types::PoseStatus::Ok)
+            .count();
+        assert!(
+            late_ok >= 5,
+            "{inst:?}: {late_ok} ok values after pose 7; {ok:?}"
+        );
+    }
+    assert!(
+        contents
+            .poses
+            .iter()
+            .all(|p| p.msg.status != types::PoseStatus::DatumLost),
+        "a datum_lost value without an interferometer fault"
+    );
+    assert!(contents.rereferences.is_empty());
+    // The operator was told of both unplugs.
+    assert!(
+        stderr.matches("reconnect").count() + stderr.matches("connected").count() >= 2,
+        "{stderr}"
+    );
+    println!("ok per instrument: {ok:?}");
+    print_alarm_lines(&stderr);
+}
+
+/// The WARN and ERROR lines of a run (what the operator was told), for the test's output.
+fn print_alarm_lines(stderr: &str) {
+    for l in stderr
+        .lines()
+        .filter(|l| l.contains("WARN") || l.contains("ERROR"))
+    {
+        println!("  told: {l}");
+    }
+}

@@ -154,6 +154,7 @@ fn pipeline(seen: &Arc<Mutex<Seen>>, stop_at_program_end: bool) -> Pipeline {
             connect: None,
             disk_alarm: None,
             trajectory: Vec::new(),
+            datum: None,
         },
         HostClock::new(),
         Box::new(Counting(DetectOnly::new(engine), seen.clone())),

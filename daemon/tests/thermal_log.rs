@@ -47,6 +47,7 @@ fn pose(instrument: Instrument, pose: u32, from: f64, to: f64, mean: &[(&str, f6
         std: BTreeMap::new(),
         t_first_ns: ns(from),
         t_last_ns: ns(to),
+        datum_epoch: 0,
     }
 }
 

@@ -24,8 +24,8 @@
 use std::collections::VecDeque;
 
 use types::{
-    DATUM_FLAGS, DetectorSettings, Instrument, NC_SETTLE_US, PoseMsg, PoseStatus, PoseValue,
-    Sample, SampleValues, SteadyError, Trigger, TriggerEvent, TriggerTime,
+    DetectorSettings, Instrument, NC_SETTLE_US, PoseMsg, PoseStatus, PoseValue, Sample,
+    SampleValues, SteadyError, Trigger, TriggerEvent, TriggerTime,
 };
 
 use crate::clock::{NcClock, NcPoint};
@@ -46,23 +46,122 @@ struct Slot {
     /// Samples past the time of a trigger still waiting to be placed, in order: fed once it
     /// is (a dwell must not take samples past its end before the end is known).
     queued: VecDeque<QueuedSample>,
-    /// Time of the first sample whose zero is not the run's ([`types::DATUM_FLAGS`]): every
-    /// pose after it that has no value is `datum_lost`, not a beam or device fault.
-    datum_lost_from: Option<u64>,
+    /// The interferometer's datum epochs, as its samples' flags say (default for the others).
+    epochs: Epochs,
+}
+
+/// How far from zero the reference visit's value may read for a re-reference to stand, µm: the
+/// device read 0 at `DATUM` and the axis stood still, so more means the datum was taken while
+/// the axis moved or rang (docs/design.md, "Datum epochs").
+pub(crate) const REFERENCE_VISIT_TOL_UM: f64 = 1.0;
+
+/// The interferometer's datum epochs, as its samples' flags say ([`types::datum_epoch`],
+/// [`types::DATUM_FLAGS`]): which epoch a value was measured in, and whether that epoch's zero
+/// is the run's (epoch 0) or was re-referenced (a later epoch whose samples became clean).
+#[derive(Debug, Clone, Default)]
+struct Epochs {
+    /// The changes of (epoch, clean) in sample order, from (0, clean).
+    marks: Vec<(u64, u32, bool)>,
+    /// A re-reference (time, epoch) whose reference visit has not been valued yet.
+    visit: Option<(u64, u32)>,
+    /// Epochs whose re-reference the reference visit did not confirm.
+    refused: Vec<u32>,
+    /// Epoch 0 is not the run's datum: the first trigger was not the program start.
+    epoch0_foreign: bool,
+    /// [`DetectorSettings::datum_epochs`]; without it (old logs) only the first loss counts:
+    /// every later value without a valid value is `datum_lost`.
+    on: bool,
+}
+
+impl Epochs {
+    fn new(on: bool) -> Epochs {
+        Epochs {
+            on,
+            ..Epochs::default()
+        }
+    }
+
+    fn started_mid_program(&mut self) {
+        self.epoch0_foreign = self.on;
+    }
+
+    /// A sample at `t` with LI-80 flags `flags`.
+    fn observe(&mut self, t: u64, flags: u32) {
+        let now = (types::datum_epoch(flags), flags & types::DATUM_FLAGS == 0);
+        let (epoch, clean) = self.state_at(u64::MAX);
+        if now == (epoch, clean) {
+            return;
+        }
+        if self.on && now == (epoch, true) && epoch > 0 {
+            self.visit = Some((t, epoch));
+        }
+        self.marks.push((t, now.0, now.1));
+    }
+
+    /// (epoch, clean) of the samples at `t`.
+    fn state_at(&self, t: u64) -> (u32, bool) {
+        self.marks
+            .iter()
+            .rev()
+            .find(|m| m.0 <= t)
+            .map_or((0, true), |m| (m.1, m.2))
+    }
+
+    /// Whether values measured in `epoch` with clean samples are against the run's zero.
+    fn trusted(&self, epoch: u32) -> bool {
+        let foreign = epoch == 0 && self.epoch0_foreign;
+        !(self.refused.contains(&epoch) || foreign)
+    }
+
+    /// The epoch of `v`; a value not against the run's zero becomes `datum_lost`: one not
+    /// `ok` measured after the datum was lost, one `ok` from an epoch not the run's or
+    /// spanning a change of epoch, and the reference visit (not a measurement).
+    fn judge(&mut self, v: &mut PoseValue) -> u32 {
+        let (epoch, clean) = self.state_at(v.t_last_ns);
+        if !self.on {
+            if v.status != PoseStatus::Ok && self.marks.first().is_some_and(|m| v.t_last_ns >= m.0)
+            {
+                v.status = PoseStatus::DatumLost;
+            }
+            return epoch;
+        }
+        if let Some((t_ref, e)) = self.visit
+            && v.t_last_ns >= t_ref
+        {
+            self.visit = None;
+            let zero = v
+                .mean
+                .first()
+                .is_some_and(|m| m.abs() <= REFERENCE_VISIT_TOL_UM);
+            if !(v.status == PoseStatus::Ok && zero && e == epoch) {
+                self.refused.push(e);
+            }
+            v.status = PoseStatus::DatumLost;
+            return epoch;
+        }
+        let mixed = self
+            .marks
+            .iter()
+            .any(|m| m.0 > v.t_first_ns && m.0 <= v.t_last_ns);
+        let lost = !clean || !self.trusted(epoch) || (v.status == PoseStatus::Ok && mixed);
+        if lost {
+            v.status = PoseStatus::DatumLost;
+        }
+        epoch
+    }
 }
 
 /// A sample waiting in [`Slot::queued`]: time, values, channels used, valid.
 type QueuedSample = (u64, [f64; 3], usize, bool);
 
 impl Slot {
-    fn out(&self, values: Vec<PoseValue>, out: &mut Vec<PoseMsg>) {
-        out.extend(values.into_iter().map(|mut v| {
-            if v.status != PoseStatus::Ok && self.datum_lost_from.is_some_and(|t| v.t_last_ns >= t)
-            {
-                v.status = PoseStatus::DatumLost;
-            }
-            PoseMsg::from_value(self.instrument, &v)
-        }));
+    fn out(&mut self, values: Vec<PoseValue>, out: &mut Vec<PoseMsg>) {
+        for mut v in values {
+            let epoch = self.epochs.judge(&mut v);
+            let mut msg = PoseMsg::from_value(self.instrument, &v);
+            msg.datum_epoch = epoch;
+            out.push(msg);
+        }
     }
 
     /// Feeds the queued samples up to `horizon` (all with `None`), after the held triggers
@@ -101,6 +200,8 @@ pub struct PoseEngine {
     settle: bool,
     /// Triggers observed, waiting for the fit to settle, in order.
     unplaced: VecDeque<(TriggerEvent, u32, NcPoint)>,
+    /// A trigger came (the first one decides whether epoch 0 is the run's datum).
+    trigger_seen: bool,
 }
 
 impl PoseEngine {
@@ -118,7 +219,7 @@ impl PoseEngine {
                     held: VecDeque::new(),
                     newest_ns: 0,
                     queued: VecDeque::new(),
-                    datum_lost_from: None,
+                    epochs: Epochs::new(settings.datum_epochs),
                 });
             }
         }
@@ -131,6 +232,7 @@ impl PoseEngine {
             nc_clock,
             settle: settings.trigger_time == TriggerTime::NcClockSettled,
             unplaced: VecDeque::new(),
+            trigger_seen: false,
         })
     }
 
@@ -165,11 +267,8 @@ impl PoseEngine {
         let Some(slot) = self.detectors.iter_mut().find(|d| d.instrument == inst) else {
             return Vec::new();
         };
-        if let SampleValues::Position { flags, .. } = &s.values
-            && flags & DATUM_FLAGS != 0
-            && slot.datum_lost_from.is_none()
-        {
-            slot.datum_lost_from = Some(s.fitted_ns);
+        if let SampleValues::Position { flags, .. } = &s.values {
+            slot.epochs.observe(s.fitted_ns, *flags);
         }
         let mut out = Vec::new();
         slot.queued.push_back((s.fitted_ns, values, n, s.valid));
@@ -190,6 +289,17 @@ impl PoseEngine {
     /// of the trigger stream alone decides, so replay places it the same way.
     pub fn on_trigger(&mut self, t: &Trigger) -> Vec<PoseMsg> {
         let kind = t.event;
+        if !self.trigger_seen {
+            self.trigger_seen = true;
+            if kind != TriggerEvent::ProgramStart {
+                // Only the interferometer's zero is relative (docs/instruments.md).
+                for slot in &mut self.detectors {
+                    if slot.instrument == Instrument::Interferometer {
+                        slot.epochs.started_mid_program();
+                    }
+                }
+            }
+        }
         let mut out = Vec::new();
         match (&mut self.nc_clock, self.settle) {
             (Some(nc), true) => {
@@ -489,6 +599,7 @@ mod tests {
     fn old_logs_without_the_setting_place_triggers_by_arrival() {
         let old: DetectorSettings = serde_json::from_str(r#"{"instruments":["capball"]}"#).unwrap();
         assert_eq!(old.trigger_time, TriggerTime::Arrival);
+        assert!(!old.datum_epochs && DetectorSettings::default().datum_epochs);
         assert_eq!(
             DetectorSettings::default().trigger_time,
             TriggerTime::NcClockSettled
@@ -545,5 +656,123 @@ mod tests {
             after.iter().all(|p| p.status == PoseStatus::DatumLost),
             "{after:?}"
         );
+    }
+
+    /// The run's events with the interferometer's datum lost from pose 10's start (epoch 1,
+    /// flagged) and, when `reference_at` is given, `DATUM` taken `reference_at` s after pose
+    /// 14's exact stop: from then epoch 1 is clean and reads from pose 14's position, offset
+    /// by `datum_error_um` (a datum taken off the stand-still position).
+    fn epoch_events(
+        reference_at: Option<f64>,
+        datum_error_um: f64,
+        program_start: bool,
+    ) -> Vec<Ev> {
+        let ns = |t: f64| T0_NS + (t * 1e9).round() as u64;
+        let lost = ns(pose_start_s(10));
+        let referenced = reference_at.map(|d| ns(pose_start_s(14) + MOVE_S + d));
+        run_events(false)
+            .into_iter()
+            .filter(|ev| {
+                program_start
+                    || !matches!(ev, Ev::Trigger(t) if t.event == TriggerEvent::ProgramStart)
+            })
+            .map(|ev| match ev {
+                Ev::Sample(mut s) if s.fitted_ns >= lost => {
+                    let clean = referenced.is_some_and(|r| s.fitted_ns >= r);
+                    if let SampleValues::Position {
+                        flags, position_um, ..
+                    } = &mut s.values
+                    {
+                        *flags |= types::datum_epoch_bits(1);
+                        if clean {
+                            *position_um -= pose_um(14) + datum_error_um;
+                        } else {
+                            *flags |= types::DATUM_NOT_RUNS;
+                            s.valid = false;
+                        }
+                    }
+                    Ev::Sample(s)
+                }
+                ev => ev,
+            })
+            .collect()
+    }
+
+    fn run_engine(events: Vec<Ev>) -> Vec<PoseMsg> {
+        let settings = DetectorSettings {
+            instruments: vec![Instrument::Interferometer],
+            ..DetectorSettings::default()
+        };
+        let mut engine = PoseEngine::new(&settings).unwrap();
+        let mut out = Vec::new();
+        for ev in events {
+            out.extend(match ev {
+                Ev::Sample(s) => engine.on_sample(&s),
+                Ev::Trigger(t) => engine.on_trigger(&t),
+            });
+        }
+        out.extend(engine.finish(u64::MAX));
+        out
+    }
+
+    /// A lost epoch re-referenced at pose 14 (the reference visit, itself not a measurement):
+    /// poses 10 to 14 are `datum_lost`, the later ones `ok` in epoch 1, each reading its
+    /// length from pose 14 (the truth here, written independently of the engine).
+    #[test]
+    fn a_re_referenced_epoch_is_ok_again_after_its_reference_visit() {
+        let out = run_engine(epoch_events(Some(0.2), 0.0, true));
+        assert_eq!(out.len(), usize::from(POSES), "{out:#?}");
+        for p in &out {
+            let k = p.pose as u16;
+            let got = p.mean.get("position_um").copied().unwrap_or(f64::NAN);
+            let (status, epoch) = (p.status, p.datum_epoch);
+            match k {
+                1..=9 => {
+                    assert_eq!((status, epoch), (PoseStatus::Ok, 0), "{p:?}");
+                    assert!((got - pose_um(k)).abs() < 1.0, "{p:?}");
+                }
+                10..=14 => assert_eq!((status, epoch), (PoseStatus::DatumLost, 1), "{p:?}"),
+                _ => {
+                    assert_eq!((status, epoch), (PoseStatus::Ok, 1), "{p:?}");
+                    assert!((got - (pose_um(k) - pose_um(14))).abs() < 1.0, "{p:?}");
+                }
+            }
+        }
+    }
+
+    /// A datum taken off the stand-still position (the reference visit reads 5 µm, not 0) is
+    /// not a re-reference: every later value stays `datum_lost`. Without any re-reference the
+    /// same. Both fail with ok values if the engine trusted the clean flags alone.
+    #[test]
+    fn a_re_reference_the_visit_does_not_confirm_leaves_the_epoch_lost() {
+        for events in [
+            epoch_events(Some(0.2), -5.0, true),
+            epoch_events(None, 0.0, true),
+        ] {
+            let out = run_engine(events);
+            let after: Vec<_> = out.iter().filter(|p| p.pose >= 10).collect();
+            assert_eq!(after.len(), usize::from(POSES) - 9);
+            assert!(
+                after
+                    .iter()
+                    .all(|p| p.status == PoseStatus::DatumLost && p.datum_epoch == 1),
+                "{after:?}"
+            );
+        }
+    }
+
+    /// A run whose first trigger is not its program start (the service started mid-program)
+    /// has no datum of its own: no value of epoch 0 is ok; those of the re-referenced epoch are.
+    #[test]
+    fn a_start_mid_program_has_no_datum_until_re_referenced() {
+        let out = run_engine(epoch_events(Some(0.2), 0.0, false));
+        for p in &out {
+            let want = if p.pose <= 14 {
+                PoseStatus::DatumLost
+            } else {
+                PoseStatus::Ok
+            };
+            assert_eq!(p.status, want, "{p:?}");
+        }
     }
 }

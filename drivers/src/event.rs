@@ -25,11 +25,32 @@ pub enum DriverEvent {
         port: String,
         error: DriverError,
     },
+    /// The interferometer's datum epoch changed: lost (reconnect, beam loss, a start
+    /// mid-program) or re-referenced (`DATUM` at the reference pose).
+    Datum {
+        instrument: Instrument,
+        port: String,
+        change: DatumChange,
+    },
     /// A snapshot of the counters (sent about once a second and on change of connection).
     Counters {
         instrument: Instrument,
         counters: Counters,
     },
+}
+
+/// A change of the interferometer's datum epoch (docs/design.md, "Datum epochs").
+#[derive(Debug, Clone, PartialEq)]
+pub struct DatumChange {
+    /// The epoch from now on (0: the run's datum).
+    pub epoch: u32,
+    /// `true`: the epoch was re-referenced (its readings are against the run's zero again);
+    /// `false`: the datum was lost and this epoch begins.
+    pub referenced: bool,
+    /// The reference pose, for a re-reference.
+    pub pose: Option<u32>,
+    /// What the operator reads.
+    pub text: String,
 }
 
 /// How a driver hands its events on: a bounded queue; a full queue is counted, never waited on.

@@ -29,6 +29,30 @@ pub struct Li80Config {
     pub alpha_um_per_m_k: f64,
 }
 
+/// The device's own bits of the `$POS` flags (instruments.md §1 uses bits 0–2); the host's
+/// bits above them hold the datum epoch ([`types::DATUM_EPOCH_MASK`], [`types::DATUM_NOT_RUNS`]).
+const DEVICE_FLAGS: u32 = 0xFFFF;
+
+/// What the daemon asks of the LI-80 driver while it streams (docs/design.md, "Datum epochs").
+#[derive(Debug, Clone, PartialEq)]
+pub enum Li80Command {
+    /// The exact stop of the run's reference pose, whose target is the datum position: when
+    /// the epoch is not against the run's zero, send `DATUM` once the axis has stood `settle`.
+    Reference { pose: u32, settle: Duration },
+    /// The axis moves again (a motion start): a `DATUM` still waiting is not sent.
+    Moving,
+    /// The zero the device counts from is not the run's (the service started mid-program):
+    /// a new epoch begins.
+    LoseDatum { reason: String },
+}
+
+/// How the daemon steers the LI-80's datum: its commands (None: no reference pose, nothing
+/// is ever re-referenced).
+#[derive(Debug, Default)]
+pub struct Li80Control {
+    pub commands: Option<tokio::sync::mpsc::UnboundedReceiver<Li80Command>>,
+}
+
 /// LI-80 lines to readings: `$POS` compensated with the last good `$ENV`.
 struct Li80Frames {
     port: String,
@@ -37,12 +61,76 @@ struct Li80Frames {
     env_seq: Unwrap,
     /// An `$ENV` line came since the last `setup`.
     env_seen: bool,
-    /// The datum was taken on this driver's first connection and the device has been
-    /// connected ever since; `false` after a reconnect (a power-cycled LI-80 counts from
-    /// wherever it stood), so its readings are flagged [`types::DATUM_NOT_RUNS`] and invalid.
-    datum_is_runs: bool,
     /// `DATUM` was sent once (on the first connection of the run).
     datum_taken: bool,
+    /// The datum epoch of the readings: 0 from the `DATUM` of the first connection; each
+    /// reconnect (a power-cycled LI-80 counts from wherever it stood), beam loss (the
+    /// device's "datum lost" flag) or [`Li80Command::LoseDatum`] begins the next.
+    epoch: u32,
+    /// The readings are against the run's zero: epoch 0, or an epoch re-referenced by
+    /// `DATUM` at the reference pose. Otherwise they are flagged [`types::DATUM_NOT_RUNS`]
+    /// and invalid.
+    clean: bool,
+    /// A re-reference waiting for the axis to settle: the pose and when to send `DATUM`.
+    reference: Option<(u32, tokio::time::Instant)>,
+    commands: Option<tokio::sync::mpsc::UnboundedReceiver<Li80Command>>,
+}
+
+impl Li80Frames {
+    /// A new epoch begins: its readings are not against the run's zero.
+    fn new_epoch(&mut self, why: &str) -> crate::DatumChange {
+        self.epoch += 1;
+        self.clean = false;
+        self.reference = None;
+        crate::DatumChange {
+            epoch: self.epoch,
+            referenced: false,
+            pose: None,
+            text: format!(
+                "{why}: the interferometer's datum is lost; datum epoch {} begins and its \
+                 lengths are datum_lost until re-referenced (DATUM at the run's reference pose)",
+                self.epoch
+            ),
+        }
+    }
+
+    fn next_command(&mut self) -> Option<Li80Command> {
+        self.commands.as_mut().and_then(|r| r.try_recv().ok())
+    }
+
+    /// Takes one command; returns the datum change it makes.
+    fn obey(&mut self, cmd: Li80Command) -> Option<crate::DatumChange> {
+        match cmd {
+            Li80Command::Reference { pose, settle } => {
+                if !self.clean && self.datum_taken {
+                    tracing::info!(
+                        port = %self.port,
+                        "pose {pose}: reference pose reached with datum epoch {} not the run's; \
+                         DATUM in {settle:?} if the axis stands until then",
+                        self.epoch
+                    );
+                    self.reference = Some((pose, tokio::time::Instant::now() + settle));
+                }
+                None
+            }
+            Li80Command::Moving => {
+                if let Some((pose, _)) = self.reference.take() {
+                    tracing::warn!(
+                        port = %self.port,
+                        "pose {pose}: the axis moved before DATUM could be sent (dwell shorter \
+                         than the reference settle time): not re-referenced"
+                    );
+                }
+                None
+            }
+            Li80Command::LoseDatum { reason } => self.clean.then(|| self.new_epoch(&reason)),
+        }
+    }
+
+    /// The host's flag bits for the readings now.
+    fn host_flags(&self) -> u32 {
+        types::datum_epoch_bits(self.epoch) | if self.clean { 0 } else { types::DATUM_NOT_RUNS }
+    }
 }
 
 impl FrameConverter for Li80Frames {
@@ -56,6 +144,9 @@ impl FrameConverter for Li80Frames {
         match line {
             Line::Answer(a) => out(Reading::Answer(a)),
             Line::Pos(p) => {
+                if p.flags.datum_lost() && self.clean && self.datum_taken {
+                    out(Reading::Datum(self.new_epoch("interferometer beam lost")));
+                }
                 let (position_um, comp_ok) = match self.comp {
                     Some(c) => (c.length_at_20c_nm(p.raw_nm) * 1e-3, true),
                     None => (f64::NAN, false),
@@ -63,17 +154,12 @@ impl FrameConverter for Li80Frames {
                 out(Reading::Data {
                     raw_seq: p.seq as u64,
                     raw_t_us: p.t_us,
-                    valid: p.valid() && comp_ok && self.datum_is_runs,
+                    valid: p.valid() && comp_ok && self.clean,
                     values: SampleValues::Position {
                         raw_nm: p.raw_nm,
                         position_um,
                         sig: p.sig,
-                        flags: p.flags.0
-                            | if self.datum_is_runs {
-                                0
-                            } else {
-                                types::DATUM_NOT_RUNS
-                            },
+                        flags: (p.flags.0 & DEVICE_FLAGS) | self.host_flags(),
                     },
                 });
             }
@@ -164,28 +250,69 @@ impl SerialDriver for Li80Driver {
         s.expect("STREAM ON\n", is_ok).await?;
         Ok(idn.trim().to_string())
     }
+
+    async fn serve<P: Port>(
+        &self,
+        s: &mut SerialSession<'_, Li80Frames, P>,
+    ) -> Result<(), DriverError> {
+        while let Some(cmd) = s.path.converter.next_command() {
+            if let Some(change) = s.path.converter.obey(cmd) {
+                s.path.reporter.datum(change);
+            }
+        }
+        match s.path.converter.reference {
+            Some((pose, due)) if tokio::time::Instant::now() >= due => re_reference(s, pose).await,
+            _ => Ok(()),
+        }
+    }
+}
+
+/// `DATUM` while the axis stands at the reference pose: from its answer on, the epoch is
+/// against the run's zero again. A refused `DATUM` is reported and the epoch stays lost.
+async fn re_reference<P: Port>(
+    s: &mut SerialSession<'_, Li80Frames, P>,
+    pose: u32,
+) -> Result<(), DriverError> {
+    s.path.converter.reference = None;
+    match s.expect("DATUM\n", is_ok).await {
+        Ok(_) => {}
+        Err(e) if e.is_port_lost() => return Err(e),
+        Err(e) => {
+            s.path.reporter.error(e);
+            return Ok(());
+        }
+    }
+    let c = &mut s.path.converter;
+    c.clean = true;
+    let change = crate::DatumChange {
+        epoch: c.epoch,
+        referenced: true,
+        pose: Some(pose),
+        text: format!(
+            "interferometer re-referenced at pose {pose}: DATUM taken while the axis stood at \
+             the reference pose; datum epoch {} is against the run's zero again (pose {pose}'s \
+             own value is the reference visit, not a measurement)",
+            c.epoch
+        ),
+    };
+    s.path.reporter.datum(change);
+    Ok(())
 }
 
 /// `DATUM` on the run's first connection only: a later one would silently move the zero of
-/// every later length (a reconnect re-zeroed the interferometer wherever the axis stood). After
-/// a reconnect the readings are flagged instead, and the operator told.
+/// every later length (a reconnect re-zeroed the interferometer wherever the axis stood). A
+/// reconnect begins a new datum epoch instead, its readings flagged, and the operator told.
 async fn take_datum_once<P: Port>(
     s: &mut SerialSession<'_, Li80Frames, P>,
 ) -> Result<(), DriverError> {
     if s.path.converter.datum_taken {
-        if s.path.converter.datum_is_runs {
-            tracing::error!(
-                port = %s.path.converter.port,
-                "interferometer reconnected: its zero is no longer the run's datum; every later \
-                 length is marked datum_lost (re-reference and start a new run)"
-            );
-        }
-        s.path.converter.datum_is_runs = false;
+        let change = s.path.converter.new_epoch("interferometer reconnected");
+        s.path.reporter.datum(change);
         return Ok(());
     }
     s.expect("DATUM\n", is_ok).await?;
     s.path.converter.datum_taken = true;
-    s.path.converter.datum_is_runs = true;
+    s.path.converter.clean = true;
     Ok(())
 }
 
@@ -196,7 +323,19 @@ pub fn spawn_li80(
     tx: crate::EventSender,
     cancel: tokio_util::sync::CancellationToken,
 ) -> tokio::task::JoinHandle<()> {
-    let (driver, path) = li80(&cfg, clock, tx);
+    spawn_li80_with(cfg, clock, tx, cancel, Li80Control::default())
+}
+
+/// [`spawn_li80`] steered by the daemon through `control` (the re-reference).
+pub fn spawn_li80_with(
+    cfg: Li80Config,
+    clock: crate::HostClock,
+    tx: crate::EventSender,
+    cancel: tokio_util::sync::CancellationToken,
+    control: Li80Control,
+) -> tokio::task::JoinHandle<()> {
+    let (driver, mut path) = li80(&cfg, clock, tx);
+    path.converter.commands = control.commands;
     crate::serial_driver::spawn(driver, path, cancel)
 }
 
@@ -212,8 +351,11 @@ fn li80(
         comp: None,
         env_seq: Unwrap::new(32),
         env_seen: false,
-        datum_is_runs: false,
         datum_taken: false,
+        epoch: 0,
+        clean: false,
+        reference: None,
+        commands: None,
     };
     let path = SamplePath::new(
         frames,

@@ -41,8 +41,8 @@ mod trigger;
 pub use can_socket::{from_socketcan, spawn_socketcan};
 pub use cb3::{Cb3Config, spawn_cb3};
 pub use error::DriverError;
-pub use event::{DriverEvent, EventSender};
-pub use li80::{Li80Config, spawn_li80};
+pub use event::{DatumChange, DriverEvent, EventSender};
+pub use li80::{Li80Command, Li80Config, Li80Control, spawn_li80, spawn_li80_with};
 pub use modbus::{
     ModbusConfigError, ModbusTempConfig, Parity, RegisterKind, TempSensor, spawn_modbus_temperature,
 };

@@ -102,6 +102,22 @@ impl EventReporter {
         *self.counters.rejections.entry(kind).or_insert(0) += 1;
     }
 
+    /// A change of datum epoch: the operator's line (ERROR when the datum is lost, WARN when
+    /// it was re-referenced) and a `DriverEvent::Datum` for the log.
+    pub(crate) fn datum(&mut self, change: crate::DatumChange) {
+        if change.referenced {
+            tracing::warn!(instrument = self.instrument.name(), port = %self.port, "{}", change.text);
+        } else {
+            tracing::error!(instrument = self.instrument.name(), port = %self.port, "{}", change.text);
+        }
+        let ev = DriverEvent::Datum {
+            instrument: self.instrument,
+            port: self.port.clone(),
+            change,
+        };
+        self.send(ev);
+    }
+
     /// An error the operator must read; repeated identical messages are sent once.
     pub(crate) fn error(&mut self, error: DriverError) {
         let message = error.to_string();

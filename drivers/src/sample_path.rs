@@ -35,6 +35,8 @@ pub(crate) enum Reading {
     DeviceError(DriverError),
     /// Something the operator must read, not a device fault.
     Problem(DriverError),
+    /// The interferometer's datum epoch changed (docs/design.md, "Datum epochs").
+    Datum(crate::DatumChange),
 }
 
 /// The instrument-specific step: decoded frames to readings. Owns the conversion state (e.g.
@@ -179,6 +181,7 @@ fn route(
             reporter.error(e);
         }
         Reading::Problem(e) => reporter.error(e),
+        Reading::Datum(d) => reporter.datum(d),
     }
     None
 }

@@ -180,6 +180,14 @@ pub(crate) trait SerialDriver: Send + Sync {
         &self,
         s: &mut SerialSession<'_, Self::Converter, P>,
     ) -> impl Future<Output = Result<String, DriverError>> + Send;
+    /// Called after every read while streaming: commands from the daemon (the LI-80's
+    /// re-reference). Nothing by default.
+    fn serve<P: Port>(
+        &self,
+        _s: &mut SerialSession<'_, Self::Converter, P>,
+    ) -> impl Future<Output = Result<(), DriverError>> + Send {
+        async { Ok(()) }
+    }
 }
 
 /// Silence that means the device is gone: 2 s plus five sample periods.
@@ -187,14 +195,16 @@ pub(crate) fn idle_timeout(rate_hz: u32) -> Duration {
     Duration::from_secs(2) + Duration::from_secs_f64(5.0 / rate_hz.max(1) as f64)
 }
 
-async fn stream<C: FrameConverter, P: Port>(
-    s: &mut SerialSession<'_, C, P>,
-    idle: Duration,
+async fn stream<D: SerialDriver, P: Port>(
+    driver: &D,
+    s: &mut SerialSession<'_, D::Converter, P>,
 ) -> Result<(), DriverError> {
+    let idle = driver.idle_timeout();
     let mut cycle = 0u32;
     loop {
         match tokio::time::timeout(idle, s.read_once()).await {
             Ok(Ok(n)) => {
+                driver.serve(s).await?;
                 cycle = cycle.wrapping_add(1);
                 if n < BATCH_BYTES && !cycle.is_multiple_of(PROBE_EVERY) {
                     tokio::time::sleep(BATCH_WAIT).await;
@@ -279,7 +289,7 @@ pub(crate) async fn run<D: SerialDriver, P: Port>(
                 let identity = driver.setup(&mut session).await?;
                 let p = &mut session.path;
                 p.reporter.connected(identity, &p.stamper);
-                stream(&mut session, driver.idle_timeout()).await
+                stream(&driver, &mut session).await
             } => r.map_err(Ended::Failed),
         };
         match result {

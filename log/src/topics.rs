@@ -263,6 +263,8 @@ pub enum EventKind {
     Connected,
     Disconnected,
     Error,
+    // The interferometer's datum epoch changed: lost, or re-referenced (text says which).
+    Datum,
 }
 
 /// `/event`: connections, disconnections and device errors, as text.
@@ -271,7 +273,8 @@ pub struct EventMsg {
     pub instrument: String,
     pub kind: EventKind,
     pub port: String,
-    /// Identity (connected), reason (disconnected) or message (error).
+    /// Identity (connected), reason (disconnected), message (error), or for `datum`:
+    /// `epoch <k> lost: <why>` or `epoch <k> referenced at pose <p>: <text>`.
     pub text: String,
 }
 topic!(EventMsg, "/event", "metrolog.Event");

@@ -198,7 +198,7 @@ fn main() {
                 }
                 DriverEvent::Error { error, .. } => eprintln!("driver error: {error}"),
                 DriverEvent::Disconnected { reason, .. } => eprintln!("disconnected: {reason}"),
-                DriverEvent::Trigger(_) => {}
+                DriverEvent::Trigger(_) | DriverEvent::Datum { .. } => {}
             }
             }
         }

@@ -194,6 +194,8 @@ pub struct Collected {
     pub connected: Vec<String>,
     pub disconnected: Vec<String>,
     pub errors: Vec<String>,
+    /// The interferometer's datum changes (reconnect, beam loss, re-reference).
+    pub datum: Vec<drivers::DatumChange>,
     pub counters: Option<Counters>,
 }
 
@@ -205,6 +207,7 @@ impl Collected {
             DriverEvent::Connected { identity, .. } => self.connected.push(identity),
             DriverEvent::Disconnected { reason, .. } => self.disconnected.push(reason.to_string()),
             DriverEvent::Error { error, .. } => self.errors.push(error.to_string()),
+            DriverEvent::Datum { change, .. } => self.datum.push(change),
             DriverEvent::Counters { counters, .. } => self.counters = Some(counters),
         }
     }

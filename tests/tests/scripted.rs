@@ -495,6 +495,7 @@ async fn li80_values_compensation_validity_and_fault_counts() {
     let truncated: BTreeSet<u64> = [600].into();
     let garbage_before: BTreeSet<u64> = [700, 1900].into();
     let datum_lost: BTreeSet<u64> = (800..850).collect();
+    let lost_from = 800;
     let beam_low: BTreeSet<u64> = (1200..1210).collect();
     let env_at = 1000u64;
     let env2 = protocol::li80::EnvFrame {
@@ -642,9 +643,12 @@ async fn li80_values_compensation_validity_and_fault_counts() {
             (position_um - want).abs() < 1e-9 * want.abs().max(1.0),
             "sample {i}: {position_um} vs {want}"
         );
+        // From the first "datum lost" reading on, the readings are from another zero until
+        // the host re-references (DATUM at a reference pose): invalid even where this device
+        // clears its flag by itself (it should keep it until DATUM, instruments.md §1).
         assert_eq!(
             s.valid,
-            !datum_lost.contains(&i) && !beam_low.contains(&i),
+            i < lost_from && !beam_low.contains(&i),
             "sample {i}"
         );
     }
@@ -658,7 +662,13 @@ async fn li80_values_compensation_validity_and_fault_counts() {
     let k = c.counters.unwrap();
     assert_eq!(k.samples, sent.len() as u64 + 2);
     assert_eq!((k.gaps, k.gap_samples), gaps_of(&lost), "{k:?}");
-    assert_eq!(k.invalid, (datum_lost.len() + beam_low.len()) as u64);
+    assert_eq!(
+        k.invalid,
+        sent.iter().filter(|i| **i >= lost_from).count() as u64
+    );
+    // The loss began datum epoch 1, told once.
+    let epochs: Vec<(u32, bool)> = c.datum.iter().map(|d| (d.epoch, d.referenced)).collect();
+    assert_eq!(epochs, [(1, false)]);
     assert_eq!(k.device_errors, 1);
     assert_eq!(
         k.rejections.get(&RejectKind::BadChecksum),

@@ -109,6 +109,13 @@ pub struct DetectorSettings {
     /// reads as [`TriggerTime::Arrival`]; new runs write [`TriggerTime::NcClockSettled`].
     #[serde(default = "TriggerTime::arrival")]
     pub trigger_time: TriggerTime,
+    /// Datum epochs of the interferometer (docs/design.md, "Datum epochs"): a run whose first
+    /// trigger is not its program start (the service started or restarted mid-program) has no
+    /// datum of its own, and a re-reference's first pose value is the reference visit, not a
+    /// measurement. Logs written before this setting did neither: a missing key reads `false`
+    /// so replay reproduces them; new runs write `true`.
+    #[serde(default)]
+    pub datum_epochs: bool,
 }
 
 /// Which time of a CNC trigger places the dwells on the host axis, where the samples sit at
@@ -149,6 +156,7 @@ impl Default for DetectorSettings {
             capball: SteadyConfig::default(),
             psd: SteadyConfig::default(),
             trigger_time: TriggerTime::NcClockSettled,
+            datum_epochs: true,
         }
     }
 }

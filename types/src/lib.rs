@@ -20,4 +20,7 @@ pub use instrument::Instrument;
 pub use pose::{PoseMsg, PoseStatus, PoseValue, Stamp};
 pub use protocol::RejectKind;
 pub use protocol::can::TriggerEvent;
-pub use sample::{Counters, DATUM_FLAGS, DATUM_NOT_RUNS, Sample, SampleValues, Trigger};
+pub use sample::{
+    Counters, DATUM_EPOCH_MASK, DATUM_EPOCH_SHIFT, DATUM_FLAGS, DATUM_NOT_RUNS, Sample,
+    SampleValues, Trigger, datum_epoch, datum_epoch_bits,
+};

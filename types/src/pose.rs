@@ -94,6 +94,11 @@ pub struct PoseMsg {
     #[serde(rename = "t_last", alias = "t_last_ns", with = "stamp")]
     #[cfg_attr(feature = "schemars", schemars(with = "Stamp"))]
     pub t_last_ns: u64,
+    /// The interferometer's datum epoch the value was measured in (0: the run's datum; a
+    /// reconnect, a beam loss or a service start mid-program starts the next; docs/design.md,
+    /// "Datum epochs"). 0 for the other instruments and in logs written before epochs.
+    #[serde(default)]
+    pub datum_epoch: u32,
 }
 
 /// A time in the Foxglove JSON convention: seconds and nanoseconds since the Unix epoch.
@@ -164,6 +169,7 @@ impl PoseMsg {
             std: map(&v.std),
             t_first_ns: v.t_first_ns,
             t_last_ns: v.t_last_ns,
+            datum_epoch: 0,
         }
     }
 }

@@ -62,8 +62,27 @@ pub enum SampleValues {
 /// A flag of [`SampleValues::Position`] set by the host, not the device (whose flags use the
 /// low bits, instruments.md §1): the reading's zero is not the run's datum. The LI-80 driver
 /// takes the datum once per run; after a reconnect the device may have been power-cycled or
-/// re-zeroed, so every later reading carries this flag and is invalid.
+/// re-zeroed, so every later reading carries this flag and is invalid until the epoch is
+/// re-referenced.
 pub const DATUM_NOT_RUNS: u32 = 1 << 31;
+
+/// The host bits of [`SampleValues::Position`]'s flags that hold the reading's datum epoch
+/// (docs/log-format.md): 0 is the run's datum; a reconnect, a beam loss or a service start
+/// mid-program starts the next. With [`DATUM_NOT_RUNS`] clear in an epoch > 0, the epoch was
+/// re-referenced (`DATUM` at the run's reference pose).
+pub const DATUM_EPOCH_SHIFT: u32 = 16;
+/// Mask of the epoch bits (15 bits, below [`DATUM_NOT_RUNS`]).
+pub const DATUM_EPOCH_MASK: u32 = 0x7FFF << DATUM_EPOCH_SHIFT;
+
+/// The datum epoch a [`SampleValues::Position`]'s flags carry.
+pub fn datum_epoch(flags: u32) -> u32 {
+    (flags & DATUM_EPOCH_MASK) >> DATUM_EPOCH_SHIFT
+}
+
+/// The host bits for epoch `epoch` (saturating at the mask: 32767 epochs).
+pub fn datum_epoch_bits(epoch: u32) -> u32 {
+    epoch.min(DATUM_EPOCH_MASK >> DATUM_EPOCH_SHIFT) << DATUM_EPOCH_SHIFT
+}
 
 /// The flags of [`SampleValues::Position`] that say the reading's zero is not the run's: the
 /// device's own "datum lost" (the beam was interrupted) and the host's [`DATUM_NOT_RUNS`].

@@ -158,6 +158,16 @@ struct RawRun {
     stop_at_program_end: bool,
     time_scale: Option<Spanned<f64>>,
     connect_timeout_s: Option<Spanned<i64>>,
+    reference_pose: Option<Spanned<OneOrMany>>,
+    reference_settle_s: Option<Spanned<f64>>,
+}
+
+/// `reference_pose = 7` or `reference_pose = [7, 13, 19]`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum OneOrMany {
+    One(i64),
+    Many(Vec<i64>),
 }
 
 #[derive(Debug, Deserialize)]
@@ -270,7 +280,21 @@ pub struct RunConfig {
     /// Seconds with no device connected after which the service says so loudly (and, when
     /// no device is `hotplug`, ends with [`crate::exit::NOTHING_CONNECTED`]).
     pub connect_timeout_s: u64,
+    /// The trajectory's reference poses (1-based), whose target is the interferometer's datum
+    /// position: a lost datum epoch is re-referenced at the first one reached (docs/design.md,
+    /// "Datum epochs"). Empty: none.
+    pub reference_poses: Vec<u32>,
+    /// How long the axis stands at the reference pose before `DATUM`, s.
+    pub reference_settle_s: f64,
 }
+
+/// Default of `[run] reference_settle_s`: the ringing of a stop is gone (below a nanometre
+/// after 0.15 s in the demo machine), well inside a dwell.
+pub const DEFAULT_REFERENCE_SETTLE_S: f64 = 0.2;
+
+/// The interferometer's datum position on X, mm: where `DATUM` is taken at connect (home),
+/// the positioning analysis' default `datum_x_mm`.
+pub const DATUM_X_MM: f64 = 0.0;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DetectorConfig {
@@ -489,6 +513,14 @@ impl Ctx<'_> {
 
     fn validate(&self, raw: RawConfig) -> Result<Config, ConfigError> {
         let mut errs = Errors::default();
+        if let Some(p) = &raw.run.get_ref().reference_pose
+            && raw.interferometer.is_none()
+        {
+            errs.0.push(self.err(
+                p.span(),
+                "reference_pose is set but there is no [interferometer] to re-reference",
+            ));
+        }
         let run = errs.keep(self.validate_run(raw.run.into_inner()));
         let detector = errs.keep(self.validate_detector(raw.detector));
         let interferometer = self.section(&mut errs, raw.interferometer, |r| {
@@ -844,9 +876,15 @@ impl Ctx<'_> {
         let trajectory = errs.keep(self.validate_trajectory(r.trajectory));
         let time_scale = errs.keep(self.validate_time_scale(r.time_scale));
         let connect_timeout_s = errs.keep(self.validate_connect_timeout(r.connect_timeout_s));
+        let settle = errs.keep(self.validate_reference_settle(r.reference_settle_s));
         let (Some(machine), Some(output_dir), Some(trajectory), Some(time_scale)) =
             (machine, output_dir, trajectory, time_scale)
         else {
+            return Err(errs.into_error());
+        };
+        let reference_pose =
+            errs.keep(self.validate_reference_pose(r.reference_pose, trajectory.as_ref()));
+        let (Some(reference_poses), Some(reference_settle_s)) = (reference_pose, settle) else {
             return Err(errs.into_error());
         };
         errs.result(connect_timeout_s.map(|connect_timeout_s| RunConfig {
@@ -856,7 +894,67 @@ impl Ctx<'_> {
             stop_at_program_end: r.stop_at_program_end,
             time_scale,
             connect_timeout_s,
+            reference_poses,
+            reference_settle_s,
         }))
+    }
+
+    /// `reference_pose`: poses of the trajectory whose target X is the datum position.
+    fn validate_reference_pose(
+        &self,
+        p: Option<Spanned<OneOrMany>>,
+        trajectory: Option<&Trajectory>,
+    ) -> Result<Vec<u32>, ConfigError> {
+        let Some(p) = p else { return Ok(Vec::new()) };
+        let span = p.span();
+        let ks = match p.into_inner() {
+            OneOrMany::One(k) => vec![k],
+            OneOrMany::Many(v) => v,
+        };
+        let Some(t) = trajectory else {
+            return Err(self.err(
+                span,
+                "reference_pose needs a trajectory (its target must be the interferometer's datum position)",
+            ));
+        };
+        let n = t.rows.len();
+        let mut poses = Vec::new();
+        let mut errs = Errors::default();
+        for k in ks {
+            let row = usize::try_from(k)
+                .ok()
+                .filter(|i| (1..=n).contains(i))
+                .map(|i| &t.rows[i - 1]);
+            let found = match row {
+                None => Err(format!(
+                    "reference_pose {k} is not a pose of the trajectory (1 to {n})"
+                )),
+                Some(r) if (r.x_mm - DATUM_X_MM).abs() > 0.0005 => Err(format!(
+                    "reference_pose {k} has target X {} mm, not the interferometer's datum position X {DATUM_X_MM} mm (where DATUM is taken at connect): a re-reference there would move the zero",
+                    r.x_mm
+                )),
+                Some(r) => Ok(r.pose),
+            };
+            match found {
+                Ok(pose) => poses.push(pose),
+                Err(m) => errs.0.push(self.err(span.clone(), m)),
+            }
+        }
+        errs.result(Some(poses))
+    }
+
+    fn validate_reference_settle(&self, t: Option<Spanned<f64>>) -> Result<f64, ConfigError> {
+        let Some(t) = t else {
+            return Ok(DEFAULT_REFERENCE_SETTLE_S);
+        };
+        let v = *t.get_ref();
+        if !(v.is_finite() && v > 0.0 && v <= 10.0) {
+            return Err(self.err(
+                t.span(),
+                format!("reference_settle_s = {v} must be above 0 and at most 10 s (how long the axis stands at the reference pose before DATUM)"),
+            ));
+        }
+        Ok(v)
     }
 
     fn validate_poly(

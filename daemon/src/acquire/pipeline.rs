@@ -72,6 +72,10 @@ pub struct InstrumentStatus {
     /// The status of this instrument's last pose value.
     #[serde(skip)]
     pub last_pose_status: Option<types::PoseStatus>,
+    /// The datum alarm while the interferometer's epoch is not the run's (from its driver's
+    /// datum change until the re-reference).
+    #[serde(skip)]
+    pub datum_alarm: Option<String>,
 }
 
 impl InstrumentStatus {
@@ -86,6 +90,9 @@ impl InstrumentStatus {
     pub fn alarm(&self) -> Option<String> {
         if self.was_connected && !self.connected {
             return Some("unplugged".to_string());
+        }
+        if let Some(a) = &self.datum_alarm {
+            return Some(a.clone());
         }
         self.last_pose_status
             .and_then(super::progress::alarm_of)
@@ -262,6 +269,48 @@ pub struct PipelineConfig {
     pub disk_alarm: Option<super::storage::DiskAlarm>,
     /// The run's pose table: "pose k of N" and the targets in the terminal lines.
     pub trajectory: Vec<metrolog_log::trajectory::TrajectoryRow>,
+    /// The LI-80 driver's datum commands (None: no interferometer).
+    pub datum: Option<DatumControl>,
+}
+
+/// How the pipeline steers the interferometer's datum from the triggers (docs/design.md,
+/// "Datum epochs"): a first trigger that is not the program start loses the datum (the
+/// service started mid-program); the exact stop of the reference pose re-references a lost
+/// epoch; a motion start cancels a `DATUM` still waiting.
+#[derive(Debug, Clone)]
+pub struct DatumControl {
+    pub commands: tokio::sync::mpsc::UnboundedSender<drivers::Li80Command>,
+    /// `[run] reference_pose` (empty: the run cannot re-reference).
+    pub reference_poses: Vec<u32>,
+    /// How long the axis stands at the reference pose before `DATUM`.
+    pub settle: Duration,
+}
+
+impl DatumControl {
+    fn on_trigger(&self, t: &types::Trigger, first: bool) {
+        let pose = u32::from(t.pose);
+        let cmd = match t.event {
+            _ if first && t.event != TriggerEvent::ProgramStart => {
+                drivers::Li80Command::LoseDatum {
+                    reason: format!(
+                        "the service started mid-program (its first trigger was {:?} of pose \
+                         {pose}, not the program start)",
+                        t.event
+                    ),
+                }
+            }
+            TriggerEvent::ExactStop if self.reference_poses.contains(&pose) => {
+                drivers::Li80Command::Reference {
+                    pose,
+                    settle: self.settle,
+                }
+            }
+            TriggerEvent::MotionStart => drivers::Li80Command::Moving,
+            _ => return,
+        };
+        // The driver may be gone at the end of the run: nothing to steer then.
+        let _ = self.commands.send(cmd);
+    }
 }
 
 /// The pipeline: the sink and the run's state beside it (one per run).
@@ -315,6 +364,10 @@ impl RunState {
                 self.slot(s.instrument).received += 1;
             }
             DriverEvent::Trigger(t) => {
+                let first = self.slot(Instrument::Trigger).received == 0;
+                if let Some(d) = &self.cfg.datum {
+                    d.on_trigger(&t, first);
+                }
                 self.slot(Instrument::Trigger).received += 1;
                 self.status.last_pose = self.status.last_pose.max(t.pose as u32);
                 match t.event {
@@ -361,6 +414,12 @@ impl RunState {
             // a place in the status.
             DriverEvent::Counters { instrument, .. } => {
                 self.slot(instrument);
+            }
+            DriverEvent::Datum {
+                instrument, change, ..
+            } => {
+                self.slot(instrument).datum_alarm = (!change.referenced)
+                    .then(|| format!("datum lost (epoch {}): re-reference", change.epoch));
             }
         }
     }
@@ -773,6 +832,7 @@ mod tests {
                 connect: None,
                 disk_alarm: None,
                 trajectory: Vec::new(),
+                datum: None,
             },
             HostClock::new(),
             Box::new(sink),
@@ -815,6 +875,7 @@ mod tests {
             std: BTreeMap::new(),
             t_first_ns: 0,
             t_last_ns: 0,
+            datum_epoch: 0,
         }
     }
 
@@ -1245,5 +1306,48 @@ mod tests {
             Some("cannot write the footer")
         );
         assert_eq!((out.status.poses, out.status.poses_ok), (1, 1));
+    }
+
+    /// The datum commands the triggers give the LI-80 driver: a first trigger that is not the
+    /// program start loses the datum; the exact stop of a reference pose asks for `DATUM`
+    /// after the settle time, every motion start cancels one waiting; nothing else.
+    #[test]
+    fn triggers_steer_the_interferometer_datum() {
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+        let d = DatumControl {
+            commands: tx,
+            reference_poses: vec![7],
+            settle: Duration::from_millis(200),
+        };
+        let trig = |event, pose| Trigger {
+            event,
+            pose,
+            nc_ms: 0,
+            host_ns: 0,
+        };
+        let mut got = |t: Trigger, first: bool| {
+            d.on_trigger(&t, first);
+            rx.try_recv().ok()
+        };
+        assert_eq!(got(trig(TriggerEvent::ProgramStart, 0), true), None);
+        assert_eq!(got(trig(TriggerEvent::ExactStop, 6), false), None);
+        assert_eq!(got(trig(TriggerEvent::DwellEnd, 7), false), None);
+        assert_eq!(
+            got(trig(TriggerEvent::ExactStop, 7), false),
+            Some(drivers::Li80Command::Reference {
+                pose: 7,
+                settle: Duration::from_millis(200)
+            })
+        );
+        assert_eq!(
+            got(trig(TriggerEvent::MotionStart, 8), false),
+            Some(drivers::Li80Command::Moving)
+        );
+        match got(trig(TriggerEvent::DwellEnd, 5), true) {
+            Some(drivers::Li80Command::LoseDatum { reason }) => {
+                assert!(reason.contains("started mid-program"), "{reason}")
+            }
+            other => panic!("{other:?}"),
+        }
     }
 }

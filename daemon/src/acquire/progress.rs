@@ -99,6 +99,7 @@ mod tests {
             std: BTreeMap::new(),
             t_first_ns: 0,
             t_last_ns: 0,
+            datum_epoch: 0,
         }
     }
 

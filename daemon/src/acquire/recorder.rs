@@ -25,6 +25,16 @@ pub struct Recorder {
     last_ns: u64,
 }
 
+/// The `/event` text of a datum change (docs/log-format.md): `epoch <k> lost: …` or
+/// `epoch <k> referenced at pose <p>: …`.
+pub fn datum_text(c: &drivers::DatumChange) -> String {
+    match (c.referenced, c.pose) {
+        (true, Some(p)) => format!("epoch {} referenced at pose {p}: {}", c.epoch, c.text),
+        (true, None) => format!("epoch {} referenced: {}", c.epoch, c.text),
+        (false, _) => format!("epoch {} lost: {}", c.epoch, c.text),
+    }
+}
+
 /// Interval of `/status` records, ns.
 pub const STATUS_INTERVAL_NS: u64 = 1_000_000_000;
 
@@ -96,6 +106,20 @@ impl Recorder {
                 p
             }
             DriverEvent::Counters { .. } => Vec::new(),
+            DriverEvent::Datum {
+                instrument,
+                port,
+                change,
+            } => {
+                let msg = EventMsg {
+                    instrument: instrument.name().into(),
+                    kind: EventKind::Datum,
+                    port: port.clone(),
+                    text: datum_text(change),
+                };
+                self.writer.write(now_ns, &msg)?;
+                Vec::new()
+            }
             DriverEvent::Connected {
                 instrument,
                 port,

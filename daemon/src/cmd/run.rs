@@ -246,6 +246,12 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     let drivers_cancel = CancellationToken::new();
     let pipeline_cancel = CancellationToken::new();
 
+    let (datum_tx, datum_rx) = tokio::sync::mpsc::unbounded_channel();
+    let datum = cfg.interferometer.as_ref().map(|_| pipeline::DatumControl {
+        commands: datum_tx,
+        reference_poses: cfg.run.reference_poses.clone(),
+        settle: Duration::from_secs_f64(cfg.run.reference_settle_s),
+    });
     let pl = Pipeline::new(
         PipelineConfig {
             instruments: cfg.instruments(),
@@ -254,6 +260,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
             connect: Some(connect_policy(cfg)),
             disk_alarm: Some(disk_alarm),
             trajectory: trajectory_rows(cfg),
+            datum,
         },
         clock,
         Box::new(recorder),
@@ -272,11 +279,14 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
 
     let mut handles = Vec::new();
     if let Some(c) = &cfg.interferometer {
-        handles.push(drivers::spawn_li80(
+        handles.push(drivers::spawn_li80_with(
             c.clone(),
             clock,
             tx.clone(),
             drivers_cancel.child_token(),
+            drivers::Li80Control {
+                commands: Some(datum_rx),
+            },
         ));
     }
     if let Some(c) = &cfg.capball {

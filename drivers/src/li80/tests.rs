@@ -118,6 +118,23 @@ fn check_position(s: &Sample, n_air: f64, want: (u64, i64, u8, u32, bool)) {
     assert_eq!(position_um, raw as f64 / n_air * 1e-3);
 }
 
+/// The host flags of a reading in datum epoch 1, not re-referenced.
+const LOST_1: u32 = types::DATUM_NOT_RUNS | (1 << types::DATUM_EPOCH_SHIFT);
+
+/// The next event, which must be a datum change to `epoch` (`referenced` or lost).
+async fn expect_datum(rx: &mut mpsc::Receiver<DriverEvent>, epoch: u32, referenced: bool) {
+    match next_event(rx).await {
+        DriverEvent::Datum { change, .. } => {
+            assert_eq!(
+                (change.epoch, change.referenced),
+                (epoch, referenced),
+                "{change:?}"
+            );
+        }
+        ev => panic!("expected a datum change, got {ev:?}"),
+    }
+}
+
 #[tokio::test(start_paused = true)]
 async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
     let (tx, mut rx) = mpsc::channel(1024);
@@ -173,8 +190,10 @@ async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
         }
         ev => panic!("expected Disconnected, got {ev:?}"),
     }
-    // No `DATUM` this time: it would move the run's zero to wherever the axis stands.
+    // No `DATUM` this time: it would move the run's zero to wherever the axis stands. A new
+    // datum epoch begins instead, and the operator is told.
     answer_setup(&mut dev2, "", "ENV,0,500,20.00,101325,50.0,20.00", false).await;
+    expect_datum(&mut rx, 1, false).await;
     // The `$ENV` sequence starts afresh with the new session.
     expect_environment(&mut rx, 0).await;
     expect_connected(&mut rx).await;
@@ -184,7 +203,7 @@ async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
     check_position(
         &next_sample(&mut rx).await,
         n_air,
-        (1, 100, 90, types::DATUM_NOT_RUNS, false),
+        (1, 100, 90, LOST_1, false),
     );
 
     // Cancelled: the driver stops the stream, and what the device sent before its `OK` still
@@ -204,16 +223,8 @@ async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
         }
     }
     assert_eq!(samples.len(), 2);
-    check_position(
-        &samples[0],
-        n_air,
-        (2, 200, 90, types::DATUM_NOT_RUNS, false),
-    );
-    check_position(
-        &samples[1],
-        n_air,
-        (3, 300, 90, types::DATUM_NOT_RUNS, false),
-    );
+    check_position(&samples[0], n_air, (2, 200, 90, LOST_1, false));
+    check_position(&samples[1], n_air, (3, 300, 90, LOST_1, false));
 
     let c = last_counters.expect("a last counters snapshot");
     let want = Counters {
@@ -235,4 +246,108 @@ async fn li80_session_streaming_unplug_and_stop_over_an_in_memory_port() {
         clock_drift_ppm: c.clock_drift_ppm,
     };
     assert_eq!(c, want);
+}
+
+/// A beam loss (the device's "datum lost" flag) begins epoch 1; the daemon's `Reference` at
+/// the reference pose makes the driver send `DATUM` once the axis has stood the settle time,
+/// and the readings after its `OK` are clean in epoch 1; a `Moving` before the settle time
+/// cancels it; `LoseDatum` begins epoch 2.
+#[tokio::test(start_paused = true)]
+async fn li80_beam_loss_epoch_and_re_reference_over_an_in_memory_port() {
+    let (tx, mut rx) = mpsc::channel(1024);
+    let (socket, open) = socket();
+    let cancel = CancellationToken::new();
+    let (cmd_tx, cmd_rx) = mpsc::unbounded_channel();
+    let (driver, mut path) = li80(&config(), HostClock::new(), tx);
+    path.converter.commands = Some(cmd_rx);
+    let mut dev = socket.plug();
+    let task = tokio::spawn(run(driver, path, open, cancel.clone()));
+    answer_setup(&mut dev, "", "ENV,0,500,20.00,101325,50.0,20.00", true).await;
+    let n_air = expect_environment(&mut rx, 0).await;
+    expect_connected(&mut rx).await;
+    dev.send(&nmea("POS,1,1000,100,87,0")).await;
+    check_position(&next_sample(&mut rx).await, n_air, (1, 100, 87, 0, true));
+    // Beam lost: bit 1 from the device.
+    dev.send(&nmea("POS,2,2000,150,87,2")).await;
+    expect_datum(&mut rx, 1, false).await;
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (2, 150, 87, 2 | LOST_1, false),
+    );
+    // A reference pose whose dwell ends before the settle time: no DATUM.
+    cmd_tx
+        .send(Li80Command::Reference {
+            pose: 7,
+            settle: Duration::from_millis(200),
+        })
+        .unwrap();
+    cmd_tx.send(Li80Command::Moving).unwrap();
+    dev.send(&nmea("POS,3,3000,160,87,2")).await;
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (3, 160, 87, 2 | LOST_1, false),
+    );
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    dev.send(&nmea("POS,4,4000,170,87,2")).await;
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (4, 170, 87, 2 | LOST_1, false),
+    );
+    // The next one: DATUM after 200 ms standing.
+    cmd_tx
+        .send(Li80Command::Reference {
+            pose: 13,
+            settle: Duration::from_millis(200),
+        })
+        .unwrap();
+    dev.send(&nmea("POS,5,5000,170,87,2")).await;
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (5, 170, 87, 2 | LOST_1, false),
+    );
+    tokio::time::sleep(Duration::from_millis(250)).await;
+    dev.send(&nmea("POS,6,6000,170,87,2")).await;
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (6, 170, 87, 2 | LOST_1, false),
+    );
+    dev.expect("DATUM\n").await;
+    dev.send("OK\r\n").await;
+    expect_datum(&mut rx, 1, true).await;
+    dev.send(&nmea("POS,7,7000,3,87,0")).await;
+    let epoch_1 = 1 << types::DATUM_EPOCH_SHIFT;
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (7, 3, 87, epoch_1, true),
+    );
+    // The service learns it started mid-program: epoch 2.
+    cmd_tx
+        .send(Li80Command::LoseDatum {
+            reason: "test".into(),
+        })
+        .unwrap();
+    dev.send(&nmea("POS,8,8000,4,87,0")).await;
+    let lost_2 = types::DATUM_NOT_RUNS | (2 << types::DATUM_EPOCH_SHIFT);
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (8, 4, 87, epoch_1, true),
+    );
+    expect_datum(&mut rx, 2, false).await;
+    dev.send(&nmea("POS,9,9000,5,87,0")).await;
+    check_position(
+        &next_sample(&mut rx).await,
+        n_air,
+        (9, 5, 87, lost_2, false),
+    );
+    cancel.cancel();
+    dev.expect("STREAM OFF\n").await;
+    dev.send("OK\r\n").await;
+    task.await.unwrap();
 }

@@ -58,6 +58,17 @@ pub fn read_coalesce() -> Duration {
     Duration::from_micros(READ_COALESCE_US.load(Ordering::Relaxed))
 }
 
+/// The next tick of the read coalescing period after now (see [`READ_COALESCE_DEFAULT`]):
+/// the readers read again then, so a consumer that takes their data just after it wakes once
+/// for all of them. Now itself when coalescing is off.
+pub fn next_read_tick() -> tokio::time::Instant {
+    let period = read_coalesce();
+    if period.is_zero() {
+        return tokio::time::Instant::now();
+    }
+    next_tick(period)
+}
+
 /// The next tick of `period` after now, on the process-wide grid the readers share.
 fn next_tick(period: Duration) -> tokio::time::Instant {
     static EPOCH: OnceLock<tokio::time::Instant> = OnceLock::new();

@@ -55,9 +55,13 @@ def li80(path, hz, out):
             rest = lines.pop()
             for line in lines:
                 if line.startswith(b"$POS,"):
-                    body = line[5:line.index(b"*")].split(b",")
-                    seq, t_us, raw_nm, sig = (int(x) for x in body[:4])
-                    f.write(f"{seq},{t_us},{raw_nm * 1e-3},{sig},{body[4].decode()}\n")
+                    try:
+                        body = line[5:line.index(b"*")].split(b",")
+                        seq, t_us, raw_nm, sig = (int(x) for x in body[:4])
+                        flags = body[4].decode()
+                    except (ValueError, IndexError):
+                        continue
+                    f.write(f"{seq},{t_us},{raw_nm * 1e-3},{sig},{flags}\n")
                     n += 1
     ser.write(b"STREAM OFF\n")
     return n
@@ -90,7 +94,7 @@ def cb3(path, hz, out):
             rest = frames.pop()
             for fr in frames:
                 p = cobs_decode(fr)
-                if len(p) == 22 and p[0] == 1:
+                if len(p) == 22 and p[0] == 1:  # a 22-byte sample payload
                     _, seq, t_us, c0, c1, c2, flags = sample.unpack_from(p)
                     k = 10.0 / 8388608
                     f.write(f"{seq},{t_us},{c0 * k},{c1 * k},{c2 * k},{flags}\n")
@@ -112,7 +116,10 @@ def psd(path, hz, out):
             rest = lines.pop()
             for line in lines:
                 if line.startswith(b"D,"):
-                    seq, t_us, x1, x2, y1, y2, head = (int(x) for x in line[2:].split(b","))
+                    try:
+                        seq, t_us, x1, x2, y1, y2, head = (int(x) for x in line[2:].split(b","))
+                    except ValueError:
+                        continue
                     x = 5000.0 * (x2 - x1) / max(x1 + x2, 1)
                     y = 5000.0 * (y2 - y1) / max(y1 + y2, 1)
                     f.write(f"{seq},{t_us},{x},{y},{head * 1e-3}\n")
@@ -135,7 +142,10 @@ def triggers(path, out):
             rest = msgs.pop()
             for m in msgs:
                 if m.startswith(b"t") and len(m) >= 21:
-                    d = bytes.fromhex(m[5:21].decode())
+                    try:
+                        d = bytes.fromhex(m[5:21].decode())
+                    except ValueError:
+                        continue
                     event, _, pose, nc_ms = struct.unpack("<BBHI", d)
                     f.write(f"{event},{pose},{nc_ms}\n")
                     if event == 5:

@@ -129,7 +129,10 @@ pub struct SteadyDetector {
     cfg: SteadyConfig,
     channels: usize,
     times: VecDeque<u64>,
-    valid: VecDeque<bool>,
+    /// Invalid samples from the first ever fed up to and including each kept one, so that a
+    /// window's validity is one subtraction (`invalid_before` counts those before `base`).
+    invalid_upto: VecDeque<u64>,
+    invalid_before: u64,
     values: VecDeque<f64>,
     /// Absolute index of `times[0]`.
     base: u64,
@@ -149,7 +152,8 @@ impl SteadyDetector {
             cfg,
             channels,
             times: VecDeque::new(),
-            valid: VecDeque::new(),
+            invalid_upto: VecDeque::new(),
+            invalid_before: 0,
             values: VecDeque::new(),
             base: 0,
             state: match mode {
@@ -191,7 +195,12 @@ impl SteadyDetector {
     pub fn push_sample(&mut self, t_ns: u64, values: &[f64], valid: bool) -> Vec<PoseValue> {
         let ok = valid && values.len() == self.channels && values.iter().all(|v| v.is_finite());
         self.times.push_back(t_ns);
-        self.valid.push_back(ok);
+        let invalid = self
+            .invalid_upto
+            .back()
+            .copied()
+            .unwrap_or(self.invalid_before);
+        self.invalid_upto.push_back(invalid + u64::from(!ok));
         if ok {
             self.values.extend(values.iter().copied());
         } else {
@@ -328,9 +337,7 @@ impl SteadyDetector {
             if self.times[(e - self.base) as usize] > t_max_ns {
                 break;
             }
-            if let Some(w) = self.window(e)
-                && w.steady
-            {
+            if let Some(w) = self.steady_window(e) {
                 return Some(w);
             }
             e += 1;
@@ -352,7 +359,7 @@ impl SteadyDetector {
                 break;
             }
             samples += 1;
-            if self.valid[k] {
+            if self.is_valid(k) {
                 run += 1;
                 max_run = max_run.max(run);
             } else {
@@ -393,8 +400,7 @@ impl SteadyDetector {
                 let mut found = None;
                 while e < end {
                     if e + 1 >= first + n
-                        && let Some(w) = self.window(e)
-                        && w.steady
+                        && let Some(w) = self.steady_window(e)
                     {
                         found = Some(w);
                         break;
@@ -421,9 +427,7 @@ impl SteadyDetector {
             State::Searching { next_end } => {
                 let mut e = (*next_end).max(self.base + n - 1);
                 while e < end {
-                    if let Some(w) = self.window(e)
-                        && w.steady
-                    {
+                    if let Some(w) = self.steady_window(e) {
                         let pose = self.next_plateau_pose;
                         self.next_plateau_pose += 1;
                         out.push(PoseValue {
@@ -471,47 +475,75 @@ impl SteadyDetector {
         }
     }
 
-    /// Statistics of the window of `samples` samples ending at absolute index `end_idx`, or
-    /// None when it is not wholly kept or holds an invalid sample.
-    fn window(&self, end_idx: u64) -> Option<Window> {
+    /// Whether the kept sample at `k` (index into the history) is valid.
+    fn is_valid(&self, k: usize) -> bool {
+        let before = if k == 0 {
+            self.invalid_before
+        } else {
+            self.invalid_upto[k - 1]
+        };
+        self.invalid_upto[k] == before
+    }
+
+    /// History index of the first sample of the window of `samples` samples ending at absolute
+    /// index `end_idx`, or None when it is not wholly kept or holds an invalid sample.
+    fn window_start(&self, end_idx: u64) -> Option<usize> {
         let n = self.cfg.samples;
         if end_idx + 1 < self.base + n as u64 || end_idx >= self.end() {
             return None;
         }
         let k0 = (end_idx + 1 - self.base) as usize - n;
-        if (k0..k0 + n).any(|k| !self.valid[k]) {
-            return None;
+        let before = if k0 == 0 {
+            self.invalid_before
+        } else {
+            self.invalid_upto[k0 - 1]
+        };
+        (self.invalid_upto[k0 + n - 1] == before).then_some(k0)
+    }
+
+    /// Mean, standard deviation and steadiness of channel `c` over the window starting at
+    /// history index `k0` (the steady-state test of the module documentation).
+    fn channel_stats(&self, k0: usize, c: usize) -> (f64, f64, bool) {
+        let n = self.cfg.samples;
+        let ch = self.channels;
+        let y = |k: usize| self.values[k * ch + c];
+        let mut sum = 0.0;
+        for k in k0..k0 + n {
+            sum += y(k);
         }
+        let m = sum / n as f64;
+        let (mut ss, mut sd, mut max_dev) = (0.0f64, 0.0f64, 0.0f64);
+        let mut prev = y(k0);
+        for k in k0..k0 + n {
+            let v = y(k);
+            let dev = v - m;
+            ss += dev * dev;
+            let d = v - prev;
+            sd += d * d;
+            prev = v;
+            max_dev = max_dev.max(dev.abs());
+        }
+        let s1_sq = ss / (n - 1) as f64;
+        let s2_sq = sd / (2 * (n - 1)) as f64;
+        let s1 = s1_sq.sqrt();
+        let s2 = s2_sq.sqrt();
+        let floor = self.cfg.std_floor;
+        let stationary = s1 <= floor || s1_sq <= self.cfg.r_crit * s2_sq;
+        let no_outlier = max_dev <= self.cfg.outlier_k * s2.max(floor);
+        (m, s1, stationary && no_outlier)
+    }
+
+    /// Statistics of the window of `samples` samples ending at absolute index `end_idx`, or
+    /// None when it is not wholly kept or holds an invalid sample.
+    fn window(&self, end_idx: u64) -> Option<Window> {
+        let k0 = self.window_start(end_idx)?;
         let ch = self.channels;
         let mut mean = Vec::with_capacity(ch);
         let mut std = Vec::with_capacity(ch);
         let mut steady = true;
         for c in 0..ch {
-            let y = |k: usize| self.values[k * ch + c];
-            let mut sum = 0.0;
-            for k in k0..k0 + n {
-                sum += y(k);
-            }
-            let m = sum / n as f64;
-            let (mut ss, mut sd, mut max_dev) = (0.0f64, 0.0f64, 0.0f64);
-            let mut prev = y(k0);
-            for k in k0..k0 + n {
-                let v = y(k);
-                let dev = v - m;
-                ss += dev * dev;
-                let d = v - prev;
-                sd += d * d;
-                prev = v;
-                max_dev = max_dev.max(dev.abs());
-            }
-            let s1_sq = ss / (n - 1) as f64;
-            let s2_sq = sd / (2 * (n - 1)) as f64;
-            let s1 = s1_sq.sqrt();
-            let s2 = s2_sq.sqrt();
-            let floor = self.cfg.std_floor;
-            let stationary = s1 <= floor || s1_sq <= self.cfg.r_crit * s2_sq;
-            let no_outlier = max_dev <= self.cfg.outlier_k * s2.max(floor);
-            steady &= stationary && no_outlier;
+            let (m, s1, ok) = self.channel_stats(k0, c);
+            steady &= ok;
             mean.push(m);
             std.push(s1);
         }
@@ -520,8 +552,20 @@ impl SteadyDetector {
             mean,
             std,
             t_first_ns: self.times[k0],
-            t_last_ns: self.times[k0 + n - 1],
+            t_last_ns: self.times[k0 + self.cfg.samples - 1],
         })
+    }
+
+    /// [`Self::window`] when it is steady. The windows tested while a signal settles are
+    /// mostly not: the test stops at the first channel that fails, and the statistics are
+    /// gathered (the same arithmetic again) only for the steady one.
+    fn steady_window(&self, end_idx: u64) -> Option<Window> {
+        let k0 = self.window_start(end_idx)?;
+        if (0..self.channels).all(|c| self.channel_stats(k0, c).2) {
+            self.window(end_idx)
+        } else {
+            None
+        }
     }
 
     /// Drops samples no state needs any more.
@@ -554,7 +598,9 @@ impl SteadyDetector {
         let keep_from = keep_from.max(end.saturating_sub(self.cfg.max_history as u64));
         while self.base < keep_from {
             self.times.pop_front();
-            self.valid.pop_front();
+            if let Some(v) = self.invalid_upto.pop_front() {
+                self.invalid_before = v;
+            }
             for _ in 0..self.channels {
                 self.values.pop_front();
             }

@@ -15,7 +15,9 @@
 //! time) → the instrument's `FrameConverter` → `SampleStamper` (sequence, device clock fit) →
 //! `EventReporter` (count, emit); the instrument's `SerialDriver` only issues its commands
 //! (connect, stop a stale stream, identify, configure, stream; reopen with backoff 100 ms to
-//! 2 s on loss; a stop delivers every sample sent before the device's answer). Sessions are
+//! 2 s on loss; a stop delivers every sample sent before the device's answer; while streaming,
+//! reads are coalesced on a shared tick, [`set_read_coalesce`], so a device costs about one
+//! wake-up per tick whatever its rate). Sessions are
 //! generic over the byte stream, so the tests run real drivers over `tokio::io::duplex`.
 
 #[cfg(feature = "socketcan")]
@@ -47,6 +49,7 @@ pub use modbus::{
     ModbusConfigError, ModbusTempConfig, Parity, RegisterKind, TempSensor, spawn_modbus_temperature,
 };
 pub use psd::{HeadCorrection, PsdAxis, PsdConfig, spawn_psd};
+pub use serial_driver::{READ_COALESCE_DEFAULT, next_read_tick, read_coalesce, set_read_coalesce};
 pub use trigger::{SlcanConfig, SocketCanConfig, spawn_slcan, trigger_from_frame};
 /// The shared vocabulary the drivers' events are made of (`metrolog-types`).
 pub use types::{Counters, HostClock, Instrument, Sample, SampleValues, Trigger};

@@ -10,6 +10,8 @@
 //! runs a driver on its serial port.
 
 use std::collections::VecDeque;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use tokio_util::sync::CancellationToken;
@@ -25,15 +27,57 @@ pub(crate) const ANSWER_TIMEOUT_BUSY: Duration = Duration::from_secs(30);
 /// First and longest wait between attempts to open a vanished port.
 const BACKOFF_MIN: Duration = Duration::from_millis(100);
 const BACKOFF_MAX: Duration = Duration::from_secs(2);
-/// While streaming, a read that returned less than this lets the next read wait a little so
-/// that bytes accumulate: at 20 kHz the CB-3 otherwise wakes the driver for every frame.
-const BATCH_BYTES: usize = 2048;
-const BATCH_WAIT: Duration = Duration::from_millis(10);
-/// Every this many batched reads, one read waits for the next bytes without the batching
-/// pause: its arrival time is then the write time plus the wake-up latency only, which gives
-/// the clock fit ([`detect::ClockFit`]) the least-delayed points it needs (a batched read dates
-/// everything in it by the read, up to `BATCH_WAIT` late).
-const PROBE_EVERY: u32 = 2;
+/// Read coalescing (docs/design.md, "Where the daemon's CPU goes"): while streaming, a reader
+/// that has read pauses until the next tick of the coalescing period before it reads again, so
+/// one read takes everything the device sent meanwhile and a device costs about one wake-up per
+/// period whatever its rate. The ticks are shared by every reader of the process (multiples of
+/// the period since the first tick asked for), so the readers wake together. The default
+/// period; `set_read_coalesce` changes it (the daemon's `[run] read_coalesce_ms`), zero turns
+/// coalescing off.
+pub const READ_COALESCE_DEFAULT: Duration = Duration::from_millis(10);
+/// The coalescing period in µs (see [`READ_COALESCE_DEFAULT`]).
+static READ_COALESCE_US: AtomicU64 = AtomicU64::new(READ_COALESCE_DEFAULT.as_micros() as u64);
+/// A read at least this long is read again at once, without the pause: the tty layer hands
+/// out at most its 4 KiB line-discipline buffer per read (N_TTY_BUF_SIZE), so a full read
+/// means more is waiting (the LI-80 at 10 kHz sends 4.5 kB per 10 ms).
+const FULL_READ: usize = 3 * 1024;
+/// Every this many coalesced reads, one read waits for the next bytes without the pause: its
+/// arrival time is then the write time plus the wake-up latency only, which gives the clock fit
+/// ([`detect::ClockFit`], windows of 0.5 s) the least-delayed points it needs (a coalesced read
+/// dates everything in it by the read, up to a period late). About ten probes per second.
+const PROBE_EVERY: u32 = 10;
+
+/// Sets the read coalescing period of every serial reader started from now on (zero: read as
+/// soon as bytes arrive).
+pub fn set_read_coalesce(period: Duration) {
+    READ_COALESCE_US.store(period.as_micros() as u64, Ordering::Relaxed);
+}
+
+/// The read coalescing period in force.
+pub fn read_coalesce() -> Duration {
+    Duration::from_micros(READ_COALESCE_US.load(Ordering::Relaxed))
+}
+
+/// The next tick of the read coalescing period after now (see [`READ_COALESCE_DEFAULT`]):
+/// the readers read again then, so a consumer that takes their data just after it wakes once
+/// for all of them. Now itself when coalescing is off.
+pub fn next_read_tick() -> tokio::time::Instant {
+    let period = read_coalesce();
+    if period.is_zero() {
+        return tokio::time::Instant::now();
+    }
+    next_tick(period)
+}
+
+/// The next tick of `period` after now, on the process-wide grid the readers share.
+fn next_tick(period: Duration) -> tokio::time::Instant {
+    static EPOCH: OnceLock<tokio::time::Instant> = OnceLock::new();
+    let epoch = *EPOCH.get_or_init(tokio::time::Instant::now);
+    let since = tokio::time::Instant::now().saturating_duration_since(epoch);
+    let p = period.as_nanos().max(1);
+    let k = since.as_nanos() / p + 1;
+    epoch + Duration::from_nanos((k * p).min(u64::MAX as u128) as u64)
+}
 
 /// The LI-80 and CB-3 acknowledge a command with a plain `OK` (instruments.md §1, §2).
 pub(crate) fn is_ok(answer: &str) -> bool {
@@ -169,6 +213,11 @@ pub(crate) trait SerialDriver: Send + Sync {
     fn baud(&self) -> u32;
     /// Longest silence while streaming before the port is taken for lost.
     fn idle_timeout(&self) -> Duration;
+    /// The read coalescing period while streaming (see [`READ_COALESCE_DEFAULT`]); zero for a
+    /// sparse stream whose every arrival time counts (the triggers).
+    fn coalesce(&self) -> Duration {
+        read_coalesce()
+    }
     /// Stop streaming and wait for the device's answer, handling every data line before it,
     /// so a run that ends on purpose loses nothing the device sent.
     fn stop<P: Port>(
@@ -195,21 +244,25 @@ pub(crate) fn idle_timeout(rate_hz: u32) -> Duration {
     Duration::from_secs(2) + Duration::from_secs_f64(5.0 / rate_hz.max(1) as f64)
 }
 
+/// Streams until the port fails or falls silent for the driver's idle time, coalescing reads
+/// on the driver's tick; after each read it serves the driver's commands (the LI-80's
+/// re-reference `DATUM`).
 async fn stream<D: SerialDriver, P: Port>(
     driver: &D,
     s: &mut SerialSession<'_, D::Converter, P>,
 ) -> Result<(), DriverError> {
     let idle = driver.idle_timeout();
+    let coalesce = driver.coalesce();
     let mut cycle = 0u32;
     loop {
         match tokio::time::timeout(idle, s.read_once()).await {
             Ok(Ok(n)) => {
                 driver.serve(s).await?;
-                cycle = cycle.wrapping_add(1);
-                if n < BATCH_BYTES && !cycle.is_multiple_of(PROBE_EVERY) {
-                    tokio::time::sleep(BATCH_WAIT).await;
-                }
                 s.path.tick(false);
+                cycle = cycle.wrapping_add(1);
+                if !coalesce.is_zero() && n < FULL_READ && !cycle.is_multiple_of(PROBE_EVERY) {
+                    tokio::time::sleep_until(next_tick(coalesce)).await;
+                }
             }
             Ok(Err(e)) => return Err(e),
             Err(_) => return Err(DriverError::Silent { idle }),

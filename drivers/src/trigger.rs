@@ -110,6 +110,11 @@ impl SerialDriver for SlcanDriver {
         // shows as a read error.
         Duration::from_secs(24 * 3600)
     }
+    fn coalesce(&self) -> Duration {
+        // A few frames per pose: nothing to coalesce, and each frame's arrival time feeds the
+        // NC clock fit that places the dwells.
+        Duration::ZERO
+    }
     async fn stop<P: Port>(
         &self,
         s: &mut SerialSession<'_, SlcanFrames, P>,

@@ -32,6 +32,10 @@ pub const DEFAULT_CONNECT_TIMEOUT_S: u64 = 60;
 /// Accepted range of `[run] connect_timeout_s` (from 1 s, for tests, to a day).
 pub const CONNECT_TIMEOUT_S: (u64, u64) = (1, 86_400);
 
+/// Accepted range of `[run] read_coalesce_ms`: 0 (read as bytes arrive) to 20 ms, which keeps
+/// the pose latency (a window's last sample to its `/pose` record) well under 50 ms.
+pub const READ_COALESCE_MS: (u64, u64) = (0, 20);
+
 /// The steady test needs a variance of successive differences (metrolog-detect): 3 at least.
 pub const DETECTOR_SAMPLES: (usize, usize) = (3, 1_000_000);
 
@@ -160,6 +164,7 @@ struct RawRun {
     connect_timeout_s: Option<Spanned<i64>>,
     reference_pose: Option<Spanned<OneOrMany>>,
     reference_settle_s: Option<Spanned<f64>>,
+    read_coalesce_ms: Option<Spanned<i64>>,
 }
 
 /// `reference_pose = 7` or `reference_pose = [7, 13, 19]`.
@@ -286,6 +291,9 @@ pub struct RunConfig {
     pub reference_poses: Vec<u32>,
     /// How long the axis stands at the reference pose before `DATUM`, s.
     pub reference_settle_s: f64,
+    /// How long a serial reader waits after a read before the next one, so that reads are
+    /// coalesced (`drivers::set_read_coalesce`).
+    pub read_coalesce: std::time::Duration,
 }
 
 /// Default of `[run] reference_settle_s`: the ringing of a stop is gone (below a nanometre
@@ -454,6 +462,24 @@ impl Ctx<'_> {
             ));
         }
         Ok(v as u64)
+    }
+
+    fn validate_read_coalesce(
+        &self,
+        t: Option<Spanned<i64>>,
+    ) -> Result<std::time::Duration, ConfigError> {
+        let Some(t) = t else {
+            return Ok(drivers::READ_COALESCE_DEFAULT);
+        };
+        let v = *t.get_ref();
+        let (lo, hi) = READ_COALESCE_MS;
+        if v < lo as i64 || v > hi as i64 {
+            return Err(self.err(
+                t.span(),
+                format!("read_coalesce_ms = {v} is outside {lo} to {hi} ms (how long a serial reader lets bytes gather between reads)"),
+            ));
+        }
+        Ok(std::time::Duration::from_millis(v as u64))
     }
 
     /// A path in the config, relative to the config file's directory.
@@ -877,6 +903,7 @@ impl Ctx<'_> {
         let time_scale = errs.keep(self.validate_time_scale(r.time_scale));
         let connect_timeout_s = errs.keep(self.validate_connect_timeout(r.connect_timeout_s));
         let settle = errs.keep(self.validate_reference_settle(r.reference_settle_s));
+        let read_coalesce = errs.keep(self.validate_read_coalesce(r.read_coalesce_ms));
         let (Some(machine), Some(output_dir), Some(trajectory), Some(time_scale)) =
             (machine, output_dir, trajectory, time_scale)
         else {
@@ -884,10 +911,16 @@ impl Ctx<'_> {
         };
         let reference_pose =
             errs.keep(self.validate_reference_pose(r.reference_pose, trajectory.as_ref()));
-        let (Some(reference_poses), Some(reference_settle_s)) = (reference_pose, settle) else {
+        let (
+            Some(reference_poses),
+            Some(reference_settle_s),
+            Some(connect_timeout_s),
+            Some(read_coalesce),
+        ) = (reference_pose, settle, connect_timeout_s, read_coalesce)
+        else {
             return Err(errs.into_error());
         };
-        errs.result(connect_timeout_s.map(|connect_timeout_s| RunConfig {
+        errs.result(Some(RunConfig {
             machine,
             output_dir,
             trajectory,
@@ -896,6 +929,7 @@ impl Ctx<'_> {
             connect_timeout_s,
             reference_poses,
             reference_settle_s,
+            read_coalesce,
         }))
     }
 

@@ -36,6 +36,10 @@ use super::sink::EventSink;
 /// costs nothing.
 pub const QUEUE_CAPACITY: usize = 1 << 16;
 
+/// While the drivers coalesce their reads (`drivers::read_coalesce`), the pipeline takes the
+/// queue this long after their tick: their reads of the tick are then queued.
+const BATCH_AFTER_TICK: Duration = Duration::from_millis(1);
+
 /// How often `/status` is written and systemd hears from us.
 pub const STATUS_PERIOD: Duration = Duration::from_secs(1);
 
@@ -327,7 +331,8 @@ struct RunState {
     /// `poses_ok` are filled from the sink's counts in every snapshot.
     status: Status,
     started: Instant,
-    last_sample: Option<Instant>,
+    /// Host time (ns) of the batch of events that brought the last sample.
+    last_sample_ns: Option<u64>,
     /// Since when no device is connected (None while one is).
     nothing_since: Option<Instant>,
     poses: Vec<PoseMsg>,
@@ -357,10 +362,10 @@ impl RunState {
     }
 
     /// What the pipeline sees of one event (the sink has recorded it).
-    fn on_event(&mut self, ev: DriverEvent) {
+    fn on_event(&mut self, ev: DriverEvent, now_ns: u64) {
         match ev {
             DriverEvent::Sample(s) => {
-                self.last_sample = Some(Instant::now());
+                self.last_sample_ns = Some(now_ns);
                 self.slot(s.instrument).received += 1;
             }
             DriverEvent::Trigger(t) => {
@@ -550,7 +555,9 @@ impl RunState {
     fn watchdog(&self, interval: Duration) -> Watchdog {
         Watchdog {
             since_loop_s: 0.0,
-            since_sample_s: self.last_sample.map(|t| t.elapsed().as_secs_f64()),
+            since_sample_s: self
+                .last_sample_ns
+                .map(|t| self.clock.now_ns().saturating_sub(t) as f64 / 1e9),
             uptime_s: self.started.elapsed().as_secs_f64(),
             connected: self
                 .status
@@ -584,7 +591,7 @@ impl Pipeline {
                     ..Status::default()
                 },
                 started: Instant::now(),
-                last_sample: None,
+                last_sample_ns: None,
                 nothing_since: Some(Instant::now()),
                 poses: Vec::new(),
                 stop: None,
@@ -595,10 +602,16 @@ impl Pipeline {
     /// Handle one driver event.
     pub fn handle(&mut self, ev: DriverEvent) {
         let now = self.state.clock.now_ns();
+        self.handle_at(ev, now);
+    }
+
+    /// Handle one driver event of a batch taken from the queue at `now` (ns): the clock is
+    /// read once per batch, not per sample (docs/design.md, "Where the daemon's CPU goes").
+    fn handle_at(&mut self, ev: DriverEvent, now: u64) {
         let timed = self.sink.placing_at_once();
         let r = self.sink.record(&ev, now);
         let poses = self.state.sink_result(r);
-        self.state.on_event(ev);
+        self.state.on_event(ev, now);
         self.state.on_poses(poses, timed);
     }
 
@@ -654,6 +667,37 @@ impl Pipeline {
         })
     }
 
+    /// Handles `first` (if any) and what is queued now, up to 4096 events, all with one clock
+    /// read; notes the queue's high-water mark.
+    fn take_batch(&mut self, rx: &mut mpsc::Receiver<DriverEvent>, first: Option<DriverEvent>) {
+        let now = self.state.clock.now_ns();
+        if let Some(ev) = first {
+            self.handle_at(ev, now);
+        }
+        let mut budget = rx.len().min(4096);
+        while budget > 0 && self.state.stop.is_none() {
+            match rx.try_recv() {
+                Ok(ev) => self.handle_at(ev, now),
+                Err(_) => break,
+            }
+            budget -= 1;
+        }
+        self.state.status.queue_max = self.state.status.queue_max.max(rx.len());
+    }
+
+    /// Publishes the status on `progress` when pose values were written since the last time.
+    fn publish_poses(
+        &mut self,
+        published: &mut u64,
+        progress: &watch::Sender<Status>,
+        queue: usize,
+    ) {
+        if self.poses_counted() != *published {
+            *published = self.poses_counted();
+            progress.send_replace(self.status(queue));
+        }
+    }
+
     /// The main loop: until cancelled, program end (if configured) or every driver gone.
     /// Publishes the status on `progress` after every pose and every second.
     pub async fn run(
@@ -668,6 +712,10 @@ impl Pipeline {
         let watchdog_interval = notifier.watchdog_interval();
         let mut poses_published = 0u64;
         let reason = loop {
+            // While the readers coalesce their reads, the queue is taken just after their
+            // tick, so one wake-up takes what all of them sent; otherwise at every event.
+            let coalesced = !drivers::read_coalesce().is_zero();
+            let batch_at = drivers::next_read_tick() + BATCH_AFTER_TICK;
             tokio::select! {
                 biased;
                 _ = cancel.cancelled() => break StopReason::Cancelled,
@@ -689,23 +737,20 @@ impl Pipeline {
                         break r;
                     }
                 }
-                ev = rx.recv() => {
+                ev = rx.recv(), if !coalesced => {
                     let Some(ev) = ev else { break StopReason::DriversGone };
-                    self.handle(ev);
-                    // Drain what is queued without going through select! for every event.
-                    let mut budget = 4096;
-                    while budget > 0 && self.state.stop.is_none() {
-                        match rx.try_recv() {
-                            Ok(ev) => self.handle(ev),
-                            Err(_) => break,
-                        }
-                        budget -= 1;
+                    self.take_batch(&mut rx, Some(ev));
+                    self.publish_poses(&mut poses_published, &progress, rx.len());
+                    if let Some(r) = self.state.stop.clone() {
+                        break r;
                     }
-                    self.state.status.queue_max = self.state.status.queue_max.max(rx.len());
-                    if self.poses_counted() != poses_published {
-                        poses_published = self.poses_counted();
-                        progress.send_replace(self.status(rx.len()));
+                }
+                _ = tokio::time::sleep_until(batch_at), if coalesced => {
+                    if rx.is_closed() && rx.is_empty() {
+                        break StopReason::DriversGone;
                     }
+                    self.take_batch(&mut rx, None);
+                    self.publish_poses(&mut poses_published, &progress, rx.len());
                     if let Some(r) = self.state.stop.clone() {
                         break r;
                     }

@@ -23,6 +23,9 @@ pub struct Recorder {
     counts: RunCounts,
     last_status_ns: Option<u64>,
     last_ns: u64,
+    /// The `now_ns` of the last flush check: the pipeline hands a batch of events one `now`,
+    /// and the writer's flush check reads the clock, so it is made once per batch.
+    flush_checked_ns: u64,
 }
 
 /// The `/event` text of a datum change (docs/log-format.md): `epoch <k> lost: …` or
@@ -69,6 +72,7 @@ impl Recorder {
             counts: RunCounts::default(),
             last_status_ns: None,
             last_ns: 0,
+            flush_checked_ns: 0,
         })
     }
 
@@ -198,7 +202,10 @@ impl Recorder {
             let st = self.status();
             self.writer.write_status(now_ns, &st)?;
         }
-        self.writer.flush_if_due()?;
+        if now_ns != self.flush_checked_ns {
+            self.flush_checked_ns = now_ns;
+            self.writer.flush_if_due()?;
+        }
         Ok(())
     }
 

@@ -277,6 +277,7 @@ pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {
     )
     .context("cannot start the pipeline thread")?;
 
+    drivers::set_read_coalesce(cfg.run.read_coalesce);
     let mut handles = Vec::new();
     if let Some(c) = &cfg.interferometer {
         handles.push(drivers::spawn_li80_with(

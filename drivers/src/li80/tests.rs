@@ -26,14 +26,20 @@ fn config() -> Li80Config {
 
 /// The device's side of the driver's setup (instruments.md §1), the `$ENV` record answering
 /// `ENV?` being `env`. `stale` is what a device still streaming sends before its `OK`. The
-/// datum is taken on the run's first connection only (`first`).
+/// datum is taken on the run's first connection only (`first`). The driver is configured at
+/// `config().rate_hz`.
 async fn answer_setup(dev: &mut Device, stale: &str, env: &str, first: bool) {
+    answer_setup_at(dev, 1000, stale, env, first).await
+}
+
+/// [`answer_setup`] for a driver configured at `rate_hz`.
+async fn answer_setup_at(dev: &mut Device, rate_hz: u32, stale: &str, env: &str, first: bool) {
     dev.expect("STREAM OFF\n").await;
     dev.send(stale).await;
     dev.send("OK\r\n").await;
     dev.expect("*IDN?\n").await;
     dev.send("LI-80,A1234,2.1.0\r\n").await;
-    dev.expect("RATE 1000\n").await;
+    dev.expect(&format!("RATE {rate_hz}\n")).await;
     dev.send("OK\r\n").await;
     if first {
         dev.expect("DATUM\n").await;
@@ -350,4 +356,73 @@ async fn li80_beam_loss_epoch_and_re_reference_over_an_in_memory_port() {
     dev.expect("STREAM OFF\n").await;
     dev.send("OK\r\n").await;
     task.await.unwrap();
+}
+
+/// Streams `secs` seconds of `$POS` lines at `rate_hz`, written `rate_hz / 1000` at a time
+/// every millisecond (a USB serial adapter's frames), then stops the driver; returns the
+/// samples in arrival order.
+async fn stream_for(rate_hz: u32, secs: u32) -> Vec<Sample> {
+    let (tx, mut rx) = mpsc::channel(1 << 20);
+    let (socket, open) = socket();
+    let cancel = CancellationToken::new();
+    let cfg = Li80Config {
+        rate_hz,
+        ..config()
+    };
+    let (driver, path) = li80(&cfg, HostClock::new(), tx);
+    let mut dev = socket.plug();
+    let task = tokio::spawn(run(driver, path, open, cancel.clone()));
+    let env = "ENV,0,500,20.00,101325,50.0,20.00";
+    answer_setup_at(&mut dev, rate_hz, "", env, true).await;
+    let per_ms = rate_hz / 1000;
+    let mut seq = 0u32;
+    for _ in 0..secs * 1000 {
+        let mut chunk = String::new();
+        for _ in 0..per_ms {
+            seq += 1;
+            let t_us = u64::from(seq) * 1_000_000 / u64::from(rate_hz);
+            chunk += &nmea(&format!("POS,{seq},{t_us},{seq},80,0"));
+        }
+        dev.send(&chunk).await;
+        tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+    }
+    cancel.cancel();
+    dev.expect("STREAM OFF\n").await;
+    dev.send("OK\r\n").await;
+    task.await.unwrap();
+    let mut samples = Vec::new();
+    while let Ok(ev) = rx.try_recv() {
+        if let DriverEvent::Sample(s) = ev
+            && matches!(s.values, SampleValues::Position { .. })
+        {
+            samples.push(s);
+        }
+    }
+    samples
+}
+
+/// Read coalescing (docs/design.md, "Where the daemon's CPU goes"): at 1 kHz and at 5 kHz the
+/// driver reads about once per coalescing tick (10 ms) plus a probe read every tenth tick,
+/// ~110 reads a second whatever the rate, not once per device write (1000 a second); every
+/// sample arrives once, in order. A read is told by the arrival time it gives all its samples
+/// (the host clock, which runs on while tokio's clock is paused).
+#[tokio::test(start_paused = true)]
+async fn a_stream_is_read_about_once_per_coalescing_tick_whatever_its_rate() {
+    assert_eq!(crate::read_coalesce(), std::time::Duration::from_millis(10));
+    for rate_hz in [1000, 5000] {
+        let secs = 2;
+        let samples = stream_for(rate_hz, secs).await;
+        let seqs: Vec<u64> = samples.iter().map(|s| s.seq).collect();
+        let want: Vec<u64> = (1..=u64::from(rate_hz * secs)).collect();
+        assert!(seqs == want, "{rate_hz} Hz: samples lost or out of order");
+        let mut reads = 0;
+        for w in samples.windows(2) {
+            reads += usize::from(w[1].host_ns != w[0].host_ns);
+        }
+        let per_s = reads as f64 / f64::from(secs);
+        assert!(
+            (90.0..=125.0).contains(&per_s),
+            "{rate_hz} Hz: {per_s} reads a second"
+        );
+    }
 }

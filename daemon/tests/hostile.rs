@@ -192,6 +192,11 @@ const CASES: &[Case] = &[
         &["--sigma-um", "5000"],
     ),
     case(
+        "identify psd {x}/models/psd_readings.csv --reference 0 --layout 0,1e-320,0,167,0,350",
+        1,
+        &["--layout", "at least 1 mm"],
+    ),
+    case(
         "identify capball {x}/models/capball_identification.csv --uncertainty mc --sensor-u-um 1e308,1,1",
         1,
         &["--sensor-u-um", "10000"],

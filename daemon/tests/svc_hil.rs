@@ -115,6 +115,20 @@ fn the_log(dir: &Path) -> PathBuf {
     logs[0].clone()
 }
 
+/// Runs the daemon on `cfg` until the simulated program ends it (`stop_at_program_end`), with a
+/// deadline far past the program; its stderr, once it exited 0.
+async fn run_program_to_end(cfg: &Path, sim: &sim::Sim) -> String {
+    let mut child = start_daemon(cfg);
+    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
+    let status = wait_exit(&mut child, limit).await;
+    let stderr = child.wait_with_output_stderr();
+    assert!(
+        status.success(),
+        "metrolog run failed ({status}):\n{stderr}"
+    );
+    stderr
+}
+
 async fn wait_exit(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
     let t0 = Instant::now();
     loop {
@@ -753,14 +767,7 @@ async fn interferometer_unplug_loses_the_datum_and_the_analysis_refuses_the_run(
     let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, true).unwrap();
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, toml).unwrap();
-    let mut child = start_daemon(&cfg);
-    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
-    let status = wait_exit(&mut child, limit).await;
-    let stderr = child.wait_with_output_stderr();
-    assert!(
-        status.success(),
-        "metrolog run failed ({status}):\n{stderr}"
-    );
+    let stderr = run_program_to_end(&cfg, &sim).await;
     let record = sim.record();
     sim.shutdown().await;
     let log = the_log(&logs);
@@ -1165,14 +1172,7 @@ async fn datum_beam_break_is_re_referenced_at_the_reference_pose() {
         duration_s: 0.3,
     }];
     let (sim, cfg, logs) = datum_setup(sc.clone(), dir.path(), true);
-    let mut child = start_daemon(&cfg);
-    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
-    let status = wait_exit(&mut child, limit).await;
-    let stderr = child.wait_with_output_stderr();
-    assert!(
-        status.success(),
-        "metrolog run failed ({status}):\n{stderr}"
-    );
+    let stderr = run_program_to_end(&cfg, &sim).await;
     assert!(stderr.contains("interferometer beam lost"), "{stderr}");
     let record = sim.record();
     sim.shutdown().await;
@@ -1244,14 +1244,7 @@ async fn datum_capball_and_psd_unplugs_keep_their_values_right() {
         },
     ];
     let (sim, cfg, logs) = datum_setup(sc.clone(), dir.path(), true);
-    let mut child = start_daemon(&cfg);
-    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
-    let status = wait_exit(&mut child, limit).await;
-    let stderr = child.wait_with_output_stderr();
-    assert!(
-        status.success(),
-        "metrolog run failed ({status}):\n{stderr}"
-    );
+    let stderr = run_program_to_end(&cfg, &sim).await;
     let record = sim.record();
     sim.shutdown().await;
     let contents = metrolog_analysis::LogContents::read(&the_log(&logs)).unwrap();

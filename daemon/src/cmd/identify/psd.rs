@@ -36,6 +36,7 @@ pub fn run(a: PsdArgs) -> anyhow::Result<()> {
     let layout = match &a.layout {
         Some(s) => {
             let v = numbers_arg(s, 6, "--layout")?;
+            check_layout(&v)?;
             PsdLayout {
                 x_lo: v[0],
                 x_hi: v[1],
@@ -136,6 +137,19 @@ pub fn run(a: PsdArgs) -> anyhow::Result<()> {
             "  roll ranges EAX {:.2} EBY {:.2} µrad",
             span(&e.eax_urad),
             span(&e.eby_urad)
+        );
+    }
+    Ok(())
+}
+
+/// A frame's layout: positions within ±100000 mm and each pair (x, y, z) at least 1 mm apart,
+/// low before high (a frame of 1e-320 mm divided the squareness by zero).
+fn check_layout(v: &[f64]) -> anyhow::Result<()> {
+    let within = v.iter().all(|x| x.is_finite() && x.abs() <= 100_000.0);
+    let spans = v.chunks(2).all(|p| p[1] - p[0] >= 1.0);
+    if !(within && spans) {
+        anyhow::bail!(
+            "--layout {v:?}: x_lo,x_hi,y_lo,y_hi,z0,z1 in mm within ±100000, each high at least 1 mm above its low"
         );
     }
     Ok(())

@@ -87,6 +87,7 @@ mod pty;
 pub mod record;
 pub mod scenario;
 mod shared;
+mod slow;
 pub mod thermal;
 
 use std::path::{Path, PathBuf};

@@ -21,7 +21,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::scenario::Slow;
+use crate::slow::Slow;
 
 /// Where a sensor sits in the heat network.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

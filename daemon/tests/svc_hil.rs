@@ -117,7 +117,7 @@ fn the_log(dir: &Path) -> PathBuf {
 
 /// Runs the daemon on `cfg` until the simulated program ends it (`stop_at_program_end`), with a
 /// deadline far past the program; its stderr, once it exited 0.
-async fn run_program_to_end(cfg: &Path, sim: &sim::Sim) -> String {
+async fn run_program_to_end(cfg: &Path, sim: &sim::SimHandle) -> String {
     let mut child = start_daemon(cfg);
     let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
     let status = wait_exit(&mut child, limit).await;
@@ -767,7 +767,7 @@ async fn interferometer_unplug_loses_the_datum_and_the_analysis_refuses_the_run(
     let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, true).unwrap();
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, toml).unwrap();
-    let stderr = run_program_to_end(&cfg, &sim).await;
+    run_program_to_end(&cfg, &sim).await;
     let record = sim.record();
     sim.shutdown().await;
     let log = the_log(&logs);

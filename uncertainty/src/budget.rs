@@ -635,6 +635,34 @@ impl TrialSource for Budget {
     }
 }
 
+/// Every number a result states is finite: model values that are each finite can still be too
+/// large to sum or square (an input of 1e308 gave `b = -inf °C  u = inf °C`).
+fn check_summaries(gum: Option<&GumResult>, mc: Option<&McResult>) -> Result<(), UncertaintyError> {
+    let bad = |name: &str, how: &str| UncertaintyError::NonFinite {
+        output: name.to_string(),
+        context: format!(
+            "in the {how}: its values are too large to average or square (inputs near 1e308?)"
+        ),
+    };
+    for o in gum.map(|g| g.outputs.as_slice()).unwrap_or_default() {
+        let v = [o.estimate, o.standard_uncertainty, o.expanded_uncertainty];
+        if !v.iter().chain(&o.interval).all(|x| x.is_finite()) {
+            return Err(bad(&o.name, "GUM result"));
+        }
+    }
+    for o in mc.map(|m| m.outputs.as_slice()).unwrap_or_default() {
+        let v = [o.estimate, o.standard_uncertainty];
+        let all = v
+            .iter()
+            .chain(&o.symmetric_interval)
+            .chain(&o.shortest_interval);
+        if !all.clone().all(|x| x.is_finite()) {
+            return Err(bad(&o.name, "Monte Carlo result"));
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -705,32 +733,4 @@ mod tests {
             .to_string();
         assert!(e.contains("infinite for ν ≤ 2"), "{e}");
     }
-}
-
-/// Every number a result states is finite: model values that are each finite can still be too
-/// large to sum or square (an input of 1e308 gave `b = -inf °C  u = inf °C`).
-fn check_summaries(gum: Option<&GumResult>, mc: Option<&McResult>) -> Result<(), UncertaintyError> {
-    let bad = |name: &str, how: &str| UncertaintyError::NonFinite {
-        output: name.to_string(),
-        context: format!(
-            "in the {how}: its values are too large to average or square (inputs near 1e308?)"
-        ),
-    };
-    for o in gum.map(|g| g.outputs.as_slice()).unwrap_or_default() {
-        let v = [o.estimate, o.standard_uncertainty, o.expanded_uncertainty];
-        if !v.iter().chain(&o.interval).all(|x| x.is_finite()) {
-            return Err(bad(&o.name, "GUM result"));
-        }
-    }
-    for o in mc.map(|m| m.outputs.as_slice()).unwrap_or_default() {
-        let v = [o.estimate, o.standard_uncertainty];
-        let all = v
-            .iter()
-            .chain(&o.symmetric_interval)
-            .chain(&o.shortest_interval);
-        if !all.clone().all(|x| x.is_finite()) {
-            return Err(bad(&o.name, "Monte Carlo result"));
-        }
-    }
-    Ok(())
 }

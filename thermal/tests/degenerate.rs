@@ -65,3 +65,31 @@ fn a_fit_holds_no_term_of_a_constant_input_and_no_term_twice() {
         m.channels[1].terms
     );
 }
+
+/// Two sensors, one beside a heat source whose readings step with the spindle and one in calm
+/// air, and a channel with no thermal response: "noisier than the median sensor" needs more
+/// than one other sensor to compare with, so no sensor is called noisy (the demo's thermal run
+/// named the head sensor "only adds noise" on its flat channel).
+#[test]
+fn with_two_sensors_none_is_called_noisy_for_its_real_steps() {
+    let mut csv = String::from("time_s,spindle_rpm,flat_um,head_c,air_c\n");
+    let mut head = 20.2;
+    for k in 0..160 {
+        let rpm = if (k / 20) % 2 == 0 { 0 } else { 4000 };
+        // The head warms and cools towards its level with a time constant of 12 samples (36 min).
+        let level = 20.0 + if rpm > 0 { 1.5 } else { 0.2 };
+        head += (level - head) / 12.0;
+        let head = head + 0.01 * (k % 3) as f64;
+        let flat = 3.0 + 0.1 * ((k * 7919) % 11) as f64 / 11.0;
+        csv += &format!(
+            "{},{rpm},{flat},{head},{}\n",
+            180 * k,
+            20.0 + 0.001 * k as f64
+        );
+    }
+    let ds = ThermalDataset::from_csv(&csv).expect("reads");
+    let d = diagnose(&ds, &DiagnoseOptions::default()).expect("diagnoses");
+    let text = d.render();
+    assert!(!text.contains("noisy"), "{text}");
+    assert!(!text.contains("only adds noise"), "{text}");
+}

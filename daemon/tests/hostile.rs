@@ -561,7 +561,7 @@ fn a_run_too_large_to_diagnose_is_refused_with_the_limit() {
     run_case(
         &format!("diagnose {p}"),
         1,
-        &["too many to diagnose", "12000000"],
+        &["too many to diagnose", "5000000"],
     );
     run_case(&format!("analyze positioning {p}"), 0, &[]);
 }
@@ -594,6 +594,41 @@ fn a_run_of_many_cycles_charts_in_a_bounded_file() {
     let svg = std::fs::read_to_string(out.join("run.svg")).expect("the chart");
     assert!(svg.len() < 8 << 20, "chart of {} bytes", svg.len());
     assert!(svg.contains("200 of 20000 cycles drawn"), "legend");
+}
+
+/// A thermal test past `thermal::MAX_SIZE` (100 000 samples of 16 sensors: `thermal diagnose`
+/// took 0.83 GB, and the 256 MiB text limit alone allowed 17 times that) is refused by `fit`
+/// and `diagnose` with the limit and what to do; `analyze thermal` (linear in the samples)
+/// still takes it.
+#[test]
+fn a_thermal_test_too_large_to_model_is_refused_with_the_limit() {
+    let tmp = tempfile::tempdir().expect("a temporary directory");
+    let path = tmp.path().join("long.csv");
+    let mut t = String::from("time_s,ch1_um");
+    for k in 1..=16 {
+        t += &format!(",t{k}_c");
+    }
+    t.push('\n');
+    for r in 0..100_000 {
+        t += &format!("{},{}", 15 * r, (r % 97) as f64 * 0.01);
+        for k in 1..=16 {
+            t += &format!(",{}", 20.0 + ((r * k) % 89) as f64 * 0.001);
+        }
+        t.push('\n');
+    }
+    std::fs::write(&path, t).expect("the CSV");
+    let p = path.display();
+    for args in [
+        format!("thermal diagnose {p}"),
+        format!("thermal fit {p} -o {{o}}/m.json"),
+    ] {
+        run_case(
+            &args,
+            1,
+            &["too many to model", "1500000", "split it in time"],
+        );
+    }
+    run_case(&format!("analyze thermal {p}"), 0, &[]);
 }
 
 /// A 300 000-term budget expression is refused (it overflowed the stack).

@@ -187,6 +187,7 @@ pub fn diagnose(
     ds: &ThermalDataset,
     o: &DiagnoseOptions,
 ) -> Result<ThermalDiagnosis, ThermalError> {
+    crate::model::check_size(ds)?;
     crate::baseline::static_fit(ds, o.fit.blocks)?;
     let screen = screen_sensors(ds, o);
     let refs = reference_temperatures(ds);

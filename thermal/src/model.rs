@@ -142,7 +142,29 @@ pub struct ThermalModel {
 }
 
 /// Fits a thermal model to every displacement channel of `ds`.
+/// The largest thermal test `fit` and `diagnose` take, as samples × (sensors + 1): the lagged
+/// candidate columns grow with both. `tests/sweep/largest_inputs.py` measured `diagnose` at
+/// about 490 bytes per unit (100 000 samples of 16 sensors: 0.83 GB); this bound keeps it
+/// under about 0.75 GB — 88 000 samples of 16 sensors, 15 days at one sample every 15 s.
+pub const MAX_SIZE: usize = 1_500_000;
+
+/// Refuses a test past [`MAX_SIZE`], saying how to bring it within.
+pub(crate) fn check_size(ds: &ThermalDataset) -> Result<(), ThermalError> {
+    let size = ds.len() * (ds.sensor_names.len() + 1);
+    if size > MAX_SIZE {
+        return Err(ThermalError::Parameter {
+            what: format!(
+                "{} samples of {} sensors are too many to model (samples × (sensors + 1) = {size}, at most {MAX_SIZE}): thin the file (every n-th row) or split it in time",
+                ds.len(),
+                ds.sensor_names.len()
+            ),
+        });
+    }
+    Ok(())
+}
+
 pub fn fit(ds: &ThermalDataset, opts: &FitOptions) -> Result<ThermalModel, ThermalError> {
+    check_size(ds)?;
     let stat = static_fit(ds, opts.blocks)?;
     check_options(ds, opts)?;
     let refs = reference_temperatures(ds);

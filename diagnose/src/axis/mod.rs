@@ -55,11 +55,12 @@ use run::Run;
 use search::all_cols;
 
 /// The largest run the diagnosis takes, as readings × (targets + cycles): its candidate
-/// columns grow with the targets and the cycles, each as long as the readings, so memory is
-/// about 60 bytes per unit (measured: 10 000 readings of 1 000 targets in 5 cycles, 0.54 GB;
-/// 100 000 of 1 000 in 50 cycles, 6.6 GB). This bound keeps it under about 0.8 GB; an ISO
-/// 230-2 run is a few thousand units.
-pub const MAX_SIZE: usize = 12_000_000;
+/// columns grow with the targets and the cycles, each as long as the readings. Memory is about
+/// 60 bytes per unit for a run of many targets in few cycles (10 000 readings of 1 000 targets
+/// in 5 cycles, 0.54 GB) and up to 160 for as many cycles as targets (`tests/sweep/
+/// largest_inputs.py`: 70 × 70, 1.4·10⁶ units, 0.22 GB; 122 × 122, 7.3·10⁶ units, past 1 GiB).
+/// This bound keeps every shape under about 0.8 GB; an ISO 230-2 run is a few thousand units.
+pub const MAX_SIZE: usize = 5_000_000;
 
 /// Diagnoses a positioning run against the static baseline.
 pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, DiagnoseError> {

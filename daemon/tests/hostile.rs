@@ -631,6 +631,24 @@ fn a_thermal_test_too_large_to_model_is_refused_with_the_limit() {
     run_case(&format!("analyze thermal {p}"), 0, &[]);
 }
 
+/// A CapBall dataset past `geometry::capball::MAX_DATASET_ROWS` (a million rows took 0.9 GB
+/// to identify; the text limit allowed three times that) is refused with the limit.
+#[test]
+fn a_capball_dataset_too_long_is_refused_with_the_limit() {
+    let tmp = tempfile::tempdir().expect("a temporary directory");
+    let path = tmp.path().join("long.csv");
+    let mut t = String::from("pose,x_mm,y_mm,z_mm,a_deg,c_deg,ex_um,ey_um,ez_um\n");
+    for r in 0..200_001 {
+        t += &format!("{},{},0,0,0,{},0.1,0.2,0.3\n", r + 1, r % 100, r % 360);
+    }
+    std::fs::write(&path, t).expect("the CSV");
+    run_case(
+        &format!("identify capball {}", path.display()),
+        1,
+        &["more than 200000 rows", "split the file"],
+    );
+}
+
 /// A 300 000-term budget expression is refused (it overflowed the stack).
 #[test]
 fn a_300000_term_budget_expression_is_refused() {

@@ -840,6 +840,9 @@ fn dataset_range(name: &str) -> (f64, f64, &'static str) {
 
 /// Parse a CapBall dataset (CSV text). Lines starting with `#` are comments; columns in any
 /// order; unknown columns are ignored.
+/// The most rows a CapBall dataset may hold (identification memory is about 0.9 kB per row).
+pub const MAX_DATASET_ROWS: usize = 200_000;
+
 pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
     let err = |m: String| CapballError::Dataset(m);
     let mut rdr = csv::ReaderBuilder::new()
@@ -875,6 +878,11 @@ pub fn parse_dataset(text: &str) -> Result<Vec<CapballRecord>, CapballError> {
     let time_col = col("time_s");
     let mut out = Vec::new();
     for (line, rec) in rdr.records().enumerate() {
+        if line >= MAX_DATASET_ROWS {
+            return Err(err(format!(
+                "more than {MAX_DATASET_ROWS} rows: a CapBall run has tens to a few thousand poses (1 000 000 rows took 0.9 GB to identify); split the file by run"
+            )));
+        }
         let rec = rec.map_err(|e| err(e.to_string()))?;
         let row = line + 2;
         let num = |i: usize, name: &str| -> Result<f64, CapballError> {

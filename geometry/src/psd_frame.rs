@@ -533,6 +533,9 @@ pub fn derive_uncertainty(layout: &PsdLayout, sigma_um: f64) -> Result<Vec<f64>,
 /// Parse the PSD readings CSV: `run,segment,point,r1_um,r2_um` with `segment` 1..5, `point`
 /// 1..n in ascending coordinate, and (r1, r2) = (ex, ez) on S1/S3, (ey, ez) on S2/S4, (ex, ey)
 /// on S5. `#` lines are comments. Returns the runs in file order.
+/// The most rows a PSD readings file may hold: 20 000 runs of the 51-point frame.
+pub const MAX_READING_ROWS: usize = 1_020_000;
+
 pub fn parse_readings_csv(
     layout: &PsdLayout,
     text: &str,
@@ -561,6 +564,11 @@ pub fn parse_readings_csv(
     type Slots = Vec<Vec<Option<[f64; 2]>>>;
     let mut runs: Vec<(u32, Slots)> = Vec::new();
     for (line, rec) in rdr.records().enumerate() {
+        if line >= MAX_READING_ROWS {
+            return Err(err(format!(
+                "more than {MAX_READING_ROWS} rows: a frame run has 51 points (split the file by run)"
+            )));
+        }
         let row = line + 2;
         let rec = rec.map_err(|e| err(e.to_string()))?;
         let get = |i: usize| rec.get(i).unwrap_or("");

@@ -240,8 +240,9 @@ def limit():
 
 def echoed(out: str, m, inp_text: str) -> bool:
     """Whether the word is the input's own text echoed (a budget's title), not a number."""
-    ctx = out[max(0, m.start() - 12):m.end() + 12]
-    return len(ctx) > 8 and ctx in inp_text
+    before = out[max(0, m.start() - 6):m.end()]
+    after = out[m.start():m.end() + 10]
+    return any(len(c) > len(m.group(0)) + 4 and c in inp_text for c in (before, after))
 
 
 def run_one(binary, args, work: Path, inp_text=""):

@@ -118,7 +118,16 @@ fn the_log(dir: &Path) -> PathBuf {
 /// Runs the daemon on `cfg` until the simulated program ends it (`stop_at_program_end`), with a
 /// deadline far past the program; its stderr, once it exited 0.
 async fn run_program_to_end(cfg: &Path, sim: &sim::SimHandle) -> String {
-    let mut child = start_daemon(cfg);
+    run_program_to_end_notified(cfg, sim, None).await
+}
+
+/// [`run_program_to_end`] with systemd's notifications sent to `notify`.
+async fn run_program_to_end_notified(
+    cfg: &Path,
+    sim: &sim::SimHandle,
+    notify: Option<&Path>,
+) -> String {
+    let mut child = start_daemon_notified(cfg, notify);
     let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
     let status = wait_exit(&mut child, limit).await;
     let stderr = child.wait_with_output_stderr();
@@ -262,14 +271,7 @@ async fn run_with_faults_ends_at_program_end_and_the_log_reads_back() {
 
     let notify_path = dir.path().join("notify.sock");
     let notify = Notifications::listen(&notify_path);
-    let mut child = start_daemon_notified(&cfg, Some(&notify_path));
-    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
-    let status = wait_exit(&mut child, limit).await;
-    let stderr = child.wait_with_output_stderr();
-    assert!(
-        status.success(),
-        "metrolog run failed ({status}):\n{stderr}"
-    );
+    let stderr = run_program_to_end_notified(&cfg, &sim, Some(&notify_path)).await;
     assert!(stderr.contains("program end"), "{stderr}");
     let told = pose_lines(&stderr, &scenario());
     let states = notify.stop();
@@ -1142,14 +1144,7 @@ async fn datum_li80_unplug_is_re_referenced_at_the_reference_pose() {
     let (sim, cfg, logs) = datum_setup(sc.clone(), dir.path(), true);
     let notify_path = dir.path().join("notify.sock");
     let notify = Notifications::listen(&notify_path);
-    let mut child = start_daemon_notified(&cfg, Some(&notify_path));
-    let limit = Duration::from_secs_f64(sim.program_duration_s() + 40.0);
-    let status = wait_exit(&mut child, limit).await;
-    let stderr = child.wait_with_output_stderr();
-    assert!(
-        status.success(),
-        "metrolog run failed ({status}):\n{stderr}"
-    );
+    let stderr = run_program_to_end_notified(&cfg, &sim, Some(&notify_path)).await;
     let states = notify.stop();
     let record = sim.record();
     sim.shutdown().await;

@@ -16,3 +16,5 @@ pub mod cli;
 pub mod cmd;
 pub mod exit;
 pub mod live;
+#[doc(hidden)]
+pub mod fuzzcheck;

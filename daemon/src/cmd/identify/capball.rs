@@ -133,7 +133,7 @@ pub fn run(a: CapballArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     for (run, ball, id, val) in &results {
-        print_identification(*run, ball, id, val.as_ref());
+        print!("{}", identification_text(*run, ball, id, val.as_ref()));
     }
     Ok(())
 }
@@ -145,11 +145,11 @@ fn report_skipped(p: &Path, skipped: &[(u32, String)]) {
 }
 
 /// One run of a dataset: number, poses, measured values.
-type RunData = (u32, Vec<Pose>, Vec<[f64; 3]>);
+pub(crate) type RunData = (u32, Vec<Pose>, Vec<[f64; 3]>);
 
 /// The runs of a dataset in the order they first appear, each split by
 /// [`capball::split_run`].
-fn runs_of(recs: &[capball::CapballRecord]) -> Vec<RunData> {
+pub(crate) fn runs_of(recs: &[capball::CapballRecord]) -> Vec<RunData> {
     let mut ids: Vec<u32> = Vec::new();
     for r in recs {
         if !ids.contains(&r.run) {
@@ -203,13 +203,17 @@ fn pose_residuals(
         .collect()
 }
 
-fn print_identification(
+/// The text report of one run's identification (`val`: the validation residual RMS).
+pub(crate) fn identification_text(
     run: u32,
     ball: &Vector3<f64>,
     id: &Identification,
     val: Option<&[f64; 3]>,
-) {
-    println!(
+) -> String {
+    use std::fmt::Write as _;
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
         "run {run}: {} poses, ball at ({:.3}, {:.3}, {:.3}) mm, condition number {}",
         id.n_poses,
         ball.x,
@@ -217,7 +221,7 @@ fn print_identification(
         ball.z,
         result_or(id.condition_number, 1, "singular")
     );
-    println!("  {:<12} {:>12} {:>12}", "parameter", "value", "u (k=1)");
+    let _ = writeln!(t, "  {:<12} {:>12} {:>12}", "parameter", "value", "u (k=1)");
     for ((name, p), u) in PARAM_NAMES.iter().zip(&id.params).zip(&id.std_uncertainty) {
         // A parameter the poses do not determine: "n/d", never NaN in the table.
         let cell = |v: f64| {
@@ -227,15 +231,17 @@ fn print_identification(
                 "n/d".into()
             }
         };
-        println!("  {name:<12} {:>12} {:>12}", cell(*p), cell(*u));
+        let _ = writeln!(t, "  {name:<12} {:>12} {:>12}", cell(*p), cell(*u));
     }
     let why = "residuals not finite";
-    println!(
+    let _ = writeln!(
+        t,
         "  identification residual RMS {} µm (s = {} µm)",
         xyz_or(id.residual_rms_um, 3, why),
         result_or(id.residual_sigma_um, 3, why)
     );
     if let Some(v) = val {
-        println!("  validation residual RMS     {} µm", xyz_or(*v, 3, why));
+        let _ = writeln!(t, "  validation residual RMS     {} µm", xyz_or(*v, 3, why));
     }
+    t
 }

@@ -58,29 +58,10 @@ pub fn run(a: PsdArgs) -> anyhow::Result<()> {
     }
     let runs = psd_frame::parse_readings_csv(&layout, &read_csv(&a.data)?)
         .with_context(|| format!("{}", a.data.display()))?;
-    let reference = runs
-        .iter()
-        .find(|r| r.0 == a.reference)
-        .ok_or_else(|| {
-            anyhow::anyhow!(
-                "reference run {} is not in {}",
-                a.reference,
-                a.data.display()
-            )
-        })?
-        .1
-        .clone();
+    let out = errors_against(&layout, &runs, a.reference)
+        .with_context(|| format!("{}", a.data.display()))?;
     // Reference subtraction doubles the variance of every reading.
     let u = psd_frame::derive_uncertainty(&layout, a.sigma_um * 2f64.sqrt())?;
-    let mut out = Vec::new();
-    for (run, r) in runs.iter().filter(|r| r.0 != a.reference) {
-        let e = psd_frame::derive_errors(&layout, &r.minus(&reference)?)
-            .with_context(|| format!("run {run}"))?;
-        out.push((*run, e));
-    }
-    if out.is_empty() {
-        anyhow::bail!("{} holds only the reference run", a.data.display());
-    }
     if a.mc.uncertainty.is_some() {
         return psd_mc::run(&layout, a.reference, &out, &a.mc, a.json);
     }
@@ -97,17 +78,51 @@ pub fn run(a: PsdArgs) -> anyhow::Result<()> {
         );
         return Ok(());
     }
-    for (run, e) in &out {
-        println!("run {run} − run {}:", a.reference);
+    print!("{}", errors_text(a.reference, &out, &u));
+    Ok(())
+}
+
+/// Every run's errors relative to the reference run (the runs of a readings file).
+pub(crate) fn errors_against(
+    layout: &PsdLayout,
+    runs: &[(u32, psd_frame::PsdReadings)],
+    reference: u32,
+) -> anyhow::Result<Vec<(u32, psd_frame::PsdErrors)>> {
+    let reference_readings = &runs
+        .iter()
+        .find(|r| r.0 == reference)
+        .ok_or_else(|| anyhow::anyhow!("reference run {reference} is not in the file"))?
+        .1;
+    let mut out = Vec::new();
+    for (run, r) in runs.iter().filter(|r| r.0 != reference) {
+        let e = psd_frame::derive_errors(layout, &r.minus(reference_readings)?)
+            .with_context(|| format!("run {run}"))?;
+        out.push((*run, e));
+    }
+    anyhow::ensure!(!out.is_empty(), "the file holds only the reference run");
+    Ok(out)
+}
+
+/// The text report: per run, the squareness with its uncertainty `u` (in the order of
+/// [`psd_frame::PsdErrors::names`]), the positioning change and the ranges of the rest.
+pub(crate) fn errors_text(reference: u32, out: &[(u32, psd_frame::PsdErrors)], u: &[f64]) -> String {
+    use std::fmt::Write as _;
+    let span = |v: &[f64]| {
+        v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
+    };
+    let mut t = String::new();
+    for (run, e) in out {
         let names = e.names();
         let ui = |n: &str| {
             names
                 .iter()
                 .position(|x| x == n)
-                .map(|k| u[k])
+                .and_then(|k| u.get(k).copied())
                 .unwrap_or(f64::NAN)
         };
-        println!(
+        let _ = writeln!(t, "run {run} − run {reference}:");
+        let _ = writeln!(
+            t,
             "  squareness EC0Y {:.2} EB0Z {:.2} EA0Z {:.2} µrad (u {:.2} {:.2} {:.2})",
             e.ec0y_urad,
             e.eb0z_urad,
@@ -116,15 +131,14 @@ pub fn run(a: PsdArgs) -> anyhow::Result<()> {
             ui("EB0Z_urad"),
             ui("EA0Z_urad")
         );
-        let span = |v: &[f64]| {
-            v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
-        };
-        println!(
+        let _ = writeln!(
+            t,
             "  positioning change over the travel: X {:.2} µm, Y {:.2} µm",
             e.exx_um.last().unwrap_or(&0.0) - e.exx_um.first().unwrap_or(&0.0),
             e.eyy_um.last().unwrap_or(&0.0) - e.eyy_um.first().unwrap_or(&0.0)
         );
-        println!(
+        let _ = writeln!(
+            t,
             "  straightness ranges EYX {:.2} EZX {:.2} EXY {:.2} EZY {:.2} EXZ {:.2} EYZ {:.2} µm",
             span(&e.eyx_um),
             span(&e.ezx_um),
@@ -133,13 +147,14 @@ pub fn run(a: PsdArgs) -> anyhow::Result<()> {
             span(&e.exz_um),
             span(&e.eyz_um)
         );
-        println!(
+        let _ = writeln!(
+            t,
             "  roll ranges EAX {:.2} EBY {:.2} µrad",
             span(&e.eax_urad),
             span(&e.eby_urad)
         );
     }
-    Ok(())
+    t
 }
 
 /// A frame's layout: positions within ±100000 mm and each pair (x, y, z) at least 1 mm apart,

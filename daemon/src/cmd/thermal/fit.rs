@@ -71,7 +71,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 
 /// The model as JSON, refused when any of its numbers is not finite (serde_json would write
 /// `null`, which no reader could take back as a number).
-fn model_json(model: &thermal::ThermalModel) -> anyhow::Result<String> {
+pub(crate) fn model_json(model: &thermal::ThermalModel) -> anyhow::Result<String> {
     for c in &model.channels {
         let mut all = vec![
             c.intercept_um,

@@ -29,7 +29,7 @@ pub struct Args {
 }
 
 #[derive(Debug, Serialize)]
-struct Report {
+pub(crate) struct Report {
     duration_s: f64,
     samples: usize,
     etve: Vec<Etve>,
@@ -53,10 +53,30 @@ struct Spindle {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let ds = load_thermal(&a.input)?;
+    let probes = match (&a.probes, a.probe_spacing_mm) {
+        (Some(p), Some(mm)) => Some((p.as_str(), mm)),
+        _ => None,
+    };
+    let r = evaluate(&ds, probes, &a.input)?;
+    let text = if a.json {
+        serde_json::to_string_pretty(&r)? + "\n"
+    } else {
+        render(&r, &a.input.display().to_string())
+    };
+    print_out(&text)
+}
+
+/// The ISO 230-3 numbers of a dataset: every channel's ETVE and, with five probes named and
+/// their spacing, the spindle's thermal distortion. Refused when any number is not finite.
+pub(crate) fn evaluate(
+    ds: &thermal::ThermalDataset,
+    probes: Option<(&str, f64)>,
+    input: &std::path::Path,
+) -> anyhow::Result<Report> {
     anyhow::ensure!(
         !ds.channel_names.is_empty(),
         "{}: no displacement column (a name ending `_um`, e.g. `x_um`) to evaluate",
-        a.input.display()
+        input.display()
     );
     let mut etve = vec![];
     for (name, d) in ds.channel_names.iter().zip(&ds.displacements_um) {
@@ -66,9 +86,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             etve_um: e,
         });
     }
-    let spindle = match (&a.probes, a.probe_spacing_mm) {
-        (Some(p), Some(mm)) => Some(spindle(&ds, p, mm, &a.input)?),
-        _ => None,
+    let spindle = match probes {
+        Some((p, mm)) => Some(spindle(ds, p, mm, input)?),
+        None => None,
     };
     let r = Report {
         duration_s: ds.time_s[ds.len() - 1] - ds.time_s[0],
@@ -77,12 +97,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         spindle,
     };
     check_finite(&r)?;
-    let text = if a.json {
-        serde_json::to_string_pretty(&r)? + "\n"
-    } else {
-        render(&r, &a.input.display().to_string())
-    };
-    print_out(&text)
+    Ok(r)
 }
 
 fn spindle(
@@ -147,7 +162,7 @@ fn check_finite(r: &Report) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn render(r: &Report, input: &str) -> String {
+pub(crate) fn render(r: &Report, input: &str) -> String {
     let mut s = format!(
         "ISO 230-3 thermal evaluation of {input} ({} samples over {:.2} h)\n\n\
          Environmental temperature variation error (ETVE: range of the displacement over the test)\n",

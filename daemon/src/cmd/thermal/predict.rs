@@ -118,7 +118,7 @@ fn check_inputs(
 }
 
 /// The prediction as CSV; refused if any value is not finite.
-fn prediction_csv(p: &thermal::Prediction, level: f64) -> anyhow::Result<String> {
+pub(crate) fn prediction_csv(p: &thermal::Prediction, level: f64) -> anyhow::Result<String> {
     for c in &p.channels {
         let all = c.values_um.iter().chain(&c.lower_um).chain(&c.upper_um);
         anyhow::ensure!(

@@ -1,0 +1,127 @@
+//! The analysis paths of the CapBall, PSD, thermal and uncertainty-budget inputs, as their
+//! commands take them (issue 27): shared by the cargo-fuzz targets `capball_path`, `psd_path`,
+//! `thermal_path` and `budget_path` (`protocol/fuzz`) and the corpus replay test
+//! (`daemon/tests/fuzz_paths.rs`). Each panics when the path breaks a promise on its input: no
+//! panic anywhere, and no NaN or infinity in a text, JSON or CSV output of an input the reader
+//! accepts. Not part of the API.
+
+use std::path::Path;
+
+use geometry::capball::CapballSetup;
+use geometry::kinematics::Machine;
+use geometry::psd_frame::{self, PsdLayout};
+use metrolog_analysis::fuzzcheck::non_finite_word;
+
+use crate::cmd::identify::{capball as cb, psd};
+use crate::cmd::thermal::{fit, iso230_3, predict};
+
+/// The input's name in messages.
+const INPUT: &str = "fuzz.csv";
+
+fn assert_finite_text(what: &str, out: &str, input: &str) {
+    if let Some(w) = non_finite_word(out) {
+        panic!("`{w}` in {what} of an accepted input:\n{out}\n--- input:\n{input}");
+    }
+}
+
+/// JSON of a result: serde_json writes a NaN or an infinity as `null`, so the check is on the
+/// Debug form of the same value.
+fn assert_finite_value(what: &str, v: &impl std::fmt::Debug, input: &str) {
+    assert_finite_text(what, &format!("{v:?}"), input);
+}
+
+/// CapBall CSV → the dataset reader → every run identified on the paper's machine (the
+/// command's default) → the text report. Returns the reports (`None`: the reader refused).
+pub fn capball_path(text: &str) -> Option<Vec<String>> {
+    let records = geometry::capball::parse_dataset(text).ok()?;
+    let machine = Machine::from_config(&CapballSetup::paper_machine_config()).ok()?;
+    let mut out = vec![];
+    for (run, poses, meas) in cb::runs_of(&records) {
+        let Ok(setup) = CapballSetup::with_ball_from_poses(machine.clone(), &poses) else {
+            continue;
+        };
+        let Ok(id) = setup.identify(&poses, &meas) else {
+            continue;
+        };
+        let report = cb::identification_text(run, &setup.ball_mm, &id, None);
+        assert_finite_text("the identification report", &report, text);
+        out.push(report);
+    }
+    Some(out)
+}
+
+/// PSD readings CSV → the reader on paper 003's layout → every run's 13 errors against the
+/// first run → the text report with the uncertainty of a 0.2 µm reading.
+pub fn psd_path(text: &str) -> Option<String> {
+    let layout = PsdLayout::paper();
+    let runs = psd_frame::parse_readings_csv(&layout, text).ok()?;
+    let reference = runs.first()?.0;
+    let out = psd::errors_against(&layout, &runs, reference).ok()?;
+    let u = psd_frame::derive_uncertainty(&layout, 0.2 * 2f64.sqrt()).ok()?;
+    let report = psd::errors_text(reference, &out, &u);
+    assert_finite_text("the PSD report", &report, text);
+    for (_, e) in &out {
+        assert_finite_value("the PSD errors", e, text);
+    }
+    Some(report)
+}
+
+/// Thermal CSV → the dataset reader → ISO 230-3 (ETVE) → the thermal model: fitted, written as
+/// JSON, read back, described, predicting the same data → the diagnosis.
+pub fn thermal_path(text: &str) -> Option<Vec<String>> {
+    let ds = thermal::ThermalDataset::from_csv(text).ok()?;
+    let mut out = vec![];
+    if let Ok(r) = iso230_3::evaluate(&ds, None, Path::new(INPUT)) {
+        out.push(iso230_3::render(&r, INPUT));
+    }
+    if ds.channel_names.is_empty() {
+        return Some(out);
+    }
+    if let Ok(model) = thermal::fit(&ds, &thermal::FitOptions::default()) {
+        out.extend(thermal_model_outputs(&model, &ds, text));
+    }
+    if let Ok(d) = thermal::diagnose(&ds, &thermal::DiagnoseOptions::default()) {
+        out.push(d.render());
+    }
+    for o in &out {
+        assert_finite_text("a thermal output", o, text);
+    }
+    Some(out)
+}
+
+fn thermal_model_outputs(
+    model: &thermal::ThermalModel,
+    ds: &thermal::ThermalDataset,
+    text: &str,
+) -> Vec<String> {
+    let mut out = vec![model.describe()];
+    let Ok(json) = fit::model_json(model) else {
+        return out;
+    };
+    let back: thermal::ThermalModel = match serde_json::from_str(&json) {
+        Ok(m) => m,
+        Err(e) => panic!("a written model does not read back ({e}):\n{json}\n--- input:\n{text}"),
+    };
+    if let Ok(p) = back.predict(ds) {
+        let level = back.channels.first().map_or(0.95, |c| c.interval.level);
+        if let Ok(csv) = predict::prediction_csv(&p, level) {
+            out.push(csv);
+        }
+    }
+    out.push(json);
+    out
+}
+
+/// Budget TOML → the budget reader → GUM and a Monte Carlo of 1 000 trials with the §8
+/// validation → the text report.
+pub fn budget_path(text: &str) -> Option<String> {
+    let budget = uncertainty::Budget::from_toml(text).ok()?;
+    let opts = uncertainty::McOptions {
+        fixed_trials: Some(1000),
+        ..budget.mc_options()
+    };
+    let report = budget.evaluate(uncertainty::Method::Both, &opts, None).ok()?;
+    let t = metrolog_analysis::uncertainty_text::budget_text(&report, &budget);
+    assert_finite_text("the budget report", &t, text);
+    Some(t)
+}

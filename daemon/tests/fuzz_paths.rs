@@ -1,0 +1,78 @@
+//! Replays the corpora of the analysis-path fuzz targets (`protocol/fuzz/corpus/capball_path`,
+//! `psd_path`, `thermal_path`, `budget_path`: example inputs, the hostile corpus' files of
+//! each kind, and any finding kept there) through `metrolog::fuzzcheck`, so CI re-runs every
+//! finding on stable. Each path must end without a panic and without a NaN or an infinity in
+//! an output; the example inputs must go all the way through.
+
+use std::path::PathBuf;
+
+use metrolog::fuzzcheck::{budget_path, capball_path, psd_path, thermal_path};
+
+fn corpus(target: &str) -> Vec<(String, String)> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../protocol/fuzz/corpus")
+        .join(target);
+    let mut files: Vec<(String, String)> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| {
+            let p = e.expect("a directory entry").path();
+            let bytes = std::fs::read(&p).expect("a corpus file");
+            (
+                p.file_name()
+                    .expect("a file name")
+                    .to_string_lossy()
+                    .into_owned(),
+                String::from_utf8_lossy(&bytes).into_owned(),
+            )
+        })
+        .collect();
+    files.sort();
+    assert!(files.len() >= 2, "{}: {files:?}", dir.display());
+    files
+}
+
+#[test]
+fn capball_path_corpus() {
+    for (name, text) in corpus("capball_path") {
+        let out = capball_path(&text);
+        if name == "capball_identification_40.csv" {
+            let reports = out.unwrap_or_else(|| panic!("{name} refused"));
+            assert_eq!(reports.len(), 1, "{name}");
+            assert!(reports[0].contains("run 1: 40 poses"), "{}", reports[0]);
+        }
+    }
+}
+
+#[test]
+fn psd_path_corpus() {
+    for (name, text) in corpus("psd_path") {
+        let out = psd_path(&text);
+        if name == "psd_readings.csv" {
+            let report = out.unwrap_or_else(|| panic!("{name} refused"));
+            assert!(report.contains("squareness EC0Y"), "{report}");
+        }
+    }
+}
+
+#[test]
+fn thermal_path_corpus() {
+    for (name, text) in corpus("thermal_path") {
+        let out = thermal_path(&text);
+        if name == "real_spindle_excerpt.csv" {
+            let outputs = out.unwrap_or_else(|| panic!("{name} refused"));
+            // ETVE, the model's description, the prediction CSV, the model JSON, the diagnosis.
+            assert_eq!(outputs.len(), 5, "{outputs:#?}");
+        }
+    }
+}
+
+#[test]
+fn budget_path_corpus() {
+    for (name, text) in corpus("budget_path") {
+        let out = budget_path(&text);
+        if name.starts_with("jcgm") || name.starts_with("li80") {
+            let report = out.unwrap_or_else(|| panic!("{name} refused"));
+            assert!(report.contains("Monte Carlo"), "{name}: {report}");
+        }
+    }
+}

@@ -120,7 +120,9 @@ pub fn budget_path(text: &str) -> Option<String> {
         fixed_trials: Some(1000),
         ..budget.mc_options()
     };
-    let report = budget.evaluate(uncertainty::Method::Both, &opts, None).ok()?;
+    let report = budget
+        .evaluate(uncertainty::Method::Both, &opts, None)
+        .ok()?;
     let t = metrolog_analysis::uncertainty_text::budget_text(&report, &budget);
     assert_finite_text("the budget report", &t, text);
     Some(t)

@@ -15,6 +15,6 @@ pub mod acquire;
 pub mod cli;
 pub mod cmd;
 pub mod exit;
-pub mod live;
 #[doc(hidden)]
 pub mod fuzzcheck;
+pub mod live;

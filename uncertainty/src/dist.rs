@@ -4,7 +4,6 @@
 use rand::Rng;
 use rand_distr::{Distribution as _, StandardNormal};
 use serde::{Deserialize, Serialize};
-use statrs::distribution::{ContinuousCDF, StudentsT};
 
 use super::UncertaintyError;
 
@@ -208,10 +207,9 @@ impl Distribution {
             Distribution::Arcsine { mean, half_width } => {
                 mean - half_width * (std::f64::consts::PI * p).cos()
             }
-            Distribution::StudentT { mean, scale, dof } => match StudentsT::new(0.0, 1.0, dof) {
-                Ok(t) => mean + scale * t.inverse_cdf(p),
-                Err(_) => f64::NAN,
-            },
+            Distribution::StudentT { mean, scale, dof } => {
+                crate::gum::t_quantile(p, dof).map_or(f64::NAN, |t| mean + scale * t)
+            }
             Distribution::Trapezoidal {
                 mean,
                 half_width,

@@ -105,7 +105,11 @@ pub(crate) fn errors_against(
 
 /// The text report: per run, the squareness with its uncertainty `u` (in the order of
 /// [`psd_frame::PsdErrors::names`]), the positioning change and the ranges of the rest.
-pub(crate) fn errors_text(reference: u32, out: &[(u32, psd_frame::PsdErrors)], u: &[f64]) -> String {
+pub(crate) fn errors_text(
+    reference: u32,
+    out: &[(u32, psd_frame::PsdErrors)],
+    u: &[f64],
+) -> String {
     use std::fmt::Write as _;
     let span = |v: &[f64]| {
         v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)

@@ -181,6 +181,13 @@ const CASES: &[Case] = &[
         1,
         &["not a finite number", "too large"],
     ),
+    // Found by the budget_path fuzz target: ν_eff of 7·10²⁶ (a dominant input without ν) made
+    // statrs' t quantile loop for ever; the expansion about the normal quantile answers.
+    case(
+        "uncertainty {c}/budget-dof-1e8.toml --method gum",
+        0,
+        &["k = 2.576"],
+    ),
     case(
         "volumetric --errors {x}/models/component_errors.csv --machine {c}/machine-tool-offset-1e308.toml --grid 0:400:3,0:300:3,0:200:3 --out {o}/t.csv",
         1,

@@ -632,7 +632,7 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
         &browser,
         &modules,
         url,
-        "body:has(#posek[data-of]):has(tr.counter[data-instrument=\"trigger\"]:not([data-samples=\"0\"])) tr.pose[data-instrument=\"psd\"]",
+        "body:has(#posek[data-of]):has(#settle[data-last-counts*=\"psd:\"]):has(tr.counter[data-instrument=\"trigger\"]:not([data-samples=\"0\"])) tr.pose[data-instrument=\"psd\"]",
         "live_page_running.png",
     );
     assert_fits(&dom);
@@ -644,6 +644,20 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
         .map(|v| v.parse().unwrap())
         .collect();
     assert_eq!(shown, trajectory[&k].to_vec(), "target of pose {k}");
+    // A finished dwell's samples per instrument, against the window of the config
+    // ([detector] samples, 150 by default): every instrument delivered some.
+    assert_eq!(attr_of_id(&dom, "settle", "data-window"), "150");
+    let counts: BTreeMap<&str, u64> = attr_of_id(&dom, "settle", "data-last-counts")
+        .split(',')
+        .filter_map(|c| c.split_once(':'))
+        .map(|(i, n)| (i, n.parse().unwrap()))
+        .collect();
+    for inst in ["interferometer", "capball", "psd"] {
+        assert!(
+            counts.get(inst).is_some_and(|n| *n > 0),
+            "{inst}: {counts:?}"
+        );
+    }
     let value = attr_of_id(&dom, "tile-interferometer", "data-value");
     assert!(
         value.parse::<f64>().is_ok(),

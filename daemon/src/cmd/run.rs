@@ -424,6 +424,7 @@ async fn start_live(cfg: &Config, log_path: &std::path::Path) -> Option<crate::l
             .flat_map(|t| t.sensors.iter().map(|s| s.name.clone()))
             .collect(),
         trajectory: trajectory_rows(cfg),
+        window_samples: cfg.detector.samples,
     };
     match crate::live::LiveView::start(live, run).await {
         Ok(l) => Some(l),

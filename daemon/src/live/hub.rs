@@ -46,6 +46,8 @@ pub struct RunInfo {
     pub temperature_sensors: Vec<String>,
     /// The run's pose table (the page shows "pose k of N" and the pose's target).
     pub trajectory: Vec<TrajectoryRow>,
+    /// Samples a steady value averages (`[detector] samples`).
+    pub window_samples: usize,
 }
 
 /// What the tap and the client sessions share.

@@ -29,7 +29,8 @@ pub fn channel_id(index: usize) -> u64 {
 /// `metadata` (string values, as the protocol wants): the machine, the temperature module's
 /// channel names (in `/temperature`'s channel order, comma-separated; empty without a module)
 /// and the trajectory as JSON text, `[[pose, x_mm, y_mm, z_mm], ...]` (`[]` without one), so
-/// the page can say "pose k of N" and the target of the pose being measured.
+/// the page can say "pose k of N" and the target of the pose being measured, and the samples a
+/// steady value averages (`window_samples`), against which the page counts a dwell's samples.
 pub fn server_info(run: &RunInfo) -> String {
     let trajectory: Vec<Value> = run
         .trajectory
@@ -45,6 +46,7 @@ pub fn server_info(run: &RunInfo) -> String {
             "machine": run.machine,
             "temperature_sensors": run.temperature_sensors.join(","),
             "trajectory": Value::Array(trajectory).to_string(),
+            "window_samples": run.window_samples.to_string(),
         },
         "sessionId": run.session,
     })

@@ -428,3 +428,42 @@ fn predict_refuses_missing_sensors_and_unwritable_outputs() {
         .collect();
     assert!(left.is_empty(), "{left:?}");
 }
+
+/// `metrolog sim --thermal` serves the simulated temperature module beside the instruments and
+/// writes a config that reads it: the config passes `run --check` (ports that exist, one
+/// instrument per port) while the simulator runs, and names every sensor and the spindle speed.
+#[test]
+fn sim_thermal_serves_the_temperature_module_its_config_reads() {
+    use std::io::BufRead as _;
+    let dir = tempfile::tempdir().unwrap();
+    let sim_dir = dir.path().join("sim");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(["sim", "--thermal", "--start-delay-s", "1000", "--dir"])
+        .arg(&sim_dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut seen = vec![];
+    // The config is printed once every port is open (a condition, not a time).
+    for l in lines.by_ref() {
+        let l = l.unwrap();
+        let done = l.starts_with("run the daemon with");
+        seen.push(l);
+        if done {
+            break;
+        }
+    }
+    let out = seen.join("\n");
+    let cfg = sim_dir.join("metrolog.toml");
+    let check = metrolog(&["run", "--check", "--config", cfg.to_str().unwrap()]);
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let status = child.wait().unwrap();
+    assert!(out.contains("temperature"), "{out}");
+    let toml = std::fs::read_to_string(&cfg).unwrap();
+    assert!(toml.contains("[temperature]"), "{toml}");
+    assert!(toml.contains("name = \"spindle_rpm\""), "{toml}");
+    assert_eq!(check.code, Some(0), "{}\n{}", check.stdout, check.stderr);
+    assert!(status.success(), "sim: {status:?}");
+}

@@ -26,6 +26,11 @@ pub struct Args {
     /// direction of motion. Measure again and compare with `metrolog compensate verify`.
     #[arg(long, value_name = "FILE")]
     pub apply_comp: Option<PathBuf>,
+    /// The demo's thermal run instead of the positioning program: its machine heated by the
+    /// spindle, time compressed 480×, the CapBall at 20 kHz and the simulated Modbus
+    /// temperature module (sensors and spindle speed).
+    #[arg(long, conflicts_with = "config")]
+    pub thermal: bool,
 }
 
 /// Reads a LinuxCNC type-1 comp file as LinuxCNC loads it ([`sim::ScrewComp`]); lines LinuxCNC
@@ -165,6 +170,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     crate::acquire::service::init_tracing();
     let mut scenario = match &args.config {
         Some(p) => Scenario::load(p)?,
+        None if args.thermal => {
+            use crate::cmd::demo::thermal as th;
+            let plan = th::demo_plan(th::THERMAL_TIME_SCALE)?;
+            th::thermal_scenario(&plan, th::demo_machine(), th::THERMAL_TIME_SCALE)
+        }
         None => Scenario::demo(),
     };
     if let Some(p) = &args.apply_comp {
@@ -193,7 +203,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for d in [Device::Interferometer, Device::Capball, Device::Psd, Device::Trigger] {
             println!("  {:<15} {}", d.name(), sim.port(d).display());
         }
-        let toml = write_daemon_config(&sim, &dir, &dir.join("logs"), false)?;
+        let (toml, module) = daemon_config(&sim, &dir, args.thermal)?;
         let cfg_path = dir.join("metrolog.toml");
         std::fs::write(&cfg_path, &toml).with_context(|| format!("cannot write {}", cfg_path.display()))?;
         println!("\na metrolog config for them ({}):\n\n{toml}", cfg_path.display());
@@ -223,6 +233,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         }
         sim.shutdown().await;
+        if let Some(m) = module {
+            m.shutdown().await;
+        }
         anyhow::Ok(())
     })
+}
+
+/// The daemon's config for the simulated instruments of `dir`, and the simulated temperature
+/// module (at `dir/temperature`) when the scenario has a thermal machine. The demo's thermal
+/// run (`thermal`) reads the CapBall and the module, as `metrolog demo --thermal-only` does.
+fn daemon_config(
+    sim: &SimHandle,
+    dir: &Path,
+    thermal: bool,
+) -> anyhow::Result<(String, Option<sim::modbus::ModbusModule>)> {
+    use crate::cmd::demo::thermal as th;
+    let logs = dir.join("logs");
+    if sim.scenario().thermal.is_none() {
+        return Ok((write_daemon_config(sim, dir, &logs, false)?, None));
+    }
+    let link = dir.join("temperature");
+    let module = th::start_module(sim, &link)?;
+    println!("  {:<15} {}", "temperature", link.display());
+    let toml = if thermal {
+        th::thermal_config(sim, dir, &logs, &link)?
+    } else {
+        write_daemon_config(sim, dir, &logs, false)? + &th::temperature_section(sim, &link)?
+    };
+    Ok((toml, Some(module)))
 }

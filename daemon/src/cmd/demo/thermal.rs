@@ -200,8 +200,14 @@ pub fn thermal_config(
             crate::cmd::sim::SIM_PSD_RATE_HZ,
         ],
     )?;
-    let mut toml = without_sections(&base, &["interferometer", "psd"]);
-    toml += &format!(
+    let toml = without_sections(&base, &["interferometer", "psd"]);
+    Ok(toml + &temperature_section(sim, module_link)?)
+}
+
+/// The `[temperature]` section of the simulated module behind `module_link` (started by
+/// [`start_module`]): its sensors by name and location, then the spindle speed channel.
+pub fn temperature_section(sim: &sim::SimHandle, module_link: &Path) -> anyhow::Result<String> {
+    let mut toml = format!(
         "\n[temperature]\nport = {:?}\nunit = 1\nbaud = 115200\nscale_c = {MODULE_SCALE_C}\npoll_period_s = 0.05\ntimeout_s = 0.2\nsilence_s = 10\n",
         module_link.display().to_string()
     );

@@ -181,6 +181,12 @@ const CASES: &[Case] = &[
         1,
         &["not a finite number", "too large"],
     ),
+    // A before sample without scatter printed "variance ratio after/before inf".
+    case(
+        "parts {c}/parts-before-constant.csv {x}/models/parts_after.csv --tolerance=-10,10",
+        0,
+        &["variance ratio after/before: not defined"],
+    ),
     // Found by the budget_path fuzz target: ν_eff of 7·10²⁶ (a dominant input without ν) made
     // statrs' t quantile loop for ever; the expansion about the normal quantile answers.
     case(

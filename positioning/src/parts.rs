@@ -55,8 +55,9 @@ pub struct PartsReport {
     pub p_value: f64,
     /// Significant at 5 % (two-sided).
     pub significant: bool,
-    /// F = s_after² / s_before² (scatter ratio; the correction should leave it near 1).
-    pub variance_ratio: f64,
+    /// F = s_after² / s_before² (scatter ratio; the correction should leave it near 1);
+    /// `None` when it is not a finite number (the before sample has no scatter).
+    pub variance_ratio: Option<f64>,
 }
 
 fn stats(which: &str, x: &[f64], lo: f64, hi: f64) -> Result<SampleStats, PartsError> {
@@ -114,11 +115,7 @@ pub fn compare(before: &[f64], after: &[f64], lo: f64, hi: f64) -> Result<PartsR
     let dof = (vb + va).powi(2) / (vb * vb / (b.n as f64 - 1.0) + va * va / (a.n as f64 - 1.0));
     let td = StudentsT::new(0.0, 1.0, dof).map_err(|_| PartsError::NoScatter)?;
     let p = 2.0 * (1.0 - td.cdf(t.abs()));
-    let variance_ratio = if b.std_dev > 0.0 {
-        (a.std_dev / b.std_dev).powi(2)
-    } else {
-        f64::INFINITY
-    };
+    let variance_ratio = Some((a.std_dev / b.std_dev).powi(2)).filter(|f| f.is_finite());
     Ok(PartsReport {
         tolerance: [lo, hi],
         mean_shift: a.mean - b.mean,

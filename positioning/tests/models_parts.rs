@@ -21,7 +21,7 @@ fn welch_t_test_hand_worked() {
     assert!((r.dof - 5.882_352_9).abs() < 1e-6);
     assert!((r.p_value - 0.107_531).abs() < 1e-4, "{}", r.p_value);
     assert!(!r.significant);
-    assert!((r.variance_ratio - 4.0).abs() < 1e-12);
+    assert!((r.variance_ratio.unwrap() - 4.0).abs() < 1e-12);
 }
 
 #[test]
@@ -50,7 +50,7 @@ fn paper_like_mean_shift_is_significant() {
     let r = compare(&before, &after, -6.0, 6.0).unwrap();
     assert!(r.significant && r.p_value < 1e-10);
     assert!((r.mean_shift - 4.0).abs() < 1e-12);
-    assert!((r.variance_ratio - 1.0).abs() < 1e-12);
+    assert!((r.variance_ratio.unwrap() - 1.0).abs() < 1e-12);
     assert!(r.after.predicted_reject_pct < r.before.predicted_reject_pct);
 }
 
@@ -72,6 +72,14 @@ fn bad_inputs() {
         compare(&[1.0, 1.0], &[1.0, 1.0], 0.0, 3.0),
         Err(PartsError::NoScatter)
     ));
+    // A before sample without scatter has no variance ratio (it printed "inf").
+    let r = compare(&[1.0, 1.0], &[1.0, 2.0], 0.0, 3.0).unwrap();
+    assert_eq!(r.variance_ratio, None);
+    let r = compare(&[0.0, 1e-90], &[0.0, 1e70], -1e71, 1e71).unwrap();
+    assert_eq!(
+        r.variance_ratio, None,
+        "an overflowing ratio is not a number either"
+    );
     assert_eq!(
         parse_sample("b", "# gauges\ndiameter_mm\n1.5\n2.5\n").unwrap(),
         vec![1.5, 2.5]

@@ -70,9 +70,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "not significant at 5 %"
         }
     );
-    println!(
-        "variance ratio after/before {:.3} (a correction of systematic errors leaves it near 1)",
-        r.variance_ratio
-    );
+    match r.variance_ratio {
+        Some(f) => println!(
+            "variance ratio after/before {f:.3} (a correction of systematic errors leaves it near 1)"
+        ),
+        None => {
+            println!("variance ratio after/before: not defined (the before sample has no scatter)")
+        }
+    }
     Ok(())
 }

@@ -127,3 +127,60 @@ pub fn budget_path(text: &str) -> Option<String> {
     assert_finite_text("the budget report", &t, text);
     Some(t)
 }
+
+/// Before and after samples of `metrolog parts`, one text with the after sample following a
+/// line `---` → the readers → the comparison with tolerance [−10, 10] → the text and JSON.
+pub fn parts_path(text: &str) -> Option<String> {
+    let (before, after) = text.split_once("\n---\n")?;
+    let b = positioning::parts::parse_sample("before", before).ok()?;
+    let a = positioning::parts::parse_sample("after", after).ok()?;
+    let r = positioning::parts::compare(&b, &a, -10.0, 10.0).ok()?;
+    assert_finite_value("the parts comparison", &r, text);
+    serde_json::to_string(&r).ok()
+}
+
+/// The example machine of `examples/models` (three linear axes).
+const MACHINE_3AXIS: &str = include_str!("../../examples/models/machine_3axis.toml");
+
+/// Component errors CSV → the reader → the volumetric errors on a 3 × 3 × 3 grid of the example
+/// machine → the summary, the compensation CSV and the SINUMERIK CEC tables.
+pub fn volumetric_path(text: &str) -> Option<Vec<String>> {
+    use geometry::volumetric::{self, CecOptions, ComponentErrors, GridSpec};
+    let errors = ComponentErrors::from_csv(text).ok()?;
+    let machine = Machine::from_toml(MACHINE_3AXIS).ok()?;
+    let grid = GridSpec::parse("0:400:3,0:300:3,0:200:3").ok()?;
+    let points = volumetric::volumetric_grid(&machine, &errors, &grid).ok()?;
+    let summary = volumetric::summarize(&points);
+    assert_finite_value("the volumetric summary", &summary, text);
+    let mut out = vec![volumetric::compensation_csv(&points)];
+    let t = machine.tool_offset_mm;
+    let cec = volumetric::siemens_cec_for(
+        &points,
+        &grid,
+        &CecOptions {
+            axis_names: ["AX1", "AX2", "AX3"],
+            max_tables: volumetric::CEC_TABLES_840D,
+            tool_offset_mm: Some([t.x, t.y, t.z]),
+        },
+    );
+    if let Ok(c) = cec {
+        out.push(c.ini);
+    }
+    for o in &out {
+        assert_finite_text("a volumetric output", o, text);
+    }
+    Some(out)
+}
+
+/// Positioning CSV → the reader → the diagnosis of the axis (what ISO 230-2 and the baseline
+/// model miss, the extended model) with a 2-seed reproduction check → the text report.
+pub fn diagnose_path(text: &str) -> Option<String> {
+    use diagnose::axis;
+    let (data, _notes) =
+        positioning::positioning_data::PositioningData::from_csv_str_noted(text).ok()?;
+    let mut d = axis::diagnose(&data, &axis::Options::default()).ok()?;
+    d.report.reproduction = Some(axis::reproduction_check(&data, &d.model, 2));
+    let report = metrolog_analysis::diagnosis_text::positioning_text(&d);
+    assert_finite_text("the diagnosis", &report, text);
+    Some(report)
+}

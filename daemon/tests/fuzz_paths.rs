@@ -1,12 +1,14 @@
 //! Replays the corpora of the analysis-path fuzz targets (`protocol/fuzz/corpus/capball_path`,
-//! `psd_path`, `thermal_path`, `budget_path`: example inputs, the hostile corpus' files of
+//! `psd_path`, `thermal_path`, `budget_path`, `parts_path`, `volumetric_path`, `diagnose_path`: example inputs, the hostile corpus' files of
 //! each kind, and any finding kept there) through `metrolog::fuzzcheck`, so CI re-runs every
 //! finding on stable. Each path must end without a panic and without a NaN or an infinity in
 //! an output; the example inputs must go all the way through.
 
 use std::path::PathBuf;
 
-use metrolog::fuzzcheck::{budget_path, capball_path, psd_path, thermal_path};
+use metrolog::fuzzcheck::{
+    budget_path, capball_path, diagnose_path, parts_path, psd_path, thermal_path, volumetric_path,
+};
 
 fn corpus(target: &str) -> Vec<(String, String)> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -73,6 +75,41 @@ fn budget_path_corpus() {
         if name.starts_with("jcgm") || name.starts_with("li80") {
             let report = out.unwrap_or_else(|| panic!("{name} refused"));
             assert!(report.contains("Monte Carlo"), "{name}: {report}");
+        }
+    }
+}
+
+#[test]
+fn parts_path_corpus() {
+    for (name, text) in corpus("parts_path") {
+        let out = parts_path(&text);
+        if name.starts_with("parts") {
+            let json = out.unwrap_or_else(|| panic!("{name} refused"));
+            assert!(json.contains("\"variance_ratio\":"), "{json}");
+        }
+    }
+}
+
+#[test]
+fn volumetric_path_corpus() {
+    for (name, text) in corpus("volumetric_path") {
+        let out = volumetric_path(&text);
+        if name == "component_errors.csv" {
+            let outputs = out.unwrap_or_else(|| panic!("{name} refused"));
+            // The compensation CSV (a header and 27 points) and the CEC tables.
+            assert_eq!(outputs.len(), 2, "{outputs:#?}");
+            assert_eq!(outputs[0].lines().count(), 28, "{}", outputs[0]);
+        }
+    }
+}
+
+#[test]
+fn diagnose_path_corpus() {
+    for (name, text) in corpus("diagnose_path") {
+        let out = diagnose_path(&text);
+        if !name.starts_with("positioning-") && !name.starts_with("crash-") {
+            let report = out.unwrap_or_else(|| panic!("{name} refused"));
+            assert!(!report.is_empty(), "{name}");
         }
     }
 }

@@ -146,3 +146,128 @@ impl AsyncWrite for TtyPort {
         Poll::Ready(Ok(()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::os::fd::{FromRawFd, OwnedFd};
+    use std::time::Duration;
+
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    use super::*;
+
+    /// A pty pair: the master (the device's end) and the slave's path.
+    fn pty() -> (std::fs::File, String) {
+        let (mut master, mut slave) = (-1, -1);
+        // SAFETY: openpty writes two fds; the name, termios and winsize pointers may be null.
+        let r = unsafe {
+            libc::openpty(
+                &mut master,
+                &mut slave,
+                std::ptr::null_mut(),
+                std::ptr::null(),
+                std::ptr::null(),
+            )
+        };
+        assert_eq!(r, 0, "openpty: {}", io::Error::last_os_error());
+        // SAFETY: both fds were just opened and are owned here alone.
+        let (master, slave) =
+            unsafe { (OwnedFd::from_raw_fd(master), OwnedFd::from_raw_fd(slave)) };
+        let path = std::fs::read_link(format!("/proc/self/fd/{}", slave.as_raw_fd())).unwrap();
+        drop(slave);
+        (std::fs::File::from(master), path.display().to_string())
+    }
+
+    /// The fds in the process's epoll sets, read from the kernel (`/proc/self/fdinfo` of every
+    /// eventpoll fd lists its targets as `tfd:`), not from tokio.
+    fn in_epoll_sets() -> Vec<RawFd> {
+        let mut fds = Vec::new();
+        for e in std::fs::read_dir("/proc/self/fd").unwrap().flatten() {
+            let is_epoll = std::fs::read_link(e.path())
+                .is_ok_and(|l| l.to_string_lossy().contains("eventpoll"));
+            let info = std::fs::read_to_string(format!(
+                "/proc/self/fdinfo/{}",
+                e.file_name().to_string_lossy()
+            ));
+            if let (true, Ok(info)) = (is_epoll, info) {
+                fds.extend(info.lines().filter_map(|l| {
+                    l.strip_prefix("tfd:")?
+                        .split_whitespace()
+                        .next()?
+                        .parse::<RawFd>()
+                        .ok()
+                }));
+            }
+        }
+        fds
+    }
+
+    /// A tty is in the runtime's epoll set only while a read waits on it; read without waiting
+    /// it gives nothing, then the bytes written; a closed master is an error, as a pulled USB
+    /// adapter is.
+    #[tokio::test]
+    async fn a_tty_is_watched_only_while_a_read_waits_and_sees_its_master_close() {
+        use std::io::Write;
+        let (mut master, path) = pty();
+        let mut port = TtyPort::open(&path, 115_200).unwrap();
+        let fd = port.tty.as_raw_fd();
+        let mut buf = [0u8; 64];
+        assert!(port.try_read(&mut buf).unwrap().is_none());
+        assert!(!in_epoll_sets().contains(&fd), "watched before any wait");
+
+        // A waiting read registers the tty, then gets the bytes.
+        {
+            let mut read = std::pin::pin!(port.read(&mut buf));
+            let first = tokio::time::timeout(Duration::ZERO, &mut read).await;
+            assert!(first.is_err(), "read something before it was written");
+            assert!(in_epoll_sets().contains(&fd), "not watched while waiting");
+            master.write_all(b"hello").unwrap();
+            let n = tokio::time::timeout(Duration::from_secs(10), read)
+                .await
+                .unwrap()
+                .unwrap();
+            assert_eq!(n, 5);
+        }
+        assert_eq!(&buf[..5], b"hello");
+        port.unwatch();
+        assert!(
+            !in_epoll_sets().contains(&fd),
+            "still watched after unwatch"
+        );
+
+        // Commands go out through the same fd.
+        port.write_all(b"STREAM ON\n").await.unwrap();
+        let mut line = [0u8; 10];
+        std::io::Read::read_exact(&mut master, &mut line).unwrap();
+        assert_eq!(&line, b"STREAM ON\n");
+
+        // Bytes written meanwhile are there for a read that does not wait.
+        master.write_all(b"12345").unwrap();
+        let mut got = Vec::new();
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+        while got.len() < 5 && tokio::time::Instant::now() < deadline {
+            match port.try_read(&mut buf).unwrap() {
+                Some(n) => got.extend_from_slice(&buf[..n]),
+                None => tokio::time::sleep(Duration::from_millis(1)).await,
+            }
+        }
+        assert_eq!(got, b"12345");
+        assert!(
+            !in_epoll_sets().contains(&fd),
+            "a read that does not wait registered"
+        );
+
+        // The device's end closes: a read without waiting says so (EIO or end of file, both
+        // a lost port for the driver loop), not "nothing yet".
+        drop(master);
+        let gone = loop {
+            match port.try_read(&mut buf) {
+                Err(e) => break format!("error {e}"),
+                Ok(Some(0)) => break "end of file".to_string(),
+                Ok(got) if tokio::time::Instant::now() > deadline => panic!("still {got:?}"),
+                Ok(_) => tokio::time::sleep(Duration::from_millis(1)).await,
+            }
+        };
+        eprintln!("closed master: {gone}");
+    }
+}

@@ -46,8 +46,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for n in &notes {
         tracing::warn!("{n}");
     }
+    // One worker: the drivers read on a shared tick (docs/design.md, "Where the daemon's CPU
+    // goes"), so one thread wakes per tick for all of them; a second worker was woken on every
+    // tick as well, to look for work to steal. The log is written on the pipeline's thread.
     let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
+        .worker_threads(1)
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;

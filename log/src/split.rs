@@ -138,14 +138,10 @@ pub fn resolve(path: &Path) -> Result<Resolved, LogError> {
 
 /// The first missing part number of `parts` (sorted), if the numbering 1, 2, … has a hole.
 pub fn first_gap(parts: &[(u32, PathBuf)]) -> Option<u32> {
-    let mut want = 1;
-    for (n, _) in parts {
-        if *n != want {
-            return Some(want);
-        }
-        want += 1;
-    }
-    None
+    (1..)
+        .zip(parts)
+        .find(|(want, (n, _))| n != want)
+        .map(|(want, _)| want)
 }
 
 #[cfg(test)]

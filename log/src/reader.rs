@@ -70,6 +70,20 @@ pub struct ReadSummary {
     pub parts: Vec<std::path::PathBuf>,
 }
 
+impl ReadSummary {
+    /// For a split run read as one: `split run of N parts read as one: FIRST .. LAST`; None
+    /// for a single file. Every command that reads a log tells it.
+    pub fn split_note(&self) -> Option<String> {
+        let (first, last) = (self.parts.first()?, self.parts.last()?);
+        Some(format!(
+            "split run of {} parts read as one: {} .. {}",
+            self.parts.len(),
+            first.display(),
+            last.display()
+        ))
+    }
+}
+
 /// Whether the file's last bytes are the MCAP magic (the writer's very last write).
 fn ends_with_magic(file: &mut File) -> bool {
     use std::io::{Seek, SeekFrom};

@@ -96,8 +96,8 @@ fn main() {
         split_after: (split_min > 0.0).then(|| Duration::from_secs_f64(split_min * 60.0)),
         ..LogOptions::default()
     };
-    let w = LogWriter::create(&dir.path().join("metrolog-soak.mcap"), &meta, opts)
-        .expect("create log");
+    let w =
+        LogWriter::create(&dir.path().join("metrolog-soak.mcap"), &meta, opts).expect("create log");
     let mut rec = Recorder::new(w, &meta.detector).expect("recorder");
     println!(
         "soak: {hours} h simulated, CB-3 {cb3_hz} Hz, temperatures {temp_hz} Hz, triggers of a visit every 3 min, split every {split_min} min"
@@ -161,6 +161,10 @@ fn report(rss: &[u64], samples: u64, hours: f64, wall: Duration) {
         hi as f64 / 1e6,
         dev as f64 / 1e6,
         *rss.last().unwrap_or(&0) as f64 / 1e6,
-        if dev.abs() <= 1_000_000 { "met" } else { "NOT met" }
+        if dev.abs() <= 1_000_000 {
+            "met"
+        } else {
+            "NOT met"
+        }
     );
 }

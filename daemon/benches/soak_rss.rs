@@ -8,16 +8,25 @@
 //! `TEMP_HZ` (20, every 50 ms as in the demo), the LI-80's environment once a second, the CNC's
 //! triggers of a visit every 3 min (84 s move, 96 s dwell, as `metrolog plan thermal
 //! --every-min 3`). The log is flushed once a second of run time as the daemon does, and split
-//! every `SPLIT_MINUTES` (60; 0: one file, to see what splitting bounds); finished parts are
+//! every `SPLIT_MINUTES` (30; 0: one file, to see what splitting bounds); finished parts are
 //! deleted as retention would, so the disk holds about one part.
 //!
 //! The process's resident set (`VmRSS`, /proc/self/status) is read every simulated minute;
 //! printed: RSS after the first simulated hour, its largest deviation from that afterwards,
-//! RSS at the end, run length simulated and wall time.
+//! RSS at the end, run length simulated and wall time; beside it the bytes the Rust heap holds
+//! (a counting allocator), which tells data kept from pages the allocator keeps.
 //!
 //! `cargo bench -p metrolog --bench soak_rss` (env: HOURS, CB3_HZ, TEMP_HZ, SPLIT_MINUTES).
 
 use std::time::{Duration, Instant};
+
+// What Rust code holds (zstd's own buffers are C allocations and not counted): tells growth of
+// data kept (held grows) from the allocator's retained pages (RSS grows, held does not).
+#[path = "../../log/tests/support/counting_alloc.rs"]
+mod counting_alloc;
+
+#[global_allocator]
+static ALLOC: counting_alloc::Counting = counting_alloc::Counting;
 
 use drivers::DriverEvent;
 use drivers::synthetic::SyntheticRun;
@@ -80,7 +89,7 @@ fn main() {
     let hours = env_f64("HOURS", 48.0);
     let cb3_hz = env_f64("CB3_HZ", 1000.0);
     let temp_hz = env_f64("TEMP_HZ", 20.0);
-    let split_min = env_f64("SPLIT_MINUTES", 60.0);
+    let split_min = env_f64("SPLIT_MINUTES", 30.0);
     let run = thermal_run(hours, cb3_hz, temp_hz);
     let dir = tempfile::tempdir().expect("temporary directory");
     let meta = RunMetadata {
@@ -105,6 +114,7 @@ fn main() {
     let t0 = Instant::now();
     let (mut now, mut next_flush, mut next_minute) = (run.start_ns, run.start_ns, run.start_ns);
     let mut rss: Vec<u64> = Vec::new();
+    let mut held: Vec<u64> = Vec::new();
     let mut samples = 0u64;
     let mut part = rec.part();
     for ev in run.events() {
@@ -123,22 +133,25 @@ fn main() {
         }
         if now >= next_minute {
             rss.push(rss_bytes());
+            held.push(counting_alloc::held() as u64);
             next_minute += 60_000_000_000;
             if rss.len() % 60 == 1 {
                 println!(
-                    "  hour {:>3}: RSS {:.2} MB, part {part}, {samples} samples, {:.0} s wall",
+                    "  hour {:>3}: RSS {:.2} MB, heap held {:.2} MB, part {part}, {samples} samples, {:.0} s wall",
                     rss.len() / 60,
                     *rss.last().unwrap_or(&0) as f64 / 1e6,
+                    *held.last().unwrap_or(&0) as f64 / 1e6,
                     t0.elapsed().as_secs_f64()
                 );
             }
         }
     }
     rec.finish(now).expect("finish");
-    report(&rss, samples, hours, t0.elapsed());
+    report("RSS", &rss, samples, hours, t0.elapsed());
+    report("heap held", &held, samples, hours, t0.elapsed());
 }
 
-fn report(rss: &[u64], samples: u64, hours: f64, wall: Duration) {
+fn report(what: &str, rss: &[u64], samples: u64, hours: f64, wall: Duration) {
     let Some(&at_hour) = rss.get(60) else {
         println!("run shorter than an hour: RSS {rss:?}");
         return;
@@ -154,7 +167,7 @@ fn report(rss: &[u64], samples: u64, hours: f64, wall: Duration) {
         after.iter().max().copied().unwrap_or(0),
     );
     println!(
-        "soak result: {hours} h simulated ({samples} samples) in {:.0} s wall; RSS after the first hour {:.2} MB; after it {:.2} .. {:.2} MB, largest deviation {:+.3} MB; at the end {:.2} MB (target ±1 MB: {})",
+        "soak result: {hours} h simulated ({samples} samples) in {:.0} s wall; {what} after the first hour {:.2} MB; after it {:.2} .. {:.2} MB, largest deviation {:+.3} MB; at the end {:.2} MB (target ±1 MB: {})",
         wall.as_secs_f64(),
         at_hour as f64 / 1e6,
         lo as f64 / 1e6,

@@ -471,7 +471,13 @@ impl LogWriter {
         };
         let mut k = 1;
         loop {
-            let path = LogWriter::free_name(dir, &base, opts.splits(), k);
+            let (path, other) = LogWriter::free_name(dir, &base, opts.splits(), k);
+            // A run name is taken by a file of either form (one file, or a split run's part
+            // 1): two runs of one name would be one run to retention.
+            if other.exists() && k < 1000 {
+                k += 1;
+                continue;
+            }
             match LogWriter::create(&path, meta, opts.clone()) {
                 Err(LogError::Create { source, .. })
                     if source.kind() == std::io::ErrorKind::AlreadyExists && k < 1000 =>
@@ -483,16 +489,21 @@ impl LogWriter {
         }
     }
 
-    /// Like [`LogWriter::create_in_dir`], the file name (without `.mcap`) the run gets.
-    fn free_name(dir: &Path, base: &str, splits: bool, k: u32) -> PathBuf {
+    /// For [`LogWriter::create_in_dir`]: the first file of candidate `k` of run name `base`,
+    /// and the first file of that name in the other form (split or not).
+    fn free_name(dir: &Path, base: &str, splits: bool, k: u32) -> (PathBuf, PathBuf) {
         let run = if k == 1 {
             base.to_string()
         } else {
             format!("{base}-{k}")
         };
+        let (part, whole) = (
+            dir.join(part_name(&run, 1)),
+            dir.join(format!("{run}.mcap")),
+        );
         match splits {
-            true => dir.join(part_name(&run, 1)),
-            false => dir.join(format!("{run}.mcap")),
+            true => (part, whole),
+            false => (whole, part),
         }
     }
 

@@ -178,6 +178,34 @@ fn a_split_run_reads_as_the_unsplit_one_from_any_part_or_its_directory() {
     }
 }
 
+/// Runs started in the same second get distinct run names whether split or not (a split run
+/// and a one-file run of one name would be one run to retention).
+#[test]
+fn a_run_name_is_never_shared_by_a_split_and_an_unsplit_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let meta = RunMetadata {
+        machine: "m".into(),
+        started_ns: 1_795_305_600_000_000_000,
+        ..RunMetadata::default()
+    };
+    let names: Vec<String> = [LogOptions::default(), split_opts(), LogOptions::default()]
+        .into_iter()
+        .map(|o| {
+            let w = LogWriter::create_in_dir(dir.path(), &meta, o).unwrap();
+            let p = w.finish().unwrap();
+            p.file_name().unwrap().to_string_lossy().into_owned()
+        })
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "metrolog-m-20261122T000000Z.mcap",
+            "metrolog-m-20261122T000000Z-2-p0001.mcap",
+            "metrolog-m-20261122T000000Z-3.mcap"
+        ]
+    );
+}
+
 #[test]
 fn a_split_run_by_size_keeps_parts_near_the_size() {
     let dir = tempfile::tempdir().unwrap();

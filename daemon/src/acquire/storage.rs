@@ -183,9 +183,9 @@ pub fn apply(
                 break;
             }
             let why = format!(
-                "{:.2} GB free, less than min_free_gb {:.2}",
-                out.free_bytes as f64 / GB,
-                min as f64 / GB
+                "{} GB free, less than min_free_gb {}",
+                gb(out.free_bytes),
+                gb(min)
             );
             delete(&r, why, &mut out)?;
             out.free_bytes = free.free_bytes(dir)?;
@@ -196,6 +196,18 @@ pub fn apply(
 
 /// Deletes every file of run `r` (part 1 last, so a run cut short by an error still shows
 /// where it began).
+/// Bytes in GB with two decimals, or with four significant digits below 0.1 GB (a small
+/// file system would read "0.00 GB free, less than 0.00").
+fn gb(bytes: u64) -> String {
+    let x = bytes as f64 / GB;
+    if x >= 0.1 || x == 0.0 {
+        format!("{x:.2}")
+    } else {
+        let decimals = (3.0 - x.log10().floor()).clamp(2.0, 12.0) as usize;
+        format!("{x:.decimals$}")
+    }
+}
+
 fn delete(r: &RunFile, why: String, out: &mut Applied) -> std::io::Result<()> {
     let mut gone = 0;
     for f in r.files.iter().rev() {
@@ -466,6 +478,13 @@ mod tests {
             .collect();
         assert_eq!(deleted, ["metrolog-m-a-p0001.mcap", "metrolog-m-b.mcap"]);
         assert!(a.deleted[0].1.contains("all 2 parts"), "{:?}", a.deleted);
+        assert!(
+            a.deleted[0]
+                .1
+                .starts_with("0.0000001000 GB free, less than min_free_gb 0.0000003500"),
+            "{:?}",
+            a.deleted
+        );
         assert_eq!(
             names(d),
             ["metrolog-m-c-p0001.mcap", "metrolog-m-c-p0002.mcap"]

@@ -99,7 +99,7 @@ fn run_in_dir(dir: &Path) -> Result<String, LogError> {
     };
     match runs.len() {
         0 => Err(not(
-            "it is a directory without the parts of a split run (*-pNNNN.mcap)".into(),
+            "it is not a regular file but a directory, and holds no parts of a split run (*-pNNNN.mcap)".into(),
         )),
         1 => Ok(runs.pop_first().unwrap_or_default()),
         n => Err(not(format!(

@@ -1003,10 +1003,11 @@ async fn a_split_run_keeps_running_while_retention_frees_old_runs() {
     // The current run: parts 1..n, none missing, read as one run (our reader, from part 2).
     let parts = current_parts(&logs, &old_names);
     assert!(parts.len() >= 4, "{parts:?}");
-    let mut messages = 0;
+    let (mut messages, mut statuses) = (0, 0u64);
     let summary = metrolog_log::read_log(&parts[1].0, |item| {
-        if let metrolog_log::LogItem::Message { .. } = item {
+        if let metrolog_log::LogItem::Message { topic, .. } = item {
             messages += 1;
+            statuses += u64::from(topic == "/status");
         }
     })
     .unwrap();
@@ -1017,6 +1018,24 @@ async fn a_split_run_keeps_running_while_retention_frees_old_runs() {
     let files: Vec<PathBuf> = parts.iter().map(|p| p.0.clone()).collect();
     assert_eq!(summary.parts, files);
     assert!(messages > 1000, "{messages}");
+    // Each part alone, read by the independent Python reader: closed, schema-valid, with the
+    // run metadata and the config and trajectory; their /status records add up to the run's.
+    if python_ok() {
+        let mut py_statuses = 0;
+        for (p, _) in &parts {
+            let r = read_log(p);
+            assert_eq!(r["complete"], true, "{p:?}: {}", r["read_error"]);
+            assert_eq!(r["n_errors"], 0, "{p:?}: {}", r["errors"]);
+            let att = r["attachments"].to_string();
+            assert!(
+                att.contains("metrolog.toml") && att.contains("trajectory.csv"),
+                "{p:?}: {att}"
+            );
+            assert!(!r["metadata"]["metrolog.run"].is_null(), "{p:?}");
+            py_statuses += r["counts"]["/status"].as_u64().unwrap_or(0);
+        }
+        assert_eq!(py_statuses, statuses);
+    }
 
     // Retention deleted old runs whole, oldest first, and nothing of the current run.
     let deleted: Vec<&str> = stderr

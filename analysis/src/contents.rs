@@ -250,4 +250,5 @@ pub(crate) fn is_ok(p: &PoseMsg) -> bool {
 pub fn is_mcap(path: &Path) -> bool {
     path.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+        || (path.is_dir() && metrolog_log::split::resolve(path).is_ok())
 }

@@ -450,14 +450,29 @@ fn storage_policy_is_read_and_its_mistakes_reported_together() {
     );
     assert_eq!(c.storage.min_free_bytes, Some(2_500_000_000));
     assert_eq!(c.storage.warn_free_bytes, 10_000_000_000);
-    let text = format!("{GOOD}[storage]\nkeep_days = 0\nmin_free_gb = -1\nwarn_free_gb = nan\n");
+    assert_eq!((c.storage.split_after, c.storage.split_bytes), (None, None));
+    let c = parse(&format!(
+        "{GOOD}[storage]\nsplit_minutes = 30\nsplit_mb = 500\n"
+    ))
+    .unwrap();
+    assert_eq!(
+        c.storage.split_after,
+        Some(std::time::Duration::from_secs(30 * 60))
+    );
+    assert_eq!(c.storage.split_bytes, Some(500_000_000));
+    let text = format!(
+        "{GOOD}[storage]\nkeep_days = 0\nmin_free_gb = -1\nwarn_free_gb = nan\nsplit_minutes = 0.5\nsplit_mb = 0\n"
+    );
     let e = parse(&text).unwrap_err();
     let each: Vec<String> = e.each().iter().map(|e| e.to_string()).collect();
-    assert_eq!(each.len(), 3, "{e}");
-    for (msg, key) in each
-        .iter()
-        .zip(["keep_days", "min_free_gb", "warn_free_gb"])
-    {
+    assert_eq!(each.len(), 5, "{e}");
+    for (msg, key) in each.iter().zip([
+        "keep_days",
+        "min_free_gb",
+        "warn_free_gb",
+        "split_minutes",
+        "split_mb",
+    ]) {
         let line = line_of(&text, key);
         assert!(
             msg.starts_with(&format!("/etc/metrolog/metrolog.toml:{line}:"))

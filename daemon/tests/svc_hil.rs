@@ -884,6 +884,186 @@ fn retention_frees_a_small_file_system_oldest_run_first() {
     assert!(free >= 2_000_000, "{free}");
 }
 
+/// Old runs on a small file system (a 16 MiB tmpfs; root only): three runs of 4 MiB, the
+/// oldest split in two parts, leave about 4 MB free.
+fn old_runs(logs: &Path) -> Vec<(&'static str, Vec<&'static str>)> {
+    let runs = vec![
+        (
+            "metrolog-m-20260101T000000Z",
+            vec![
+                "metrolog-m-20260101T000000Z-p0001.mcap",
+                "metrolog-m-20260101T000000Z-p0002.mcap",
+            ],
+        ),
+        (
+            "metrolog-m-20260102T000000Z",
+            vec!["metrolog-m-20260102T000000Z.mcap"],
+        ),
+        (
+            "metrolog-m-20260103T000000Z",
+            vec!["metrolog-m-20260103T000000Z.mcap"],
+        ),
+    ];
+    let now = std::time::SystemTime::now();
+    for (k, (_, files)) in runs.iter().enumerate() {
+        for f in files {
+            let p = logs.join(f);
+            std::fs::write(&p, vec![7u8; (4 << 20) / files.len()]).unwrap();
+            let age = Duration::from_secs(86_400 * (3 - k as u64));
+            std::fs::File::options()
+                .write(true)
+                .open(&p)
+                .unwrap()
+                .set_modified(now - age)
+                .unwrap();
+        }
+    }
+    runs
+}
+
+/// The bytes of the files of the current run (`metrolog-m-2…-pNNNN.mcap` not among `old`).
+fn current_parts(logs: &Path, old: &[&str]) -> Vec<(PathBuf, u64)> {
+    let mut v: Vec<(PathBuf, u64)> = std::fs::read_dir(logs)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| {
+            let n = e.file_name().to_string_lossy().into_owned();
+            n.contains("-p0") && !old.iter().any(|o| n.starts_with(o))
+        })
+        .map(|e| (e.path(), e.metadata().map(|m| m.len()).unwrap_or(0)))
+        .collect();
+    v.sort();
+    v
+}
+
+/// A split run keeps running on a small file system while retention frees the old runs: on a
+/// 16 MiB tmpfs with about 4 MB free and `min_free_gb = 0.0035`, the run (at full rates, in
+/// parts of 1 MB) writes more than was free at its start; retention deletes the old runs
+/// whole, oldest first (both parts of the split one), never a part of the current run, and
+/// the run is never stopped for space (it ends at SIGTERM with exit 0; every part there and
+/// read as one run). Without the retention the run stops at ENOSPC (exit 74): the disk-full
+/// test above.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_split_run_keeps_running_while_retention_frees_old_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let ports = dir.path().join("ports");
+    let logs = dir.path().join("logs");
+    std::fs::create_dir_all(&ports).unwrap();
+    std::fs::create_dir_all(&logs).unwrap();
+    let _fs = match SmallFs::mount(&logs, "16m") {
+        Ok(fs) => fs,
+        Err(why) => {
+            println!(
+                "SKIPPED the split retention test: cannot mount a small tmpfs ({why}); run as root"
+            );
+            return;
+        }
+    };
+    let old = old_runs(&logs);
+    let old_names: Vec<&str> = old.iter().map(|(r, _)| *r).collect();
+    let free_at_start = {
+        let s = nix::sys::statvfs::statvfs(&logs).unwrap();
+        s.blocks_available() as u64 * s.fragment_size() as u64
+    };
+    let mut sc = scenario();
+    sc.faults = Default::default();
+    let sim = sim::Sim::start(sc, &ports).unwrap();
+    let mut toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
+    toml += "\n[storage]\nmin_free_gb = 0.0035\nwarn_free_gb = 0\nsplit_mb = 1\n";
+    let cfg = dir.path().join("metrolog.toml");
+    std::fs::write(&cfg, toml).unwrap();
+    let mut child = start_daemon(&cfg);
+    // Until the run has written 1.5× what was free at its start (or it ended).
+    let t0 = Instant::now();
+    let written = loop {
+        let w: u64 = current_parts(&logs, &old_names).iter().map(|p| p.1).sum();
+        if w > free_at_start * 3 / 2 || child.try_wait().unwrap().is_some() {
+            break w;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(300),
+            "the run wrote only {w} bytes in 300 s"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    };
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the run ended by itself after {written} bytes:\n{}",
+        child.wait_with_output_stderr()
+    );
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    let status = wait_exit(&mut child, Duration::from_secs(60)).await;
+    let stderr = child.wait_with_output_stderr();
+    sim.shutdown().await;
+    assert!(status.success(), "{status}\n{stderr}");
+    assert!(!stderr.contains("No space left"), "{stderr}");
+
+    // The current run: parts 1..n, none missing, read as one run (our reader, from part 2).
+    let parts = current_parts(&logs, &old_names);
+    assert!(parts.len() >= 4, "{parts:?}");
+    let (mut messages, mut statuses) = (0, 0u64);
+    let summary = metrolog_log::read_log(&parts[1].0, |item| {
+        if let metrolog_log::LogItem::Message { topic, .. } = item {
+            messages += 1;
+            statuses += u64::from(topic == "/status");
+        }
+    })
+    .unwrap();
+    assert!(
+        summary.error.is_none() && summary.clean_close,
+        "{summary:?}"
+    );
+    let files: Vec<PathBuf> = parts.iter().map(|p| p.0.clone()).collect();
+    assert_eq!(summary.parts, files);
+    assert!(messages > 1000, "{messages}");
+    // Each part alone, read by the independent Python reader: closed, schema-valid, with the
+    // run metadata and the config and trajectory; their /status records add up to the run's.
+    if python_ok() {
+        let mut py_statuses = 0;
+        for (p, _) in &parts {
+            let r = read_log(p);
+            assert_eq!(r["complete"], true, "{p:?}: {}", r["read_error"]);
+            assert_eq!(r["n_errors"], 0, "{p:?}: {}", r["errors"]);
+            let att = r["attachments"].to_string();
+            assert!(
+                att.contains("metrolog.toml") && att.contains("trajectory.csv"),
+                "{p:?}: {att}"
+            );
+            assert!(!r["metadata"]["metrolog.run"].is_null(), "{p:?}");
+            py_statuses += r["counts"]["/status"].as_u64().unwrap_or(0);
+        }
+        assert_eq!(py_statuses, statuses);
+    }
+
+    // Retention deleted old runs whole, oldest first, and nothing of the current run.
+    let deleted: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.contains("retention: deleted"))
+        .collect();
+    assert!(!deleted.is_empty(), "{stderr}");
+    for (k, line) in deleted.iter().enumerate() {
+        assert!(line.contains(old_names[k]), "{k}: {line}\n{stderr}");
+    }
+    assert!(deleted[0].contains("all 2 parts"), "{}", deleted[0]);
+    let left: Vec<String> = std::fs::read_dir(&logs)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| old_names.iter().any(|o| n.starts_with(o)))
+        .collect();
+    for (run, files) in &old[..deleted.len()] {
+        assert!(!left.iter().any(|n| n.starts_with(run)), "{run}: {left:?}");
+        assert!(files.iter().all(|f| !logs.join(f).exists()));
+    }
+    println!(
+        "free at start {free_at_start} B; the run wrote {written} B in {} parts; retention: {deleted:?}",
+        parts.len()
+    );
+}
+
 /// A full disk with nothing retention may delete: the start exits 73 with what to do and
 /// leaves no empty log behind (a 1 MiB tmpfs filled by another file; root only).
 #[test]

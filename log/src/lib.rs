@@ -48,6 +48,7 @@ pub mod raw;
 pub mod reader;
 pub mod recover;
 mod run;
+pub mod split;
 pub mod topics;
 pub mod trajectory;
 pub mod writer;

@@ -64,6 +64,24 @@ pub struct ReadSummary {
     pub missing_messages: u64,
     pub first_log_ns: Option<u64>,
     pub last_log_ns: Option<u64>,
+    /// The files read as one split run (`crate::split`), in part order; empty for a single
+    /// file. The byte counts above are then over all of them.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<std::path::PathBuf>,
+}
+
+impl ReadSummary {
+    /// For a split run read as one: `split run of N parts read as one: FIRST .. LAST`; None
+    /// for a single file. Every command that reads a log tells it.
+    pub fn split_note(&self) -> Option<String> {
+        let (first, last) = (self.parts.first()?, self.parts.last()?);
+        Some(format!(
+            "split run of {} parts read as one: {} .. {}",
+            self.parts.len(),
+            first.display(),
+            last.display()
+        ))
+    }
 }
 
 /// Whether the file's last bytes are the MCAP magic (the writer's very last write).
@@ -183,7 +201,114 @@ fn record_length_limit(file_bytes: u64) -> usize {
 
 /// Like [`read_log_until`], telling `progress(bytes read, file bytes)` as it goes (for a
 /// progress bar: an 8-hour log is gigabytes).
+///
+/// A part of a split run, or a directory holding one run's parts, is read as the whole run
+/// (`crate::split`): every part from the first, in order, the records each part repeats from
+/// the ones before skipped; [`ReadSummary::parts`] lists the files. A missing part ends the
+/// reading there, reported in [`ReadSummary::error`] like damage inside a file.
 pub fn read_log_progress(
+    path: &Path,
+    progress: impl FnMut(u64, u64),
+    on: impl FnMut(LogItem<'_>) -> ControlFlow<()>,
+) -> Result<ReadSummary, LogError> {
+    match crate::split::resolve(path)? {
+        crate::split::Resolved::Single(p) => read_one(&p, progress, on),
+        crate::split::Resolved::Split { run, parts } => read_split(&run, &parts, progress, on),
+    }
+}
+
+/// Adds one part's summary to the run's.
+fn merge(run: &mut ReadSummary, part: ReadSummary, path: &Path) {
+    run.file_bytes += part.file_bytes;
+    run.bytes_read += part.bytes_read;
+    run.messages += part.messages;
+    run.missing_messages += part.missing_messages;
+    run.clean_close &= part.clean_close;
+    run.first_log_ns = run.first_log_ns.or(part.first_log_ns);
+    run.last_log_ns = part.last_log_ns.or(run.last_log_ns);
+    if let Some(e) = part.error {
+        run.error = Some(format!("in part {}: {e}", path.display()));
+    }
+    run.parts.push(path.to_path_buf());
+}
+
+/// Reads the parts of split run `run` as one (see [`read_log_progress`]).
+fn read_split(
+    run: &str,
+    parts: &[(u32, std::path::PathBuf)],
+    mut progress: impl FnMut(u64, u64),
+    mut on: impl FnMut(LogItem<'_>) -> ControlFlow<()>,
+) -> Result<ReadSummary, LogError> {
+    use crate::split::{PART_METADATA, PART_NEXT_METADATA, first_gap, part_name};
+    let total: u64 = parts
+        .iter()
+        .map(|(_, p)| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0))
+        .sum();
+    let gap = first_gap(parts);
+    let mut sum = ReadSummary {
+        clean_close: true,
+        ..ReadSummary::default()
+    };
+    let mut announced: std::collections::BTreeSet<String> = Default::default();
+    let mut next: Option<String> = None;
+    let mut stopped = false;
+    for (n, path) in parts.iter().take_while(|(n, _)| gap.is_none_or(|g| *n < g)) {
+        // Part 1's records are all its own; later parts repeat the earlier ones' metadata and
+        // attachments up to their `metrolog.part` record.
+        let mut own = *n == 1;
+        let base = sum.bytes_read;
+        next = None;
+        let s = read_one(
+            path,
+            |d, _| progress(base + d, total),
+            |item| match item {
+                LogItem::Metadata { name, .. } if name == PART_METADATA => {
+                    own = true;
+                    ControlFlow::Continue(())
+                }
+                LogItem::Metadata { name, map } if name == PART_NEXT_METADATA => {
+                    next = map.get("next").cloned();
+                    ControlFlow::Continue(())
+                }
+                LogItem::Channel { topic, .. } if announced.contains(topic) => {
+                    ControlFlow::Continue(())
+                }
+                LogItem::Metadata { .. } | LogItem::Attachment { .. } if !own => {
+                    ControlFlow::Continue(())
+                }
+                item => {
+                    if let LogItem::Channel { topic, .. } = &item {
+                        announced.insert(topic.to_string());
+                    }
+                    let flow = on(item);
+                    stopped |= flow.is_break();
+                    flow
+                }
+            },
+        )?;
+        merge(&mut sum, s, path);
+        if stopped || sum.error.is_some() {
+            return Ok(sum);
+        }
+    }
+    let missing = match gap {
+        Some(g) => Some(g),
+        // The last part read names a successor that is not there.
+        None => next.map(|_| parts.last().map_or(1, |(n, _)| n + 1)),
+    };
+    if let Some(g) = missing {
+        sum.clean_close = false;
+        sum.error = Some(format!(
+            "part {g} of split run {run} ({}) is missing: the run is damaged, read up to part {}",
+            part_name(run, g),
+            g - 1
+        ));
+    }
+    Ok(sum)
+}
+
+/// One MCAP file (see [`read_log_progress`]).
+fn read_one(
     path: &Path,
     mut progress: impl FnMut(u64, u64),
     mut on: impl FnMut(LogItem<'_>) -> ControlFlow<()>,

@@ -21,6 +21,7 @@ use mcap::{Attachment, Compression, McapError, WriteOptions};
 use types::{Sample, Trigger};
 
 use super::raw::{self, Builder};
+use super::split::{PART_METADATA, PART_NEXT_METADATA, parse_part_name, part_name};
 use super::topics::{self, PoseMsg, StatusMsg, TopicMessage, TriggerMsg};
 use super::{LogError, RUN_METADATA, RunMetadata};
 
@@ -39,6 +40,19 @@ pub struct LogOptions {
     pub batch_interval: Duration,
     /// Most samples in one raw batch.
     pub batch_max: usize,
+    /// Split the run into a new part when a part spans this much log time
+    /// (`[storage] split_minutes`; `crate::split`). None: never by time.
+    pub split_after: Option<Duration>,
+    /// Split the run into a new part when a part holds this many bytes (`[storage] split_mb`).
+    /// None: never by size.
+    pub split_bytes: Option<u64>,
+}
+
+impl LogOptions {
+    /// Whether a run is written as parts (`crate::split`).
+    pub fn splits(&self) -> bool {
+        self.split_after.is_some() || self.split_bytes.is_some()
+    }
 }
 
 impl Default for LogOptions {
@@ -50,6 +64,8 @@ impl Default for LogOptions {
             fsync: true,
             batch_interval: Duration::from_millis(10),
             batch_max: 1000,
+            split_after: None,
+            split_bytes: None,
         }
     }
 }
@@ -61,12 +77,16 @@ struct SyncFile {
     fsync: bool,
     pos: u64,
     durable: u64,
+    /// The file's size as written (read by the writer to split by size).
+    size: std::sync::Arc<std::sync::atomic::AtomicU64>,
 }
 
 impl Write for SyncFile {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let n = self.inner.write(buf)?;
         self.pos += n as u64;
+        self.size
+            .fetch_max(self.pos, std::sync::atomic::Ordering::Relaxed);
         Ok(n)
     }
     fn flush(&mut self) -> std::io::Result<()> {
@@ -130,10 +150,57 @@ pub fn channel_specs() -> Vec<ChannelSpec> {
 /// (the live view hands the message to a lossy queue).
 pub type MessageTap = Box<dyn FnMut(&'static str, u64, &[u8]) + Send>;
 
-/// Writes one run to one MCAP file.
+/// A record every part of a split run repeats at its start.
+enum Carried {
+    Attachment {
+        name: String,
+        media_type: String,
+        log_ns: u64,
+        data: Vec<u8>,
+    },
+    Metadata {
+        name: String,
+        map: BTreeMap<String, String>,
+    },
+}
+
+/// Where a split run stands.
+struct Split {
+    dir: PathBuf,
+    run: String,
+    part: u32,
+    /// Log times of the current part's first and last message.
+    first_ns: Option<u64>,
+    last_ns: u64,
+    /// Records repeated in every part: the attachments, and the last metadata record of
+    /// each name and instrument (so what is kept stays bounded over days).
+    carried: Vec<Carried>,
+}
+
+impl Split {
+    fn carry(&mut self, c: Carried) {
+        let key = |c: &Carried| match c {
+            Carried::Attachment { name, .. } => (0, name.clone(), None),
+            Carried::Metadata { name, map } => (1, name.clone(), map.get("instrument").cloned()),
+        };
+        let k = key(&c);
+        match self.carried.iter_mut().find(|o| key(o) == k) {
+            Some(old) => *old = c,
+            None => self.carried.push(c),
+        }
+    }
+}
+
+/// Writes one run to one MCAP file, or to several when split (`LogOptions::split_after`,
+/// `LogOptions::split_bytes`; `crate::split`).
 pub struct LogWriter {
     mcap: Option<mcap::Writer<SyncFile>>,
     path: PathBuf,
+    /// The run metadata record (repeated in every part).
+    run_meta: BTreeMap<String, String>,
+    split: Option<Split>,
+    /// Bytes in the current file.
+    size: std::sync::Arc<std::sync::atomic::AtomicU64>,
     channels: BTreeMap<&'static str, u16>,
     sequence: u32,
     messages: u64,
@@ -179,58 +246,99 @@ fn hint_for(e: &McapError) -> &'static str {
     }
 }
 
+/// Where part 1 of a split run named by `path` goes (see [`LogWriter::create`]).
+fn first_part(path: &Path) -> Split {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let run = match parse_part_name(&name) {
+        Some((run, _)) => run.to_string(),
+        None => name.strip_suffix(".mcap").unwrap_or(&name).to_string(),
+    };
+    Split {
+        dir,
+        run,
+        part: 1,
+        first_ns: None,
+        last_ns: 0,
+        carried: Vec::new(),
+    }
+}
+
+/// Creates `path` (which must not exist) as an MCAP file with the header, schemas and
+/// channels; returns the writer and the channel ids by topic.
+fn open_mcap(
+    path: &Path,
+    opts: &LogOptions,
+    size: &std::sync::Arc<std::sync::atomic::AtomicU64>,
+) -> Result<(mcap::Writer<SyncFile>, BTreeMap<&'static str, u16>), LogError> {
+    let file = OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(path)
+        .map_err(|source| LogError::Create {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    let sink = SyncFile {
+        inner: BufWriter::with_capacity(1 << 20, file),
+        fsync: opts.fsync,
+        pos: 0,
+        durable: 0,
+        size: size.clone(),
+    };
+    let wopts = WriteOptions::new()
+        .compression(Some(Compression::Zstd))
+        .compression_level(opts.zstd_level)
+        .chunk_size(Some(opts.chunk_size))
+        .profile("")
+        .library(concat!("metrolog ", env!("CARGO_PKG_VERSION")));
+    let werr = |e: McapError| LogError::Write {
+        path: path.to_path_buf(),
+        hint: hint_for(&e),
+        reason: describe(&e),
+    };
+    let mut mcap = wopts.create(sink).map_err(werr)?;
+    let mut channels = BTreeMap::new();
+    for c in channel_specs() {
+        let sid = mcap
+            .add_schema(c.schema_name, c.schema_encoding, &c.schema)
+            .map_err(werr)?;
+        let cid = mcap
+            .add_channel(sid, c.topic, c.message_encoding, &BTreeMap::new())
+            .map_err(werr)?;
+        channels.insert(c.topic, cid);
+    }
+    Ok((mcap, channels))
+}
+
 impl LogWriter {
     /// Creates `path` (which must not exist) and writes the header, schemas, channels and the
-    /// run metadata.
+    /// run metadata. A split run (`opts.splits()`) starts at part 1 of the run `path` names:
+    /// `path` itself when it is a part's name (`<run>-p0001.mcap`), else `<stem>-p0001.mcap`
+    /// beside it ([`LogWriter::path`] says which).
     pub fn create(
         path: &Path,
         meta: &RunMetadata,
         opts: LogOptions,
     ) -> Result<LogWriter, LogError> {
-        let file = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(path)
-            .map_err(|source| LogError::Create {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        let sink = SyncFile {
-            inner: BufWriter::with_capacity(1 << 20, file),
-            fsync: opts.fsync,
-            pos: 0,
-            durable: 0,
-        };
-        let wopts = WriteOptions::new()
-            .compression(Some(Compression::Zstd))
-            .compression_level(opts.zstd_level)
-            .chunk_size(Some(opts.chunk_size))
-            .profile("")
-            .library(concat!("metrolog ", env!("CARGO_PKG_VERSION")));
-        let werr = |e: McapError| LogError::Write {
-            path: path.to_path_buf(),
-            hint: hint_for(&e),
-            reason: describe(&e),
-        };
-        let mut mcap = wopts.create(sink).map_err(werr)?;
-        let mut channels = BTreeMap::new();
-        for c in channel_specs() {
-            let sid = mcap
-                .add_schema(c.schema_name, c.schema_encoding, &c.schema)
-                .map_err(werr)?;
-            let cid = mcap
-                .add_channel(sid, c.topic, c.message_encoding, &BTreeMap::new())
-                .map_err(werr)?;
-            channels.insert(c.topic, cid);
-        }
-        mcap.write_metadata(&Metadata {
-            name: RUN_METADATA.into(),
-            metadata: meta.to_map(),
-        })
-        .map_err(werr)?;
+        let split = opts.splits().then(|| first_part(path));
+        let path = split
+            .as_ref()
+            .map_or(path.to_path_buf(), |s| s.dir.join(part_name(&s.run, 1)));
+        let size = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let (mcap, channels) = open_mcap(&path, &opts, &size)?;
         let mut w = LogWriter {
             mcap: Some(mcap),
-            path: path.to_path_buf(),
+            path,
+            run_meta: meta.to_map(),
+            split,
+            size,
             channels,
             sequence: 0,
             messages: 0,
@@ -242,12 +350,99 @@ impl LogWriter {
             samples: 0,
             tap: None,
         };
+        w.write_part_header(false)?;
         w.flush()?;
         Ok(w)
     }
 
+    /// The run metadata, then (parts 2.. of a split run) the carried records, then the part
+    /// record (`crate::split`).
+    fn write_part_header(&mut self, carry: bool) -> Result<(), LogError> {
+        let run_meta = self.run_meta.clone();
+        self.put_metadata(RUN_METADATA, run_meta)?;
+        let Some(sp) = self.split.as_mut() else {
+            return Ok(());
+        };
+        let carried = if carry {
+            std::mem::take(&mut sp.carried)
+        } else {
+            Vec::new()
+        };
+        let part = BTreeMap::from([
+            ("run".to_string(), sp.run.clone()),
+            ("part".to_string(), sp.part.to_string()),
+        ]);
+        let mut r = Ok(());
+        for c in &carried {
+            r = r.and_then(|()| match c {
+                Carried::Attachment {
+                    name,
+                    media_type,
+                    log_ns,
+                    data,
+                } => self.put_attachment(name, media_type, data, *log_ns),
+                Carried::Metadata { name, map } => self.put_metadata(name, map.clone()),
+            });
+        }
+        if let Some(sp) = self.split.as_mut() {
+            sp.carried = carried;
+        }
+        r?;
+        self.put_metadata(PART_METADATA, part)
+    }
+
+    /// The current part of a split run (1-based; 1 for a run that is not split).
+    pub fn part(&self) -> u32 {
+        self.split.as_ref().map_or(1, |s| s.part)
+    }
+
+    /// Whether the current part is due to end (its time span or size reached).
+    fn split_due(&self) -> bool {
+        let Some(sp) = &self.split else { return false };
+        let by_time = match (self.opts.split_after, sp.first_ns) {
+            (Some(d), Some(first)) => sp.last_ns.saturating_sub(first) >= d.as_nanos() as u64,
+            _ => false,
+        };
+        let by_size = self
+            .opts
+            .split_bytes
+            .is_some_and(|b| self.size.load(std::sync::atomic::Ordering::Relaxed) >= b);
+        by_time || by_size
+    }
+
+    /// Ends the current part (naming its successor in it) and starts the next one.
+    fn roll(&mut self) -> Result<(), LogError> {
+        let Some(sp) = self.split.as_ref() else {
+            return Ok(());
+        };
+        let (next, dir) = (part_name(&sp.run, sp.part + 1), sp.dir.clone());
+        let map = BTreeMap::from([("next".to_string(), next.clone())]);
+        self.put_metadata(PART_NEXT_METADATA, map)?;
+        self.close(self.opts.fsync)?;
+        let path = dir.join(next);
+        self.path = path.clone();
+        let size = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+        match open_mcap(&path, &self.opts, &size) {
+            Ok((mcap, channels)) => {
+                self.mcap = Some(mcap);
+                self.channels = channels;
+                self.size = size;
+            }
+            Err(e) => {
+                self.failed = Some((e.to_string(), ""));
+                return Err(e);
+            }
+        }
+        if let Some(sp) = self.split.as_mut() {
+            sp.part += 1;
+            sp.first_ns = None;
+        }
+        self.write_part_header(true)?;
+        self.flush_file()
+    }
+
     /// Creates a new file in `dir`, named `metrolog-<machine>-<UTC start>.mcap` (with `-2`,
-    /// `-3`, … when that name exists).
+    /// `-3`, … when that name exists); a split run's parts are `<that name>-pNNNN.mcap`.
     pub fn create_in_dir(
         dir: &Path,
         meta: &RunMetadata,
@@ -276,12 +471,13 @@ impl LogWriter {
         };
         let mut k = 1;
         loop {
-            let name = if k == 1 {
-                format!("{base}.mcap")
-            } else {
-                format!("{base}-{k}.mcap")
-            };
-            let path = dir.join(name);
+            let (path, other) = LogWriter::free_name(dir, &base, opts.splits(), k);
+            // A run name is taken by a file of either form (one file, or a split run's part
+            // 1): two runs of one name would be one run to retention.
+            if other.exists() && k < 1000 {
+                k += 1;
+                continue;
+            }
             match LogWriter::create(&path, meta, opts.clone()) {
                 Err(LogError::Create { source, .. })
                     if source.kind() == std::io::ErrorKind::AlreadyExists && k < 1000 =>
@@ -290,6 +486,24 @@ impl LogWriter {
                 }
                 r => return r,
             }
+        }
+    }
+
+    /// For [`LogWriter::create_in_dir`]: the first file of candidate `k` of run name `base`,
+    /// and the first file of that name in the other form (split or not).
+    fn free_name(dir: &Path, base: &str, splits: bool, k: u32) -> (PathBuf, PathBuf) {
+        let run = if k == 1 {
+            base.to_string()
+        } else {
+            format!("{base}-{k}")
+        };
+        let (part, whole) = (
+            dir.join(part_name(&run, 1)),
+            dir.join(format!("{run}.mcap")),
+        );
+        match splits {
+            true => (part, whole),
+            false => (whole, part),
         }
     }
 
@@ -400,6 +614,10 @@ impl LogWriter {
         }
         self.sequence = self.sequence.wrapping_add(1);
         self.messages += 1;
+        if let Some(sp) = self.split.as_mut() {
+            sp.first_ns.get_or_insert(log_ns);
+            sp.last_ns = sp.last_ns.max(log_ns);
+        }
         if let Some(tap) = self.tap.as_mut() {
             tap(topic, log_ns, data);
         }
@@ -476,12 +694,23 @@ impl LogWriter {
         self.write(log_ns, s)
     }
 
-    /// A metadata record (written at once, outside chunks).
+    /// A metadata record (written at once, outside chunks). A split run repeats the last
+    /// record of each name (and `instrument` key) in every later part.
     pub fn write_metadata(
         &mut self,
         name: &str,
         map: BTreeMap<String, String>,
     ) -> Result<(), LogError> {
+        if let Some(sp) = self.split.as_mut() {
+            sp.carry(Carried::Metadata {
+                name: name.into(),
+                map: map.clone(),
+            });
+        }
+        self.put_metadata(name, map)
+    }
+
+    fn put_metadata(&mut self, name: &str, map: BTreeMap<String, String>) -> Result<(), LogError> {
         let r = self.writer()?.write_metadata(&Metadata {
             name: name.into(),
             metadata: map,
@@ -489,8 +718,27 @@ impl LogWriter {
         r.map_err(|e| self.fail(e))
     }
 
-    /// An attachment (config, trajectory, calibration file ...).
+    /// An attachment (config, trajectory, calibration file ...); a split run repeats it in
+    /// every later part.
     pub fn attach(
+        &mut self,
+        name: &str,
+        media_type: &str,
+        data: &[u8],
+        log_ns: u64,
+    ) -> Result<(), LogError> {
+        if let Some(sp) = self.split.as_mut() {
+            sp.carry(Carried::Attachment {
+                name: name.into(),
+                media_type: media_type.into(),
+                log_ns,
+                data: data.to_vec(),
+            });
+        }
+        self.put_attachment(name, media_type, data, log_ns)
+    }
+
+    fn put_attachment(
         &mut self,
         name: &str,
         media_type: &str,
@@ -526,8 +774,17 @@ impl LogWriter {
         self.attach(&name, media_type, &data, log_ns)
     }
 
-    /// Closes the open chunk and writes it through to the disk.
+    /// Closes the open chunk and writes it through to the disk; then, in a split run whose
+    /// part is due to end, goes on in the next part.
     pub fn flush(&mut self) -> Result<(), LogError> {
+        self.flush_file()?;
+        if self.split_due() {
+            self.roll()?;
+        }
+        Ok(())
+    }
+
+    fn flush_file(&mut self) -> Result<(), LogError> {
         self.write_batches()?;
         let r = self.writer()?.flush();
         self.last_flush = Instant::now();
@@ -544,12 +801,14 @@ impl LogWriter {
     }
 
     /// Writes the summary, footer and end magic and syncs: a cleanly closed log.
+    /// Returns the path of the last file (the last part of a split run).
     pub fn finish(mut self) -> Result<PathBuf, LogError> {
-        self.close()?;
+        self.close(true)?;
         Ok(self.path.clone())
     }
 
-    fn close(&mut self) -> Result<(), LogError> {
+    /// Closes the current file (summary, footer, magic); `sync`: through to the disk.
+    fn close(&mut self, sync: bool) -> Result<(), LogError> {
         if self.failed.is_some() {
             return Err(self.failed_error());
         }
@@ -563,7 +822,7 @@ impl LogWriter {
             return Err(self.fail(e));
         }
         let mut sink = w.into_inner();
-        sink.fsync = true;
+        sink.fsync = sync;
         sink.flush().map_err(|e| self.fail(McapError::Io(e)))
     }
 }
@@ -572,7 +831,7 @@ impl Drop for LogWriter {
     /// Closes the file as well as possible (a failed writer leaves what was flushed).
     fn drop(&mut self) {
         if self.failed.is_none() && self.mcap.is_some() {
-            let _ = self.close();
+            let _ = self.close(true);
         }
     }
 }

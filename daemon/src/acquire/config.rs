@@ -150,6 +150,8 @@ struct RawStorage {
     keep_days: Option<Spanned<f64>>,
     min_free_gb: Option<Spanned<f64>>,
     warn_free_gb: Option<Spanned<f64>>,
+    split_minutes: Option<Spanned<f64>>,
+    split_mb: Option<Spanned<f64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -1111,14 +1113,32 @@ impl Ctx<'_> {
                 .as_ref()
                 .map_or(Ok(default_warn), |v| gb(v, "warn_free_gb")),
         );
+        let split_after = errs.keep(r.split_minutes.as_ref().map_or(Ok(None), |v| {
+            self.bounded(
+                v,
+                "split_minutes",
+                (1.0, 10_080.0),
+                "minutes per part of a run",
+            )
+            .map(|m| Some(std::time::Duration::from_secs_f64(m * 60.0)))
+        }));
+        let split_bytes = errs.keep(r.split_mb.as_ref().map_or(Ok(None), |v| {
+            self.bounded(v, "split_mb", (0.1, 1e6), "MB per part of a run")
+                .map(|mb| Some((mb * 1e6) as u64))
+        }));
         let (Some(keep), Some(min_free_bytes), Some(warn_free_bytes)) = (keep, min_free, warn)
         else {
+            return Err(errs.into_error());
+        };
+        let (Some(split_after), Some(split_bytes)) = (split_after, split_bytes) else {
             return Err(errs.into_error());
         };
         Ok(StoragePolicy {
             keep,
             min_free_bytes,
             warn_free_bytes,
+            split_after,
+            split_bytes,
         })
     }
 }

@@ -80,6 +80,16 @@ impl Recorder {
         &mut self.writer
     }
 
+    /// The part of a split run being written (1 for a run that is not split).
+    pub fn part(&self) -> u32 {
+        self.writer.part()
+    }
+
+    /// The file being written (the current part of a split run).
+    pub fn log_path(&self) -> &std::path::Path {
+        self.writer.path()
+    }
+
     /// The run's counts so far (what `/status` holds).
     pub fn counts(&self) -> &RunCounts {
         &self.counts

@@ -87,6 +87,8 @@ pub fn open_log(cfg: &Config, clock: &HostClock) -> anyhow::Result<LiveLog> {
         metrolog_log::LogOptions {
             // Durability comes from the log-sync thread of [`LiveLog`].
             fsync: false,
+            split_after: cfg.storage.split_after,
+            split_bytes: cfg.storage.split_bytes,
             ..metrolog_log::LogOptions::default()
         },
     )?;

@@ -43,12 +43,42 @@ pub struct Closed {
 /// page cache, and a thread that makes the file durable once a second. `fdatasync` of a busy
 /// log can take hundreds of milliseconds; on the pipeline thread it would hold up every event
 /// behind it (measured: pose records up to 0.5 s late at full rates), on its own thread it
-/// holds up nothing. A power cut loses at most about two seconds instead of one.
+/// holds up nothing. A power cut loses at most about two seconds instead of one. When a split
+/// run goes on in a new part, the thread syncs the finished part once more and then follows
+/// the new one.
 pub struct LiveLog {
     recorder: Recorder,
+    /// The run's first file (part 1 of a split run): what names the run.
     path: std::path::PathBuf,
-    sync_stop: std::sync::mpsc::Sender<()>,
+    /// The part the sync thread follows.
+    part: u32,
+    /// A new file to follow (`Some`), or the end (`None`).
+    sync_tx: std::sync::mpsc::Sender<Option<std::fs::File>>,
     sync_thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// The log-sync thread: `fdatasync` the file once a second; a new file replaces it after a
+/// last sync of the old one; the end syncs it a last time.
+fn sync_loop(
+    mut file: std::fs::File,
+    rx: std::sync::mpsc::Receiver<Option<std::fs::File>>,
+    shown: std::path::PathBuf,
+) {
+    let mut reported = false;
+    loop {
+        let msg = rx.recv_timeout(Duration::from_secs(1));
+        if let Err(e) = file.sync_data()
+            && !reported
+        {
+            reported = true;
+            tracing::error!("cannot sync {} to disk: {e}", shown.display());
+        }
+        match msg {
+            Ok(Some(next)) => file = next,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            Ok(None) | Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+    }
 }
 
 impl LiveLog {
@@ -59,35 +89,35 @@ impl LiveLog {
         // fsync(2) works on a descriptor opened for reading: it flushes the file, not the fd.
         let file = std::fs::File::open(&path)
             .with_context(|| format!("cannot open {} for syncing", path.display()))?;
-        let (sync_stop, stop_rx) = std::sync::mpsc::channel::<()>();
+        let (sync_tx, rx) = std::sync::mpsc::channel();
         let shown = path.clone();
         let sync_thread = std::thread::Builder::new()
             .name("log-sync".into())
-            .spawn(move || {
-                let mut reported = false;
-                loop {
-                    let last = !matches!(
-                        stop_rx.recv_timeout(Duration::from_secs(1)),
-                        Err(std::sync::mpsc::RecvTimeoutError::Timeout)
-                    );
-                    if let Err(e) = file.sync_data()
-                        && !reported
-                    {
-                        reported = true;
-                        tracing::error!("cannot sync {} to disk: {e}", shown.display());
-                    }
-                    if last {
-                        break;
-                    }
-                }
-            })
+            .spawn(move || sync_loop(file, rx, shown))
             .context("cannot start the log-sync thread")?;
         Ok(LiveLog {
+            part: recorder.part(),
             recorder,
             path,
-            sync_stop,
+            sync_tx,
             sync_thread: Some(sync_thread),
         })
+    }
+
+    /// After a write: when a split run went on in a new part, the sync thread follows it.
+    fn follow_part(&mut self) -> anyhow::Result<()> {
+        let part = self.recorder.part();
+        if part == self.part {
+            return Ok(());
+        }
+        use anyhow::Context;
+        self.part = part;
+        let path = self.recorder.log_path().to_path_buf();
+        let file = std::fs::File::open(&path)
+            .with_context(|| format!("cannot open {} for syncing", path.display()))?;
+        tracing::info!("log continues in part {part}: {}", path.display());
+        let _ = self.sync_tx.send(Some(file));
+        Ok(())
     }
 
     pub fn path(&self) -> &std::path::Path {
@@ -102,10 +132,13 @@ impl LiveLog {
 
 impl EventSink for LiveLog {
     fn record(&mut self, ev: &DriverEvent, now_ns: u64) -> anyhow::Result<Vec<PoseMsg>> {
-        Ok(self.recorder.record(ev, now_ns)?)
+        let poses = self.recorder.record(ev, now_ns)?;
+        self.follow_part()?;
+        Ok(poses)
     }
     fn tick(&mut self, now_ns: u64) -> anyhow::Result<()> {
-        Ok(self.recorder.tick(now_ns)?)
+        self.recorder.tick(now_ns)?;
+        self.follow_part()
     }
     fn counts(&self) -> &RunCounts {
         self.recorder.counts()
@@ -116,18 +149,27 @@ impl EventSink for LiveLog {
     fn finish(self: Box<Self>, now_ns: u64) -> anyhow::Result<Closed> {
         let LiveLog {
             recorder,
-            sync_stop,
+            path: first,
+            sync_tx,
             sync_thread,
-            ..
+            part,
         } = *self;
         let r = recorder.finish_counted(now_ns);
         // The last sync, after the footer.
-        let _ = sync_stop.send(());
+        let _ = sync_tx.send(None);
         if let Some(h) = sync_thread {
             let _ = h.join();
         }
         let (path, poses, counts) = r?;
-        tracing::info!("log closed: {}", path.display());
+        match part {
+            1 => tracing::info!("log closed: {}", path.display()),
+            n => tracing::info!(
+                "log closed: {} parts, {} .. {}",
+                n,
+                first.display(),
+                path.display()
+            ),
+        }
         Ok(Closed { poses, counts })
     }
 }

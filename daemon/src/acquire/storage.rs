@@ -3,8 +3,9 @@
 //! applied before a run starts and every 10 s while it runs, never to the run being written;
 //! and a warning when less than `warn_free_gb` is free.
 //!
-//! A run is a file `metrolog-*.mcap` directly in `output_dir` (the names the log writer gives);
-//! nothing else there is touched. Free space is read through [`FreeSpace`], so the tests can
+//! A run is a file `metrolog-*.mcap` directly in `output_dir` (the names the log writer gives),
+//! or all the parts `<run>-pNNNN.mcap` of a split run (`metrolog_log::split`), deleted
+//! together; nothing else there is touched. Free space is read through [`FreeSpace`], so the tests can
 //! give a directory a capacity without mounting a file system.
 
 use std::path::{Path, PathBuf};
@@ -48,6 +49,10 @@ pub struct StoragePolicy {
     pub min_free_bytes: Option<u64>,
     /// Warn while less than this many bytes are free.
     pub warn_free_bytes: u64,
+    /// Start a new part of the run after this much time (`split_minutes`; None: never).
+    pub split_after: Option<Duration>,
+    /// Start a new part of the run when a part reaches this size (`split_mb`; None: never).
+    pub split_bytes: Option<u64>,
 }
 
 impl Default for StoragePolicy {
@@ -57,6 +62,8 @@ impl Default for StoragePolicy {
             keep: None,
             min_free_bytes: None,
             warn_free_bytes: (DEFAULT_WARN_FREE_GB * GB) as u64,
+            split_after: None,
+            split_bytes: None,
         }
     }
 }
@@ -77,32 +84,57 @@ impl FreeSpace for Statvfs {
     }
 }
 
-/// One run's file.
+/// One run: its file, or the parts of a split run.
 #[derive(Debug, Clone)]
 pub struct RunFile {
+    /// The run's name (the file name without `.mcap`, or without `-pNNNN.mcap`).
+    pub run: String,
+    /// The first file (in name order: part 1 of a split run).
     pub path: PathBuf,
+    /// Every file of the run, in name order.
+    pub files: Vec<PathBuf>,
+    /// When its last file was last written.
     pub modified: SystemTime,
     pub bytes: u64,
 }
 
-/// The runs in `dir`, oldest (last written first) first.
+/// The run a log file belongs to, by its name.
+pub fn run_name(path: &Path) -> Option<String> {
+    let name = path.file_name()?.to_str()?;
+    Some(metrolog_log::split::run_of_file_name(name).to_string())
+}
+
+/// The runs in `dir`, oldest (last written first) first; the parts of a split run are one.
 pub fn runs(dir: &Path) -> std::io::Result<Vec<RunFile>> {
-    let mut v = Vec::new();
+    let mut by_run: std::collections::BTreeMap<String, RunFile> = Default::default();
     for e in std::fs::read_dir(dir)? {
         let e = e?;
+        let path = e.path();
         let name = e.file_name();
         let name = name.to_string_lossy();
         if !(name.starts_with("metrolog-") && name.ends_with(".mcap")) {
             continue;
         }
         let m = e.metadata()?;
-        if m.is_file() {
-            v.push(RunFile {
-                path: e.path(),
-                modified: m.modified()?,
-                bytes: m.len(),
-            });
-        }
+        let Some(run) = run_name(&path).filter(|_| m.is_file()) else {
+            continue;
+        };
+        let modified = m.modified()?;
+        let r = by_run.entry(run.clone()).or_insert_with(|| RunFile {
+            run,
+            path: path.clone(),
+            files: Vec::new(),
+            modified,
+            bytes: 0,
+        });
+        r.files.push(path);
+        r.modified = r.modified.max(modified);
+        r.bytes += m.len();
+    }
+    let mut v: Vec<RunFile> = by_run.into_values().collect();
+    for r in &mut v {
+        r.files.sort();
+        r.path = r.files[0].clone();
     }
     v.sort_by(|a, b| (a.modified, &a.path).cmp(&(b.modified, &b.path)));
     Ok(v)
@@ -118,7 +150,8 @@ pub struct Applied {
 }
 
 /// Apply `policy` to `dir` at time `now`: runs older than `keep` go, then the oldest while
-/// less than `min_free_bytes` is free. `current` (the run being written) is never deleted.
+/// less than `min_free_bytes` is free. `current` (a file of the run being written: all of
+/// that run's parts) is never deleted.
 pub fn apply(
     policy: &StoragePolicy,
     dir: &Path,
@@ -127,9 +160,10 @@ pub fn apply(
     free: &dyn FreeSpace,
 ) -> std::io::Result<Applied> {
     let mut out = Applied::default();
+    let current = current.and_then(run_name);
     let candidates: Vec<RunFile> = runs(dir)?
         .into_iter()
-        .filter(|r| Some(r.path.as_path()) != current)
+        .filter(|r| Some(&r.run) != current.as_ref())
         .collect();
     let mut left = Vec::new();
     for r in candidates {
@@ -149,9 +183,9 @@ pub fn apply(
                 break;
             }
             let why = format!(
-                "{:.2} GB free, less than min_free_gb {:.2}",
-                out.free_bytes as f64 / GB,
-                min as f64 / GB
+                "{} GB free, less than min_free_gb {}",
+                gb(out.free_bytes),
+                gb(min)
             );
             delete(&r, why, &mut out)?;
             out.free_bytes = free.free_bytes(dir)?;
@@ -160,13 +194,37 @@ pub fn apply(
     Ok(out)
 }
 
-fn delete(r: &RunFile, why: String, out: &mut Applied) -> std::io::Result<()> {
-    match std::fs::remove_file(&r.path) {
-        Ok(()) => {}
-        // Gone already (an operator moved it): nothing to do.
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(e),
+/// Deletes every file of run `r` (part 1 last, so a run cut short by an error still shows
+/// where it began).
+/// Bytes in GB with two decimals, or with four significant digits below 0.1 GB (a small
+/// file system would read "0.00 GB free, less than 0.00").
+fn gb(bytes: u64) -> String {
+    let x = bytes as f64 / GB;
+    if x >= 0.1 || x == 0.0 {
+        format!("{x:.2}")
+    } else {
+        let decimals = (3.0 - x.log10().floor()).clamp(2.0, 12.0) as usize;
+        format!("{x:.decimals$}")
     }
+}
+
+fn delete(r: &RunFile, why: String, out: &mut Applied) -> std::io::Result<()> {
+    let mut gone = 0;
+    for f in r.files.iter().rev() {
+        match std::fs::remove_file(f) {
+            Ok(()) => gone += 1,
+            // Gone already (an operator moved it): nothing to do.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
+        }
+    }
+    if gone == 0 {
+        return Ok(());
+    }
+    let why = match r.files.len() {
+        1 => why,
+        n => format!("{why}; all {n} parts"),
+    };
     out.deleted.push((r.path.clone(), why));
     Ok(())
 }
@@ -361,6 +419,7 @@ mod tests {
             keep: None,
             min_free_bytes: Some(400),
             warn_free_bytes: 0,
+            ..StoragePolicy::default()
         };
         // 1200 − 700 = 500 free: nothing to delete yet.
         let cancel = tokio_util::sync::CancellationToken::new();
@@ -391,6 +450,45 @@ mod tests {
         cancel.cancel();
         task.await.unwrap();
         assert_eq!(names(&d), ["metrolog-c.mcap"]);
+    }
+
+    /// A split run is deleted whole, oldest run first; no part of the current run goes, even
+    /// its first part, older than everything else.
+    #[test]
+    fn split_runs_go_whole_and_the_current_run_keeps_every_part() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let now = SystemTime::now();
+        run(d, "metrolog-m-a-p0001.mcap", 100, now, 5.0);
+        run(d, "metrolog-m-a-p0002.mcap", 100, now, 4.9);
+        run(d, "metrolog-m-b.mcap", 100, now, 4.0);
+        run(d, "metrolog-m-c-p0001.mcap", 100, now, 6.0);
+        let current = run(d, "metrolog-m-c-p0002.mcap", 100, now, 0.0);
+        let policy = StoragePolicy {
+            min_free_bytes: Some(350),
+            ..StoragePolicy::default()
+        };
+        // 500 used of 600: 100 free; run a (200 bytes, the oldest by its last part) goes
+        // whole (300 free), then b (400); c is the current run and stays although its part 1 is the oldest file.
+        let a = apply(&policy, d, Some(&current), now, &Capacity(600)).unwrap();
+        let deleted: Vec<String> = a
+            .deleted
+            .iter()
+            .map(|(p, _)| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(deleted, ["metrolog-m-a-p0001.mcap", "metrolog-m-b.mcap"]);
+        assert!(a.deleted[0].1.contains("all 2 parts"), "{:?}", a.deleted);
+        assert!(
+            a.deleted[0]
+                .1
+                .starts_with("0.0000001000 GB free, less than min_free_gb 0.0000003500"),
+            "{:?}",
+            a.deleted
+        );
+        assert_eq!(
+            names(d),
+            ["metrolog-m-c-p0001.mcap", "metrolog-m-c-p0002.mcap"]
+        );
     }
 
     #[test]
@@ -435,6 +533,7 @@ mod tests {
             keep: None,
             min_free_bytes: Some(800),
             warn_free_bytes: 1000,
+            ..StoragePolicy::default()
         };
         let fs = Capacity(1500);
         let a = apply(&policy, d, Some(&current), now, &fs).unwrap();

@@ -178,6 +178,15 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
 fn print_text(r: &InfoReport) {
     println!("log        {}", r.path.display());
     let rd = &r.read;
+    if !rd.parts.is_empty() {
+        println!(
+            "parts      {} (a split run, read as one; sizes and counts are over all parts)",
+            rd.parts.len()
+        );
+        for p in &rd.parts {
+            println!("           {}", p.display());
+        }
+    }
     if rd.clean_close && rd.missing_messages > 0 {
         println!(
             "closed     cleanly but DAMAGED — {} messages its summary counts are missing ({} read)",

@@ -42,6 +42,9 @@ pub fn read_contents(
     let bar = Progress::new(label);
     let log = metrolog_analysis::LogContents::read_progress(path, |d, t| bar.update(d, t))?;
     drop(bar);
+    if let Some(note) = log.summary.split_note() {
+        eprintln!("note: {note}");
+    }
     // Every analysis of a damaged log says so, and where, before its results.
     if let Some(d) = log.damage() {
         eprintln!(

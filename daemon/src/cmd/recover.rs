@@ -25,6 +25,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let s = metrolog_log::recover::recover(&args.log, &tmp, |d, t| bar.update(d, t))
         .with_context(|| format!("cannot recover {}", args.log.display()))?;
     drop(bar);
+    if let Some(note) = s.split_note() {
+        eprintln!("note: {note}; written as one file");
+    }
     anyhow::ensure!(
         s.messages > 0,
         "cannot recover {}: not one message could be read ({}); nothing written",

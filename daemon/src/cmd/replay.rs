@@ -286,6 +286,9 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
     };
     let read = read_log_progress(path, |d, t| bar.update(d, t), &mut on_item)?;
     drop(bar);
+    if let Some(note) = read.split_note() {
+        eprintln!("note: {note}");
+    }
     if let Some(e) = first_error {
         return Err(e);
     }

@@ -64,6 +64,9 @@ fn read(path: &Path) -> anyhow::Result<Read> {
         _ => {}
     })
     .with_context(|| format!("reading {}", path.display()))?;
+    if let Some(note) = summary.split_note() {
+        eprintln!("note: {note}");
+    }
     if let Some(e) = bad {
         anyhow::bail!("{}: {e}", path.display());
     }

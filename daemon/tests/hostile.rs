@@ -181,6 +181,13 @@ const CASES: &[Case] = &[
         1,
         &["not a finite number", "too large"],
     ),
+    // Found by the hostile sweep (seed 23): the other targets without scatter made the local
+    // anomaly's ratio and significance infinite ("significance inf", "x̄ NaN µm").
+    case(
+        "diagnose {c}/positioning-one-scatter.csv",
+        0,
+        &["No finding"],
+    ),
     // A before sample without scatter printed "variance ratio after/before inf".
     case(
         "parts {c}/parts-before-constant.csv {x}/models/parts_after.csv --tolerance=-10,10",

@@ -31,6 +31,8 @@ pub mod report;
 pub mod run;
 #[cfg(feature = "sim")]
 pub mod sim;
+#[cfg(feature = "sim")]
+pub mod sim_config;
 pub mod thermal;
 pub mod uncertainty;
 pub mod volumetric;

@@ -452,12 +452,15 @@ fn anomaly_evidence(sc: &TargetScatter, t: usize, ln_n: f64) -> Option<(f64, f64
         return None;
     }
     let (vk, vr) = (sc.ss_t[t] / dk, (ss_all - sc.ss_t[t]) / dr);
-    if vk <= vr {
+    // The other targets without scatter (readings repeated exactly): no ratio to state, and
+    // the likelihood ratio would be infinite ("significance inf", found by the hostile sweep).
+    if vk <= vr || vr <= 0.0 {
         return None;
     }
     // Profile log-likelihood ratio of separate vs common variance (×2).
     let lr = dof_all * (ss_all / dof_all).ln() - dk * vk.ln() - dr * vr.ln();
-    Some(((vk / vr).sqrt(), lr - 2.0 * ln_n))
+    let ratio = (vk / vr).sqrt();
+    (ratio.is_finite() && lr.is_finite()).then_some((ratio, lr - 2.0 * ln_n))
 }
 
 /// Local anomaly: one target with its own variance (module docs).

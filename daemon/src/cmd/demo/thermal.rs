@@ -189,15 +189,15 @@ pub fn thermal_config(
     out: &Path,
     module_link: &Path,
 ) -> anyhow::Result<String> {
-    let base = crate::cmd::sim::write_daemon_config_with_rates(
+    let base = crate::cmd::sim_config::write_daemon_config_with_rates(
         sim,
         ports,
         out,
         true,
         [
-            crate::cmd::sim::SIM_LI80_RATE_HZ,
+            crate::cmd::sim_config::SIM_LI80_RATE_HZ,
             THERMAL_CB3_RATE_HZ,
-            crate::cmd::sim::SIM_PSD_RATE_HZ,
+            crate::cmd::sim_config::SIM_PSD_RATE_HZ,
         ],
     )?;
     let toml = without_sections(&base, &["interferometer", "psd"]);

@@ -181,6 +181,13 @@ const CASES: &[Case] = &[
         1,
         &["not a finite number", "too large"],
     ),
+    // Found by the hostile sweep (seed 31): a finite reading of -1e308 µm gave "EA0Z NaN",
+    // "EYZ -inf"; a reading is a spot on the 10 mm diode.
+    case(
+        "identify psd {c}/psd-reading-1e308.csv --reference 0",
+        1,
+        &["r2_um", "5000 µm"],
+    ),
     // Found by the hostile sweep (seed 23): the other targets without scatter made the local
     // anomaly's ratio and significance infinite ("significance inf", "x̄ NaN µm").
     case(

@@ -535,6 +535,8 @@ pub fn derive_uncertainty(layout: &PsdLayout, sigma_um: f64) -> Result<Vec<f64>,
 /// on S5. `#` lines are comments. Returns the runs in file order.
 /// The most rows a PSD readings file may hold: 20 000 runs of the 51-point frame.
 pub const MAX_READING_ROWS: usize = 1_020_000;
+/// Largest reading, µm: half the diode's 10 mm.
+pub const MAX_READING_UM: f64 = 5000.0;
 
 pub fn parse_readings_csv(
     layout: &PsdLayout,
@@ -580,14 +582,16 @@ pub fn parse_readings_csv(
                 ))
             })
         };
+        // A reading is a spot position on the 10 mm × 10 mm diode: within ±5000 µm of its
+        // centre (a reading of -1e308 overflowed the derived errors to NaN).
         let num = |i: usize, name: &str| -> Result<f64, PsdError> {
             get(i)
                 .parse::<f64>()
                 .ok()
-                .filter(|v| v.is_finite())
+                .filter(|v| v.abs() <= MAX_READING_UM)
                 .ok_or_else(|| {
                     err(format!(
-                        "row {row}: `{name}` = `{}` is not a finite number",
+                        "row {row}: `{name}` = `{}` is not a number within ±{MAX_READING_UM} µm (a spot on the 10 mm diode)",
                         get(i)
                     ))
                 })

@@ -239,9 +239,12 @@ def limit():
 
 
 def echoed(out: str, m, inp_text: str) -> bool:
-    """Whether the word is the input's own text echoed (a budget's title), not a number."""
+    """Whether the word is the input's own text echoed (a budget's title, or a whole quoted
+    value such as a unit `unit = "+inf"` printed in the unit column), not a number."""
     before = out[max(0, m.start() - 6):m.end()]
     after = out[m.start():m.end() + 10]
+    if f'"{m.group(0)}"' in inp_text:
+        return True
     return any(len(c) > len(m.group(0)) + 4 and c in inp_text for c in (before, after))
 
 

@@ -39,6 +39,9 @@ pub const QUEUE_CAPACITY: usize = 1 << 16;
 /// While the drivers coalesce their reads (`drivers::read_coalesce`), the pipeline takes the
 /// queue this long after their tick: their reads of the tick are then queued.
 const BATCH_AFTER_TICK: Duration = Duration::from_millis(1);
+/// Longest wait, after the program end that stops a run, for the streaming readers' samples
+/// up to that instant ([`Pipeline::catch_up_readers`]).
+const CATCH_UP_LIMIT: Duration = Duration::from_secs(1);
 
 /// How often `/status` is written and systemd hears from us.
 pub const STATUS_PERIOD: Duration = Duration::from_secs(1);
@@ -337,6 +340,8 @@ struct RunState {
     nothing_since: Option<Instant>,
     poses: Vec<PoseMsg>,
     stop: Option<StopReason>,
+    /// Host time (ns) of the program-end trigger that stops the run.
+    program_end_ns: Option<u64>,
 }
 
 impl RunState {
@@ -382,6 +387,7 @@ impl RunState {
                         tracing::info!("program end");
                         if self.cfg.stop_at_program_end {
                             self.stop = Some(StopReason::ProgramEnd);
+                            self.program_end_ns = Some(t.host_ns);
                         }
                     }
                     TriggerEvent::FeedHold => self.status.program = ProgramState::Held,
@@ -592,6 +598,7 @@ impl Pipeline {
                 },
                 started: Instant::now(),
                 last_sample_ns: None,
+                program_end_ns: None,
                 nothing_since: Some(Instant::now()),
                 poses: Vec::new(),
                 stop: None,
@@ -757,6 +764,9 @@ impl Pipeline {
                 }
             }
         };
+        if reason == StopReason::ProgramEnd {
+            self.catch_up_readers(&mut rx).await;
+        }
         // Whatever is already queued belongs to the run (not so after program end: the next
         // program's samples belong to the next run).
         if !matches!(reason, StopReason::ProgramEnd | StopReason::LogFailed) {
@@ -767,6 +777,44 @@ impl Pipeline {
         let out = self.finish(reason, rx.len())?;
         progress.send_replace(out.status.clone());
         Ok(out)
+    }
+}
+
+impl Pipeline {
+    /// The program-end trigger is not coalesced, the streaming readers deliver on their tick:
+    /// the last dwell's samples may still be on their way when it stops the run. Takes events
+    /// until every connected streaming instrument has delivered a sample from after the program
+    /// end, for at most [`CATCH_UP_LIMIT`] (an instrument that went silent).
+    async fn catch_up_readers(&mut self, rx: &mut mpsc::Receiver<DriverEvent>) {
+        let Some(end_ns) = self.state.program_end_ns else {
+            return;
+        };
+        let mut behind: Vec<Instrument> = [
+            Instrument::Interferometer,
+            Instrument::Capball,
+            Instrument::Psd,
+        ]
+        .into_iter()
+        .filter(|i| {
+            self.state
+                .status
+                .instruments
+                .get(i)
+                .is_some_and(|s| s.connected)
+        })
+        .collect();
+        let deadline = tokio::time::Instant::now() + CATCH_UP_LIMIT;
+        while !behind.is_empty() {
+            let Ok(Some(ev)) = tokio::time::timeout_at(deadline, rx.recv()).await else {
+                break;
+            };
+            if let DriverEvent::Sample(s) = &ev
+                && s.host_ns >= end_ns
+            {
+                behind.retain(|i| *i != s.instrument);
+            }
+            self.handle(ev);
+        }
     }
 }
 

@@ -243,7 +243,11 @@ def echoed(out: str, m, inp_text: str) -> bool:
     value such as a unit `unit = "+inf"` printed in the unit column), not a number."""
     before = out[max(0, m.start() - 6):m.end()]
     after = out[m.start():m.end() + 10]
-    if f'"{m.group(0)}"' in inp_text:
+    # The whitespace-delimited word holding the match, e.g. a unit `nan/°C`.
+    start = out.rfind(" ", 0, m.start()) + 1
+    end = min((i for i in (out.find(" ", m.end()), out.find("\n", m.end())) if i >= 0),
+              default=len(out))
+    if f'"{m.group(0)}"' in inp_text or f'"{out[start:end]}"' in inp_text:
         return True
     return any(len(c) > len(m.group(0)) + 4 and c in inp_text for c in (before, after))
 

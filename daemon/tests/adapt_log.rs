@@ -2,9 +2,10 @@
 //! like the demo (ISO 230-2 on X with reversal poses, CapBall poses, a PSD segment along Z),
 //! with values worked out here from known deviations and known machine errors.
 
+mod cli_common;
+use cli_common::outcome as metrolog;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use drivers::Instrument;
 use geometry::capball::{CapballErrors, CapballSetup, TrajectorySpec};
@@ -378,18 +379,6 @@ fn explicit_range_and_trajectory_override() {
     }
     assert!(analysis::parse_pose_range("12-1").is_err());
     assert!(analysis::parse_pose_range("x").is_err());
-}
-
-fn metrolog(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 #[test]

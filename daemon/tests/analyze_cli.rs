@@ -1,22 +1,11 @@
 //! `metrolog analyze positioning` and `metrolog diagnose` end to end on dataset files.
 
+mod cli_common;
+use cli_common::outcome as metrolog;
 use std::path::Path;
-use std::process::Command;
 
 use positioning::axis_model::{AxisModel, Effect};
 use positioning::positioning_data::{simulate, standard_schedule};
-
-fn metrolog(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 fn write_run(dir: &Path, effects: Vec<Effect>, drop_one: bool) -> String {
     let m = AxisModel {

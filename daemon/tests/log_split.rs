@@ -6,8 +6,9 @@
 
 mod log_common;
 
+mod cli_common;
+use cli_common::outcome as metrolog;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 use drivers::synthetic::SyntheticRun;
@@ -42,19 +43,6 @@ fn parts(dir: &Path) -> Vec<PathBuf> {
         .collect();
     v.sort();
     v
-}
-
-/// `metrolog ARGS`: (success, stdout, stderr).
-fn metrolog(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 fn s(p: &Path) -> &str {

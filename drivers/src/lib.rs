@@ -38,7 +38,6 @@ pub mod synthetic;
 #[cfg(test)]
 mod test_port;
 mod trigger;
-mod tty;
 
 #[cfg(feature = "socketcan")]
 pub use can_socket::{from_socketcan, spawn_socketcan};

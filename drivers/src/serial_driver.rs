@@ -28,9 +28,9 @@ pub(crate) const ANSWER_TIMEOUT_BUSY: Duration = Duration::from_secs(30);
 const BACKOFF_MIN: Duration = Duration::from_millis(100);
 const BACKOFF_MAX: Duration = Duration::from_secs(2);
 /// Read coalescing (docs/design.md, "Where the daemon's CPU goes"): while streaming, a reader
-/// sleeps until the next tick of the coalescing period, then reads without waiting whatever the
-/// device sent meanwhile; its port is in no epoll set between ticks (`tty::TtyPort`), so a
-/// device costs about one wake-up per period whatever its rate, not one per device write. The ticks are shared by every reader of the process (multiples of
+/// that has read pauses until the next tick of the coalescing period before it reads again, so
+/// one read takes everything the device sent meanwhile and a device costs about one wake-up per
+/// period whatever its rate. The ticks are shared by every reader of the process (multiples of
 /// the period since the first tick asked for), so the readers wake together. The default
 /// period; `set_read_coalesce` changes it (the daemon's `[run] read_coalesce_ms`), zero turns
 /// coalescing off.
@@ -106,26 +106,6 @@ impl<C: FrameConverter, P: Port> SerialSession<'_, C, P> {
             }
         })
         .await
-    }
-
-    /// Read what is there now without waiting, as [`Self::read_once`] does; `None` when
-    /// nothing was there.
-    pub(crate) fn read_now(&mut self) -> Result<Option<usize>, DriverError> {
-        let SerialSession {
-            link,
-            path,
-            answers,
-        } = self;
-        link.read_now(|item, host_ns| {
-            if let Some(a) = path.take(item, host_ns) {
-                answers.push_back(a);
-            }
-        })
-    }
-
-    /// Take the port out of the runtime's epoll set until the next read that waits.
-    pub(crate) fn unwatch(&mut self) {
-        self.link.unwatch();
     }
 
     /// Write a command line (with its terminator) that has no answer.
@@ -264,61 +244,30 @@ pub(crate) fn idle_timeout(rate_hz: u32) -> Duration {
     Duration::from_secs(2) + Duration::from_secs_f64(5.0 / rate_hz.max(1) as f64)
 }
 
-/// Streams until the port fails or falls silent for the driver's idle time, reading on the
-/// driver's coalescing tick (or as bytes arrive when it has none); after each read it serves
-/// the driver's commands (the LI-80's re-reference `DATUM`).
+/// Streams until the port fails or falls silent for the driver's idle time, coalescing reads
+/// on the driver's tick; after each read it serves the driver's commands (the LI-80's
+/// re-reference `DATUM`).
 async fn stream<D: SerialDriver, P: Port>(
     driver: &D,
     s: &mut SerialSession<'_, D::Converter, P>,
 ) -> Result<(), DriverError> {
     let idle = driver.idle_timeout();
     let coalesce = driver.coalesce();
-    let mut last_bytes = tokio::time::Instant::now();
     let mut cycle = 0u32;
     loop {
-        cycle = cycle.wrapping_add(1);
-        if coalesce.is_zero() || cycle.is_multiple_of(PROBE_EVERY) {
-            read_waiting(s, idle).await?;
-            last_bytes = tokio::time::Instant::now();
-        } else if read_on_tick(s, coalesce).await? {
-            last_bytes = tokio::time::Instant::now();
-        } else if last_bytes.elapsed() >= idle {
-            return Err(DriverError::Silent { idle });
-        }
-        driver.serve(s).await?;
-        s.path.tick(false);
-    }
-}
-
-/// One read that waits for the next bytes, at most `idle` (the port is watched by the runtime
-/// meanwhile).
-async fn read_waiting<C: FrameConverter, P: Port>(
-    s: &mut SerialSession<'_, C, P>,
-    idle: Duration,
-) -> Result<(), DriverError> {
-    match tokio::time::timeout(idle, s.read_once()).await {
-        Ok(r) => r.map(|_| ()),
-        Err(_) => Err(DriverError::Silent { idle }),
-    }
-}
-
-/// Coalesced reading: with the port out of the runtime's epoll set (so device writes wake no
-/// thread), sleep until the next tick of `period`, then read without waiting whatever came,
-/// again while reads come full. Returns whether any bytes came.
-async fn read_on_tick<C: FrameConverter, P: Port>(
-    s: &mut SerialSession<'_, C, P>,
-    period: Duration,
-) -> Result<bool, DriverError> {
-    s.unwatch();
-    tokio::time::sleep_until(next_tick(period)).await;
-    let mut any = false;
-    while let Some(n) = s.read_now()? {
-        any = true;
-        if n < FULL_READ {
-            break;
+        match tokio::time::timeout(idle, s.read_once()).await {
+            Ok(Ok(n)) => {
+                driver.serve(s).await?;
+                s.path.tick(false);
+                cycle = cycle.wrapping_add(1);
+                if !coalesce.is_zero() && n < FULL_READ && !cycle.is_multiple_of(PROBE_EVERY) {
+                    tokio::time::sleep_until(next_tick(coalesce)).await;
+                }
+            }
+            Ok(Err(e)) => return Err(e),
+            Err(_) => return Err(DriverError::Silent { idle }),
         }
     }
-    Ok(any)
 }
 
 /// How a session ended.

@@ -2,50 +2,21 @@
 //! and rejections out, each dated by its read's arrival time on the host clock.
 //!
 //! The stream is anything that reads and writes asynchronously ([`Port`]): a serial port
-//! opened by [`open_port`] in service (a [`TtyPort`], in no epoll set between waits), an in-memory `tokio::io::duplex` in the tests. Opening
+//! opened by [`open_port`] in service, an in-memory `tokio::io::duplex` in the tests. Opening
 //! is a separate step: the driver loop asks its opener for a new stream after every loss.
 
-use std::pin::Pin;
-use std::task::{Context, Poll, Waker};
-
 use protocol::{Decoded, StreamDecoder};
-use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadBuf};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio_serial::SerialPort;
 
-pub(crate) use crate::tty::TtyPort;
 use crate::{DriverError, HostClock};
 
 /// Read buffer: large, so that one read takes everything the kernel holds.
 const READ_BUF: usize = 64 * 1024;
 
 /// A byte stream a serial driver talks over.
-pub(crate) trait Port: AsyncRead + AsyncWrite + Unpin + Send {
-    /// Read what is there now, without waiting and without asking to be woken when more
-    /// comes: `None` when nothing is, `Some(0)` at end of file. (A serial port read on the
-    /// coalescing tick is then in no epoll set between ticks, see [`TtyPort`].)
-    fn read_now(&mut self, buf: &mut [u8]) -> std::io::Result<Option<usize>> {
-        let mut cx = Context::from_waker(Waker::noop());
-        let mut rb = ReadBuf::new(buf);
-        match Pin::new(&mut *self).poll_read(&mut cx, &mut rb) {
-            Poll::Ready(Ok(())) => Ok(Some(rb.filled().len())),
-            Poll::Ready(Err(e)) => Err(e),
-            Poll::Pending => Ok(None),
-        }
-    }
-    /// Stop asking to be woken when bytes arrive, until the next read that waits.
-    fn unwatch(&mut self) {}
-}
-
-impl Port for TtyPort {
-    fn read_now(&mut self, buf: &mut [u8]) -> std::io::Result<Option<usize>> {
-        self.try_read(buf)
-    }
-    fn unwatch(&mut self) {
-        TtyPort::unwatch(self)
-    }
-}
-
-/// The tests' in-memory ports.
-impl Port for tokio::io::DuplexStream {}
+pub(crate) trait Port: AsyncRead + AsyncWrite + Unpin + Send {}
+impl<T: AsyncRead + AsyncWrite + Unpin + Send> Port for T {}
 
 /// An open stream, its decoder and its read buffer.
 pub(crate) struct SerialLink<D, P> {
@@ -57,8 +28,17 @@ pub(crate) struct SerialLink<D, P> {
 }
 
 /// Open `path` at `baud`, 8N1, no flow control, and forget whatever the device sent before.
-pub(crate) fn open_port(path: &str, baud: u32) -> std::io::Result<TtyPort> {
-    TtyPort::open(path, baud)
+pub(crate) fn open_port(path: &str, baud: u32) -> std::io::Result<tokio_serial::SerialStream> {
+    let builder = tokio_serial::new(path, baud)
+        .data_bits(tokio_serial::DataBits::Eight)
+        .parity(tokio_serial::Parity::None)
+        .stop_bits(tokio_serial::StopBits::One)
+        .flow_control(tokio_serial::FlowControl::None);
+    let port = tokio_serial::SerialStream::open(&builder).map_err(std::io::Error::from)?;
+    // Whatever the device sent before we looked is stale.
+    port.clear(tokio_serial::ClearBuffer::All)
+        .map_err(std::io::Error::from)?;
+    Ok(port)
 }
 
 impl<D: StreamDecoder + Send, P: Port> SerialLink<D, P> {
@@ -85,36 +65,10 @@ impl<D: StreamDecoder + Send, P: Port> SerialLink<D, P> {
             Ok(n) => n,
             Err(e) => return Err(DriverError::ReadFailed { cause: e.into() }),
         };
-        self.feed(n, &mut sink);
-        Ok(n)
-    }
-
-    /// Read what is there now without waiting (see [`Port::read_now`]) and hand it to `sink`
-    /// as [`Self::read`] does; `None` when nothing was there.
-    pub(crate) fn read_now(
-        &mut self,
-        mut sink: impl FnMut(Decoded<D::Frame>, u64),
-    ) -> Result<Option<usize>, DriverError> {
-        let n = match self.port.read_now(&mut self.buf) {
-            Ok(None) => return Ok(None),
-            Ok(Some(0)) => return Err(DriverError::EndOfFile),
-            Ok(Some(n)) => n,
-            Err(e) => return Err(DriverError::ReadFailed { cause: e.into() }),
-        };
-        self.feed(n, &mut sink);
-        Ok(Some(n))
-    }
-
-    /// Decode the first `n` bytes of the buffer, all dated now.
-    fn feed(&mut self, n: usize, sink: &mut impl FnMut(Decoded<D::Frame>, u64)) {
         let host_ns = self.clock.now_ns();
         self.decoder
             .feed(&self.buf[..n], |item| sink(item, host_ns));
-    }
-
-    /// Take the port out of the runtime's epoll set until the next read that waits.
-    pub(crate) fn unwatch(&mut self) {
-        self.port.unwatch();
+        Ok(n)
     }
 
     /// Write a command line (with its terminator).

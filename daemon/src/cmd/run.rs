@@ -47,7 +47,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         tracing::warn!("{n}");
     }
     let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(runtime_workers(&cfg))
+        .worker_threads(2)
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
@@ -202,25 +202,6 @@ impl RunReport {
 
 /// How long stopping drivers may take before the pipeline closes the log without them.
 const DRIVER_STOP_TIMEOUT: Duration = Duration::from_secs(3);
-
-/// Up to this many samples a second from the serial instruments in all, one runtime worker
-/// reads them (docs/design.md, "Where the daemon's CPU goes").
-const ONE_WORKER_MAX_HZ: u32 = 5_000;
-
-/// Runtime workers for `cfg`: the drivers read on a shared tick, so at moderate rates one
-/// thread wakes per tick for all of them (a second worker was woken on every tick as well, to
-/// look for work to steal: 410 against 260 wake-ups a second at 2.5 kHz). At higher rates two:
-/// a tick's decoding is then milliseconds, and one preempted worker delayed every reader
-/// (pose latency 53-85 ms at 31 kHz on a loaded 2-core machine, against 23-41 ms with two).
-fn runtime_workers(cfg: &Config) -> usize {
-    let rates = [
-        cfg.interferometer.as_ref().map(|c| c.rate_hz),
-        cfg.capball.as_ref().map(|c| c.driver.rate_hz),
-        cfg.psd.as_ref().map(|c| c.rate_hz),
-    ];
-    let total: u32 = rates.iter().flatten().sum();
-    if total <= ONE_WORKER_MAX_HZ { 1 } else { 2 }
-}
 
 /// Run one acquisition from a validated config until stopped.
 pub async fn acquire(cfg: &Config, opts: Acquire) -> anyhow::Result<RunReport> {

@@ -42,6 +42,7 @@
 //! `metrolog info` reports it).
 
 #[doc(hidden)]
+mod bg_file;
 pub mod fuzzcheck;
 mod prescan;
 pub mod raw;

@@ -11,8 +11,8 @@
 //! triggers and pose values per instrument (replay depends on it; docs/log-format.md).
 
 use std::collections::BTreeMap;
-use std::fs::{File, OpenOptions};
-use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::fs::OpenOptions;
+use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -20,6 +20,7 @@ use mcap::records::{MessageHeader, Metadata};
 use mcap::{Attachment, Compression, McapError, WriteOptions};
 use types::{Sample, Trigger};
 
+use super::bg_file::BgFile;
 use super::raw::{self, Builder};
 use super::split::{PART_METADATA, PART_NEXT_METADATA, parse_part_name, part_name};
 use super::topics::{self, PoseMsg, StatusMsg, TopicMessage, TriggerMsg};
@@ -70,13 +71,13 @@ impl Default for LogOptions {
     }
 }
 
-/// The file under the MCAP writer: buffered, its `flush` reaches the disk, and it knows how
-/// much of the file is durable (everything up to the end of the last flushed chunk).
+/// The file under the MCAP writer: written by its own thread ([`BgFile`]), its `flush`
+/// reaches the disk when `fsync` (and the page cache otherwise), and it knows how much of the
+/// file is durable (everything up to the end of the last flushed chunk).
 struct SyncFile {
-    inner: BufWriter<File>,
+    inner: BgFile,
     fsync: bool,
     pos: u64,
-    durable: u64,
     /// The file's size as written (read by the writer to split by size).
     size: std::sync::Arc<std::sync::atomic::AtomicU64>,
 }
@@ -90,12 +91,7 @@ impl Write for SyncFile {
         Ok(n)
     }
     fn flush(&mut self) -> std::io::Result<()> {
-        self.inner.flush()?;
-        if self.fsync {
-            self.inner.get_ref().sync_data()?;
-        }
-        self.durable = self.pos;
-        Ok(())
+        self.inner.flush_to_disk(self.fsync)
     }
 }
 
@@ -285,11 +281,14 @@ fn open_mcap(
             path: path.to_path_buf(),
             source,
         })?;
+    let inner = BgFile::new(file).map_err(|source| LogError::Create {
+        path: path.to_path_buf(),
+        source,
+    })?;
     let sink = SyncFile {
-        inner: BufWriter::with_capacity(1 << 20, file),
+        inner,
         fsync: opts.fsync,
         pos: 0,
-        durable: 0,
         size: size.clone(),
     };
     let wopts = WriteOptions::new()
@@ -529,10 +528,10 @@ impl LogWriter {
             // half-written chunk off, so the file ends at a record boundary after the last
             // complete chunk (readers then stop cleanly; nothing flushed is lost).
             if let Some(w) = self.mcap.take() {
-                let sink = w.into_inner();
-                let durable = sink.durable;
-                let (file, _unwritten) = sink.inner.into_parts();
-                if file.set_len(durable).is_ok() {
+                let (file, durable) = w.into_inner().inner.into_file();
+                if let Some(file) = file
+                    && file.set_len(durable).is_ok()
+                {
                     let _ = file.sync_all();
                 }
             }

@@ -562,12 +562,28 @@ fn families(
     .into_iter()
     .flatten()
     .collect();
+    let members = with_spindle_variants(s, members);
     let best = best_by_score(members.iter(), |_| true)?.clone();
     Some(Families {
         best,
         no_spindle,
         members,
     })
+}
+
+/// Every member with a spindle term also with that term made asymmetric (or symmetric), the
+/// other terms the same: the asymmetry family test then compares like with like.
+fn with_spindle_variants(s: &Search, members: Vec<Selection>) -> Vec<Selection> {
+    let mut out = members.clone();
+    for m in &members {
+        let v = s.asymmetric_variant(m).or_else(|| s.symmetric_variant(m));
+        if let Some(v) = v
+            && !out.iter().any(|o| o.specs == v.specs)
+        {
+            out.push(v);
+        }
+    }
+    out
 }
 
 fn best_by_score<'a>(
@@ -691,6 +707,9 @@ fn effect_findings(
     o: &DiagnoseOptions,
 ) -> Vec<Finding> {
     let mut out = vec![];
+    if std::env::var("THERMAL_DEBUG").is_ok() {
+        debug_families(ds, s, fam, noise, o);
+    }
     let Some(m) = chosen_model(fam, noise, o) else {
         return out;
     };
@@ -839,5 +858,72 @@ pub fn describe(f: &Finding) -> String {
             tau_cool_s / 60.0,
             gain_text(gain)
         ),
+    }
+}
+
+fn spec_text(ds: &ThermalDataset, m: &Selection) -> String {
+    m.specs
+        .iter()
+        .map(|sp| {
+            let name = match sp.src {
+                Src::Sensor(i) => ds.sensor_names[i].clone(),
+                Src::Spindle(p) => format!("rpm^{p}"),
+            };
+            if sp.tau_heat_s == sp.tau_cool_s {
+                format!("{name}/{:.0}", sp.tau_heat_s / 60.0)
+            } else {
+                format!(
+                    "{name}/{:.0}:{:.0}",
+                    sp.tau_heat_s / 60.0,
+                    sp.tau_cool_s / 60.0
+                )
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn debug_families(
+    ds: &ThermalDataset,
+    s: &Search,
+    fam: &Families,
+    noise: f64,
+    o: &DiagnoseOptions,
+) {
+    eprintln!("noise {noise:.4}");
+    if let Ok(v) = std::env::var("THERMAL_SCAN") {
+        let mut sp: Vec<Spec> = (0..ds.sensor_names.len())
+            .map(|i| Spec::symmetric(Src::Sensor(i), 0.0))
+            .collect();
+        for t in v.split_whitespace() {
+            let t: f64 = t.parse().unwrap_or(0.0);
+            sp.push(Spec::symmetric(Src::Spindle(2), t * 60.0));
+            if let Some(sc) = s.score(&sp).map(|x| x.rms()) {
+                eprintln!("  scan {t}: {:?}", sc);
+            }
+            sp.pop();
+        }
+    }
+    for m in &fam.members {
+        eprintln!("  member rms {:.4}  {}", m.score.rms(), spec_text(ds, m));
+    }
+    for (name, g) in [
+        ("lag", family_gain(fam, has_lag, o)),
+        ("spindle", family_gain(fam, has_spindle, o)),
+        ("asym", family_gain(fam, has_asymmetry, o)),
+    ] {
+        if let Some((m, g)) = g {
+            eprintln!(
+                "  family {name}: {:.4} -> {:.4} t {:.2} pass {}  with: {}",
+                g.rms_before_um,
+                g.rms_after_um,
+                g.t,
+                passes(&g, noise, o),
+                spec_text(ds, &m)
+            );
+        }
+    }
+    if let Some(c) = chosen_model(fam, noise, o) {
+        eprintln!("  chosen: {}", spec_text(ds, &c));
     }
 }

@@ -158,7 +158,8 @@ fn show_one_run() {
 }
 
 /// Calibration dump: every candidate finding with its held-out statistics, thresholds off.
-/// THERMAL_DUMP="runs seed0 [1: default thresholds]" (calibrate on seeds apart from the reported 100 000+).
+/// THERMAL_DUMP="runs seed0 [1: default thresholds]" (calibrate on seeds apart from the reported 100 000+);
+/// THERMAL_CLASSES="7 12" limits it to those class indices.
 #[test]
 #[ignore = "a calibration aid: THERMAL_DUMP='20 500000 [1]' cargo test ... dump_candidates -- --ignored --nocapture"]
 fn dump_candidates() {
@@ -176,7 +177,13 @@ fn dump_candidates() {
         opts.min_effect_noise_ratio = 0.0;
         opts.vif_limit = 1.0;
     }
+    let only: Option<Vec<usize>> = std::env::var("THERMAL_CLASSES")
+        .ok()
+        .map(|v| v.split_whitespace().map(|c| c.parse().unwrap()).collect());
     for (ci, class) in CLASSES.iter().enumerate() {
+        if only.as_ref().is_some_and(|o| !o.contains(&ci)) {
+            continue;
+        }
         for r in 0..runs {
             let seed = seed0 + 1000 * ci as u64 + r;
             let run = generate(class, seed, 20.0, 60.0);

@@ -307,7 +307,8 @@ fn diagnose_channel(
     }
     let fam = families(s, &pool, &all, &s0, &s1, o).ok_or_else(err)?;
     let noise = short_term_noise(s.y);
-    undecided_noisy(ds, &noisy.undecided, &fam.best, &mut findings, &mut notes);
+    let needed = |i: usize| sensor_needed(s, &fam, &pool, i, noise, o);
+    undecided_noisy(ds, &noisy.undecided, needed, &mut findings, &mut notes);
     findings.extend(effect_findings(ds, s, &fam, noise, o));
     let (m2, m) = (&fam.no_spindle, &fam.best);
     let ladder = vec![
@@ -405,18 +406,18 @@ fn noisy_findings(
     out
 }
 
-/// A flagged sensor the static fit needs is named when the extended model does not use it
+/// A flagged sensor the static fit needs is named when the extended model does not need it
 /// (the static fit leaned on it for what lags or spindle heat explain); otherwise a note.
 fn undecided_noisy(
     ds: &ThermalDataset,
     undecided: &[(usize, f64, usize, HeldOutGain)],
-    best: &Selection,
+    needed: impl Fn(usize) -> bool,
     findings: &mut Vec<Finding>,
     notes: &mut Vec<String>,
 ) {
     for &(i, ratio, nj, gain) in undecided {
         let name = ds.sensor_names[i].clone();
-        if best.specs.iter().all(|sp| sp.src != Src::Sensor(i)) {
+        if !needed(i) {
             findings.push(Finding::NoisySensor {
                 sensor: name,
                 noise_ratio: ratio,
@@ -425,11 +426,58 @@ fn undecided_noisy(
             });
         } else {
             notes.push(format!(
-                "sensor {name} is noisy or jumps but carries information: the static fit's held-out RMS rises {:.3} → {:.3} µm without it, and the extended model uses it",
+                "sensor {name} is noisy or jumps but carries information: the static fit's held-out RMS rises {:.3} → {:.3} µm without it, and the extended model needs it",
                 gain.rms_before_um, gain.rms_after_um
             ));
         }
     }
+}
+
+fn uses_sensor(m: &Selection, i: usize) -> bool {
+    m.specs.iter().any(|sp| sp.src == Src::Sensor(i))
+}
+
+/// Whether the extended model needs sensor `i`: the best model using it passes the finding
+/// rule against the best without it — a member that does not use it, or the best model with
+/// its terms taken out, every time constant searched again and the other inputs offered
+/// again (a backward test: the other effects stay in, so a lag or spindle term the sensor
+/// only stood in for does not make it look needed).
+fn sensor_needed(
+    s: &Search,
+    fam: &Families,
+    pool: &Pool,
+    i: usize,
+    noise: f64,
+    o: &DiagnoseOptions,
+) -> bool {
+    let Some(with) = best_by_score(fam.members.iter(), |m| uses_sensor(m, i)) else {
+        return false;
+    };
+    let others = Pool {
+        sensors: pool.sensors.iter().copied().filter(|&j| j != i).collect(),
+        ..pool.clone()
+    };
+    let mut start: Vec<Spec> = with
+        .specs
+        .iter()
+        .copied()
+        .filter(|sp| sp.src != Src::Sensor(i))
+        .collect();
+    let _ = s.backfit(&mut start);
+    let reduced = s.forward(start, &others, o.fit.max_terms);
+    let member = best_by_score(fam.members.iter(), |m| !uses_sensor(m, i)).cloned();
+    let Some(without) = [reduced, member]
+        .into_iter()
+        .flatten()
+        .min_by(|a, b| a.score.total().total_cmp(&b.score.total()))
+    else {
+        return true;
+    };
+    passes(
+        &HeldOutGain::between(&without.score, &with.score, &o.finding_rule),
+        noise,
+        o,
+    )
 }
 
 /// Collinear sensors: variance inflation above the limit in the static design (all sensors

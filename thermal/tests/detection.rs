@@ -174,6 +174,7 @@ fn dump_candidates() {
     let mut opts = DiagnoseOptions::default();
     if v.get(2) != Some(&1) {
         opts.finding_rule.min_t = f64::NEG_INFINITY;
+        opts.asymmetry_min_t = f64::NEG_INFINITY;
         opts.min_effect_noise_ratio = 0.0;
         opts.vif_limit = 1.0;
     }

@@ -323,6 +323,28 @@ impl Search<'_> {
         self.refitted(specs)
     }
 
+    /// `m` with every static sensor term smoothed without delay, each smoothing's time
+    /// constant searched (zero: the reading itself).
+    pub(crate) fn smoothed_variant(&self, m: &Selection) -> Option<Selection> {
+        if !m
+            .specs
+            .iter()
+            .any(|s| matches!(s.src, Src::Sensor(_)) && s.tau_heat_s == 0.0)
+        {
+            return None;
+        }
+        let mut specs: Vec<Spec> = m
+            .specs
+            .iter()
+            .map(|s| match s.src {
+                Src::Sensor(i) if s.tau_heat_s == 0.0 => Spec::symmetric(Src::Smoothed(i), 0.0),
+                _ => *s,
+            })
+            .collect();
+        let score = self.backfit(&mut specs)?;
+        Some(Selection { specs, score })
+    }
+
     /// The last term's time constants searched, then every term's.
     fn refitted(&self, mut specs: Vec<Spec>) -> Option<Selection> {
         let last = specs.len().checked_sub(1)?;

@@ -201,8 +201,8 @@ impl<'a> Search<'a> {
             .grid
             .iter()
             .copied()
-            .filter(|&g| g < tau)
-            .last()
+            .rev()
+            .find(|&g| g < tau)
             .unwrap_or(tau / 1.5);
         let hi = self
             .grid

@@ -638,7 +638,13 @@ fn families(
 /// averaging.
 fn with_spindle_variants(s: &Search, members: Vec<Selection>) -> Vec<Selection> {
     let mut out = members.clone();
+    let mut seen: Vec<&Selection> = vec![];
     for m in &members {
+        // Identical members (several searches often end on the same model) once.
+        if seen.iter().any(|o| o.specs == m.specs) {
+            continue;
+        }
+        seen.push(m);
         let v = s.asymmetric_variant(m).or_else(|| s.symmetric_variant(m));
         let smoothed = s.smoothed_variant(m);
         for v in [v, smoothed].into_iter().flatten() {

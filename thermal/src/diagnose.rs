@@ -621,7 +621,7 @@ fn families(
     .into_iter()
     .flatten()
     .collect();
-    let members = with_spindle_variants(s, members);
+    let members = with_variants(s, members);
     let best = best_by_score(members.iter(), |_| true)?.clone();
     Some(Families {
         best,
@@ -636,7 +636,7 @@ fn families(
 /// minutes gained on held-out blocks by averaging the readings' noise (0.01 K × a few µm/K),
 /// which named lags in runs without one; a lag is named when the delay gains, not the
 /// averaging.
-fn with_spindle_variants(s: &Search, members: Vec<Selection>) -> Vec<Selection> {
+fn with_variants(s: &Search, members: Vec<Selection>) -> Vec<Selection> {
     let mut out = members.clone();
     let mut seen: Vec<&Selection> = vec![];
     for m in &members {

@@ -5,6 +5,20 @@
 /// `tau_heat_s` applies while the input is above the lagged value (it is heating the
 /// lagged value), `tau_cool_s` while it is below. A time constant of 0 passes the input
 /// through. Each step is exact for an input held at the mean of its two readings.
+/// `x` smoothed without delay: the first-order filter of time constant `tau_s` run forward,
+/// then backward over the result (a centred smoother; `tau_s` <= 0: `x` itself).
+pub(crate) fn zero_phase(time_s: &[f64], x: &[f64], tau_s: f64) -> Vec<f64> {
+    if tau_s <= 0.0 {
+        return x.to_vec();
+    }
+    let fwd = lag_held(time_s, x, tau_s, tau_s, 0.5);
+    let rev_t: Vec<f64> = time_s.iter().rev().map(|t| -t).collect();
+    let rev_x: Vec<f64> = fwd.iter().rev().copied().collect();
+    let mut out = lag_held(&rev_t, &rev_x, tau_s, tau_s, 0.5);
+    out.reverse();
+    out
+}
+
 #[cfg(test)]
 pub(crate) fn lag(time_s: &[f64], x: &[f64], tau_heat_s: f64, tau_cool_s: f64) -> Vec<f64> {
     lag_held(time_s, x, tau_heat_s, tau_cool_s, 0.5)
@@ -44,6 +58,20 @@ pub(crate) fn lag_held(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zero_phase_smoothing_keeps_a_ramp_in_place() {
+        // A centred smoother leaves a straight line where it is (a lag would shift it by τ).
+        let t: Vec<f64> = (0..400).map(|i| i as f64 * 60.0).collect();
+        let x: Vec<f64> = t.iter().map(|&t| 1e-3 * t).collect();
+        let y = zero_phase(&t, &x, 600.0);
+        for k in 100..300 {
+            // (1e-4: the steps' trapezoid input, against a 0.6 shift for the lag below)
+            assert!((y[k] - x[k]).abs() < 1e-4, "{k}: {} vs {}", y[k], x[k]);
+        }
+        let lagged = lag_held(&t, &x, 600.0, 600.0, 0.5);
+        assert!((lagged[200] - x[200] + 0.6).abs() < 1e-3);
+    }
 
     #[test]
     fn step_response_is_exponential() {

@@ -1,7 +1,7 @@
 //! The model's input columns: sensor temperature rises and spindle speed, through lags.
 
 use crate::dataset::ThermalDataset;
-use crate::filter::lag_held;
+use crate::filter::{lag_held, zero_phase};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::rc::Rc;
@@ -13,6 +13,10 @@ pub(crate) enum Src {
     Sensor(usize),
     /// Spindle speed as (rpm / 1000)^exponent.
     Spindle(u32),
+    /// A sensor smoothed without delay (a first-order filter run forward, then backward, with
+    /// the term's time constant): in the diagnosis, the counterpart of a lag that only averages
+    /// the reading's noise. `thermal::fit` never offers it.
+    Smoothed(usize),
 }
 
 /// A term before its coefficient is known: an input and its lag.
@@ -101,7 +105,7 @@ impl Inputs {
     /// The raw (unlagged) input of `src`, or `None` when the dataset lacks it.
     pub(crate) fn raw(&self, src: Src) -> Option<Vec<f64>> {
         match src {
-            Src::Sensor(i) => self.rises.get(i).cloned(),
+            Src::Sensor(i) | Src::Smoothed(i) => self.rises.get(i).cloned(),
             Src::Spindle(p) => self
                 .krpm
                 .as_ref()
@@ -117,15 +121,12 @@ impl Inputs {
         let raw = self.raw(spec.src)?;
         let w = match spec.src {
             Src::Spindle(_) => self.spindle_hold,
-            Src::Sensor(_) => 0.5,
+            Src::Sensor(_) | Src::Smoothed(_) => 0.5,
         };
-        let col = Rc::new(lag_held(
-            &self.time_s,
-            &raw,
-            spec.tau_heat_s,
-            spec.tau_cool_s,
-            w,
-        ));
+        let col = Rc::new(match spec.src {
+            Src::Smoothed(_) => zero_phase(&self.time_s, &raw, spec.tau_heat_s),
+            _ => lag_held(&self.time_s, &raw, spec.tau_heat_s, spec.tau_cool_s, w),
+        });
         self.cache.borrow_mut().insert(spec.key(), Rc::clone(&col));
         Some(col)
     }

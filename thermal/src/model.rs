@@ -337,7 +337,8 @@ fn channel_of(ds: &ThermalDataset, y: &[f64]) -> usize {
 
 pub(crate) fn term_of(ds: &ThermalDataset, refs: &[f64], s: &Spec, coefficient: f64) -> Term {
     let input = match s.src {
-        Src::Sensor(i) => Input::Sensor {
+        // `Smoothed` is the diagnosis's alone (never in a fit's pool).
+        Src::Sensor(i) | Src::Smoothed(i) => Input::Sensor {
             name: ds.sensor_names[i].clone(),
             reference_c: refs[i],
         },

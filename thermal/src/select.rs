@@ -191,15 +191,25 @@ impl<'a> Search<'a> {
         } else {
             best.0.tau_cool_s
         };
-        let Some(pos) = self.grid.iter().position(|&g| g == tau) else {
+        if tau <= 0.0 {
             return best;
-        };
-        let lo = if pos == 0 {
-            tau / 1.5
-        } else {
-            self.grid[pos - 1]
-        };
-        let hi = self.grid.get(pos + 1).copied().unwrap_or(tau * 1.5);
+        }
+        // Between the grid's neighbours of τ: the grid value's two neighbours, or the two grid
+        // values around a τ an earlier search left between them (which, when it beats every
+        // grid value, would otherwise never be searched again as the other terms change).
+        let lo = self
+            .grid
+            .iter()
+            .copied()
+            .rev()
+            .find(|&g| g < tau)
+            .unwrap_or(tau / 1.5);
+        let hi = self
+            .grid
+            .iter()
+            .copied()
+            .find(|&g| g > tau)
+            .unwrap_or(tau * 1.5);
         let symmetric = !best.0.is_asymmetric();
         let start = best.0;
         let make = |t: f64| {
@@ -276,6 +286,82 @@ impl<'a> Search<'a> {
         }
         Some(Selection { specs, score })
     }
+}
+
+impl Search<'_> {
+    /// `m` with its symmetric spindle term made asymmetric: heating and cooling time
+    /// constants searched with the other terms fixed, then every term's searched again. The
+    /// asymmetry is then judged on the same other terms, not on whatever a greedy path took
+    /// before the spindle term came in as symmetric (and stayed so).
+    pub(crate) fn asymmetric_variant(&self, m: &Selection) -> Option<Selection> {
+        let idx = m
+            .specs
+            .iter()
+            .position(|s| matches!(s.src, Src::Spindle(_)) && !s.is_asymmetric())?;
+        let Src::Spindle(p) = m.specs[idx].src else {
+            return None;
+        };
+        let mut specs = without(&m.specs, idx);
+        let (a, _) = best_of(
+            self.scores_with(&specs, &self.asymmetric_candidates(p))
+                .into_iter(),
+        )?;
+        specs.push(a);
+        self.refitted(specs)
+    }
+
+    /// `m` with its asymmetric spindle term made symmetric (one time constant searched), then
+    /// every term's searched again: the asymmetry's counterpart on the same other terms.
+    pub(crate) fn symmetric_variant(&self, m: &Selection) -> Option<Selection> {
+        let idx = m
+            .specs
+            .iter()
+            .position(|s| matches!(s.src, Src::Spindle(_)) && s.is_asymmetric())?;
+        let sym = Spec::symmetric(m.specs[idx].src, m.specs[idx].tau_heat_s);
+        let mut specs = without(&m.specs, idx);
+        specs.push(sym);
+        self.refitted(specs)
+    }
+
+    /// `m` with every static sensor term smoothed without delay, each smoothing's time
+    /// constant searched (zero: the reading itself).
+    pub(crate) fn smoothed_variant(&self, m: &Selection) -> Option<Selection> {
+        if !m
+            .specs
+            .iter()
+            .any(|s| matches!(s.src, Src::Sensor(_)) && s.tau_heat_s == 0.0)
+        {
+            return None;
+        }
+        let mut specs: Vec<Spec> = m
+            .specs
+            .iter()
+            .map(|s| match s.src {
+                Src::Sensor(i) if s.tau_heat_s == 0.0 => Spec::symmetric(Src::Smoothed(i), 0.0),
+                _ => *s,
+            })
+            .collect();
+        let score = self.backfit(&mut specs)?;
+        Some(Selection { specs, score })
+    }
+
+    /// The last term's time constants searched, then every term's.
+    fn refitted(&self, mut specs: Vec<Spec>) -> Option<Selection> {
+        let last = specs.len().checked_sub(1)?;
+        let (r, _) = self.refine(&specs, last);
+        specs[last] = r;
+        let score = self.backfit(&mut specs)?;
+        Some(Selection { specs, score })
+    }
+}
+
+fn without(specs: &[Spec], idx: usize) -> Vec<Spec> {
+    specs
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != idx)
+        .map(|(_, s)| *s)
+        .collect()
 }
 
 impl Search<'_> {

@@ -85,7 +85,7 @@ fn check(rows: &[Row], min_detect: f64, max_false: f64) {
 }
 
 #[test]
-#[ignore = "below target: 6 runs per class, classes from 33 % (asymmetry+noisy) to 100 % named, 3 of 90 runs name an effect not there (docs/methods.md)"]
+#[ignore = "below target: 6 runs per class, lag+unseen named in 3 of 6, every other class in 6 of 6, no run names an effect not there (docs/methods.md)"]
 fn hidden_effects_are_named_fast() {
     let rows = sweep(6, 1);
     check(&rows, 5.0 / 6.0, 0.05);
@@ -93,25 +93,25 @@ fn hidden_effects_are_named_fast() {
 
 /// The default (CI) guard, ~15-50 s: the same 6 runs per class, held to what the code
 /// reaches now (not the targets; docs/methods.md): each class named in at least as many runs
-/// as now, and no more runs naming an effect not there than now (3 of the 90).
+/// as now, and no more runs naming an effect not there than now (none of the 90).
 #[test]
 fn fast_sweep_holds_its_current_level() {
     // (class, least runs of 6 with every effect named, most runs naming one not there)
     const LEVEL: &[(&str, usize, usize)] = &[
         ("none", 0, 0),
         ("lag", 6, 0),
-        ("unseen", 6, 1),
+        ("unseen", 6, 0),
         ("asymmetry", 6, 0),
-        ("noisy", 6, 1),
+        ("noisy", 6, 0),
         ("collinear", 6, 0),
-        ("lag+unseen", 6, 0),
-        ("lag+asymmetry", 5, 0),
-        ("lag+noisy", 5, 0),
+        ("lag+unseen", 3, 0),
+        ("lag+asymmetry", 6, 0),
+        ("lag+noisy", 6, 0),
         ("lag+collinear", 6, 0),
-        ("unseen+noisy", 5, 0),
-        ("unseen+collinear", 5, 1),
-        ("asymmetry+noisy", 2, 0),
-        ("asymmetry+collinear", 5, 0),
+        ("unseen+noisy", 6, 0),
+        ("unseen+collinear", 6, 0),
+        ("asymmetry+noisy", 6, 0),
+        ("asymmetry+collinear", 6, 0),
         ("noisy+collinear", 6, 0),
     ];
     let rows = sweep(6, 1);
@@ -136,7 +136,7 @@ fn fast_sweep_holds_its_current_level() {
 }
 
 #[test]
-#[ignore = "100 runs per class (~5 min unloaded): below target (≥ 95 % named, ≤ 2 % false): named 45-100 % by class, 2.7 % of all runs (4 % of none runs) name an effect not there; table in docs/methods.md"]
+#[ignore = "100 runs per class (~5 min unloaded): below target (≥ 95 % named in every class): lag+unseen 57 %, lag+asymmetry 80 %, the others 96-100 %; 1.4 % of all runs (none of the none runs) name an effect not there; table in docs/methods.md"]
 fn hidden_effects_are_named_sweep() {
     let rows = sweep(100, 100_000);
     check(&rows, 0.95, 0.02);
@@ -158,7 +158,8 @@ fn show_one_run() {
 }
 
 /// Calibration dump: every candidate finding with its held-out statistics, thresholds off.
-/// THERMAL_DUMP="runs seed0 [1: default thresholds]" (calibrate on seeds apart from the reported 100 000+).
+/// THERMAL_DUMP="runs seed0 [1: default thresholds]" (calibrate on seeds apart from the reported 100 000+);
+/// THERMAL_CLASSES="7 12" limits it to those class indices.
 #[test]
 #[ignore = "a calibration aid: THERMAL_DUMP='20 500000 [1]' cargo test ... dump_candidates -- --ignored --nocapture"]
 fn dump_candidates() {
@@ -173,10 +174,17 @@ fn dump_candidates() {
     let mut opts = DiagnoseOptions::default();
     if v.get(2) != Some(&1) {
         opts.finding_rule.min_t = f64::NEG_INFINITY;
+        opts.asymmetry_min_t = f64::NEG_INFINITY;
         opts.min_effect_noise_ratio = 0.0;
         opts.vif_limit = 1.0;
     }
+    let only: Option<Vec<usize>> = std::env::var("THERMAL_CLASSES")
+        .ok()
+        .map(|v| v.split_whitespace().map(|c| c.parse().unwrap()).collect());
     for (ci, class) in CLASSES.iter().enumerate() {
+        if only.as_ref().is_some_and(|o| !o.contains(&ci)) {
+            continue;
+        }
         for r in 0..runs {
             let seed = seed0 + 1000 * ci as u64 + r;
             let run = generate(class, seed, 20.0, 60.0);

@@ -80,3 +80,21 @@ fn a_trial_count_past_the_limit_is_a_usage_error() {
         assert!(err.contains("20000000"), "{args:?}: {err}");
     }
 }
+
+/// A seed count for the diagnosis's reproduction check is bounded (issue 27's held-out sweep,
+/// seed 67: `diagnose … --check-seeds 4294967296` ran for as many simulated runs, without end).
+#[test]
+fn a_check_seed_count_past_the_limit_is_a_usage_error() {
+    for v in ["4294967296", "101", "0"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["diagnose", "run.csv", "--check-seeds", v])
+            .output()
+            .expect("metrolog runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{v}: {err}");
+        assert!(
+            err.contains("--check-seeds") && err.contains("100"),
+            "{v}: {err}"
+        );
+    }
+}

@@ -24,9 +24,10 @@ pub struct Args {
     /// Draw the residual views (.svg or .png).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
-    /// Seeds averaged when checking that the extended model reproduces the run.
-    #[arg(long, default_value_t = 8)]
-    pub check_seeds: usize,
+    /// Seeds averaged when checking that the extended model reproduces the run (1 to 100;
+    /// each costs one simulated run and one diagnosis of it).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub check_seeds: u32,
     /// Read the input as CapBall data (automatic for a CSV whose header names `ex_um`).
     #[arg(long)]
     pub capball: bool,
@@ -50,6 +51,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         json: args.json,
         write_model: args.write_model.as_deref(),
         plot: args.plot.as_deref(),
-        check_seeds: args.check_seeds,
+        check_seeds: args.check_seeds as usize,
     })
 }

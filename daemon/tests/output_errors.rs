@@ -85,7 +85,7 @@ fn a_trial_count_past_the_limit_is_a_usage_error() {
 /// seed 67: `diagnose … --check-seeds 4294967296` ran for as many simulated runs, without end).
 #[test]
 fn a_check_seed_count_past_the_limit_is_a_usage_error() {
-    for v in ["4294967296", "101", "0"] {
+    for v in ["18446744073709551615", "4294967296", "101", "0"] {
         let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
             .args(["diagnose", "run.csv", "--check-seeds", v])
             .output()
@@ -96,5 +96,56 @@ fn a_check_seed_count_past_the_limit_is_a_usage_error() {
             err.contains("--check-seeds") && err.contains("100"),
             "{v}: {err}"
         );
+    }
+}
+
+/// The pose count of a CapBall trajectory is bounded (`identify trajectory --poses
+/// 18446744073709551615` panicked on the allocation; 10⁸ ran without end).
+#[test]
+fn a_trajectory_pose_count_past_the_limit_is_a_usage_error() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let out_csv = dir.path().join("t.csv");
+    for v in ["18446744073709551615", "100000000", "4"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["identify", "trajectory", "--poses", v, "--out"])
+            .arg(&out_csv)
+            .output()
+            .expect("metrolog runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{v}: {err}");
+        assert!(
+            err.contains("--poses") && err.contains("100000"),
+            "{v}: {err}"
+        );
+        assert!(!out_csv.exists(), "{v}: a file was written");
+    }
+}
+
+/// The trajectory's angles are bounded and a trajectory that cannot identify the errors is not
+/// written (`--c-turns 1e308` or `nan` ran without end; `0` wrote a file and printed a
+/// condition number of inf with exit 0).
+#[test]
+fn a_trajectory_that_cannot_identify_is_refused() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let out_csv = dir.path().join("t.csv");
+    let cases: [(&[&str], i32, &str); 5] = [
+        (&["--c-turns", "1e308"], 2, "turns of C"),
+        (&["--c-turns", "nan"], 2, "turns of C"),
+        (&["--c-turns", "0"], 2, "turns of C"),
+        (&["--a-end-deg", "1e300"], 2, "A angle"),
+        (&["--a-start-deg", "0", "--a-end-deg", "0"], 1, "singular"),
+    ];
+    for (args, code, words) in cases {
+        let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+            .args(["identify", "trajectory"])
+            .args(args)
+            .arg("--out")
+            .arg(&out_csv)
+            .output()
+            .expect("metrolog runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
+        assert!(err.contains(words), "{args:?}: {err}");
+        assert!(!out_csv.exists(), "{args:?}: a file was written");
     }
 }

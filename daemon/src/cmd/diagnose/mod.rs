@@ -26,8 +26,8 @@ pub struct Args {
     pub plot: Option<PathBuf>,
     /// Seeds averaged when checking that the extended model reproduces the run (1 to 100;
     /// each costs one simulated run and one diagnosis of it).
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=100))]
-    pub check_seeds: u32,
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..=100))]
+    pub check_seeds: u64,
     /// Read the input as CapBall data (automatic for a CSV whose header names `ex_um`).
     #[arg(long)]
     pub capball: bool,

@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use geometry::capball::{CapballSetup, TrajectorySpec};
 use metrolog_log::trajectory::{TrajectoryRow, write_trajectory};
 use nalgebra::Vector3;
@@ -15,13 +14,18 @@ pub struct TrajectoryArgs {
     /// Output file (CSV).
     #[arg(long)]
     pub out: PathBuf,
-    #[arg(long, default_value_t = 807)]
-    pub poses: usize,
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    /// Poses on the trajectory (5 to 100 000; 14 parameters need at least 5, paper 001 used
+    /// 807).
+    #[arg(long, default_value_t = 807, value_parser = clap::value_parser!(u64).range(5..=100_000))]
+    pub poses: u64,
+    /// A at the first pose, degrees (−360 to 360).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = a_deg_arg)]
     pub a_start_deg: f64,
-    #[arg(long, default_value_t = -90.0, allow_hyphen_values = true)]
+    /// A at the last pose, degrees (−360 to 360).
+    #[arg(long, default_value_t = -90.0, allow_hyphen_values = true, value_parser = a_deg_arg)]
     pub a_end_deg: f64,
-    #[arg(long, default_value_t = 6.0)]
+    /// Turns of C over the trajectory (more than 0, at most 1000).
+    #[arg(long, default_value_t = 6.0, value_parser = c_turns_arg)]
     pub c_turns: f64,
     /// The validation trajectory: A runs the other way.
     #[arg(long)]
@@ -56,14 +60,8 @@ pub fn run(a: TrajectoryArgs) -> anyhow::Result<()> {
         machine,
         ball_mm: ball,
     };
-    if a.poses < 5 {
-        anyhow::bail!(
-            "--poses {}: at least 5 poses are needed for 14 parameters",
-            a.poses
-        );
-    }
     let mut spec = TrajectorySpec {
-        n_poses: a.poses,
+        n_poses: a.poses as usize,
         a_start_deg: a.a_start_deg,
         a_end_deg: a.a_end_deg,
         c_turns: a.c_turns,
@@ -72,19 +70,46 @@ pub fn run(a: TrajectoryArgs) -> anyhow::Result<()> {
         spec = spec.reversed_a();
     }
     let poses = setup.trajectory(&spec);
+    let condition = setup.condition_number(&poses);
+    if !condition.is_finite() {
+        anyhow::bail!(
+            "this trajectory cannot identify the 14 errors (its Jacobian is singular: A from {} to {} deg, {} turns of C); nothing written",
+            a.a_start_deg,
+            a.a_end_deg,
+            a.c_turns
+        );
+    }
     let rows: Vec<TrajectoryRow> = (1..)
         .zip(&poses)
         .map(|(k, p)| trajectory_row(k, p))
         .collect();
-    std::fs::write(&a.out, write_trajectory(&rows))
-        .with_context(|| format!("writing {}", a.out.display()))?;
+    crate::cmd::input::write_output(&a.out, &write_trajectory(&rows))?;
     println!(
-        "{} poses written to {}; identification Jacobian condition number {:.1}",
+        "{} poses written to {}; identification Jacobian condition number {condition:.1}",
         poses.len(),
         a.out.display(),
-        setup.condition_number(&poses)
     );
     Ok(())
+}
+
+/// `--a-start-deg`, `--a-end-deg`: a finite angle within one turn either way.
+fn a_deg_arg(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v.abs() <= 360.0 => Ok(v),
+        _ => Err(format!(
+            "`{s}`: an A angle is a number of degrees from -360 to 360"
+        )),
+    }
+}
+
+/// `--c-turns`: more than 0, at most 1000.
+fn c_turns_arg(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v <= 1000.0 => Ok(v),
+        _ => Err(format!(
+            "`{s}`: the turns of C are a number more than 0 and at most 1000"
+        )),
+    }
 }
 
 /// Row `pose` (1-based) of the trajectory format for a machine pose; A and C are written (B is

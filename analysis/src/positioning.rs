@@ -111,6 +111,9 @@ pub fn positioning_from_contents(
     let time_scale = time_scale(log)?;
     let visits = visits(&traj, lo, hi, datum_x_mm);
     let datum_note = check_datum_epochs(log, &traj, &visits, &values)?;
+    if let Some(far) = far_from_target(&traj, &visits, &values, datum_x_mm) {
+        return Err(no_data(log, far, MISPLACED_HINT));
+    }
     let targets = measured_targets(&traj, &visits, &values);
     if targets.len() < 2 {
         return Err(no_data(
@@ -320,6 +323,42 @@ fn header_metadata(log: &LogContents, m: &mut std::collections::BTreeMap<String,
     if let Some(h) = stats(env.map(|e| e.rh_pct).collect(), 1, "%RH") {
         m.insert("humidity_pct".into(), h);
     }
+}
+
+/// Farthest an `ok` interferometer value may be from its pose's target, µm. No machine tool
+/// this evaluates errs by 2 mm; a value that far is another pose's (its dwell window was placed
+/// on the wrong samples, e.g. by a timing fault while the run was recorded), or the datum
+/// position is not what the log says.
+pub const MAX_FROM_TARGET_UM: f64 = 2000.0;
+
+const MISPLACED_HINT: &str = "check --datum-x-mm (or the run metadata's datum_x_mm); if it is right, the run's pose values cannot be trusted: measure it again";
+
+/// The first `ok` value of the run farther than [`MAX_FROM_TARGET_UM`] from its target (its
+/// reading `position_um` against `(x_mm − datum_x_mm)·1000`), described.
+fn far_from_target(
+    traj: &[TrajectoryRow],
+    visits: &[(usize, Direction)],
+    values: &BTreeMap<u32, &PoseMsg>,
+    datum_x_mm: f64,
+) -> Option<String> {
+    visits.iter().find_map(|&(i, _)| {
+        let row = &traj[i];
+        let p = values.get(&row.pose).filter(|p| is_ok(p))?;
+        let got = *p.mean.get("position_um")?;
+        let want = (row.x_mm - datum_x_mm) * 1000.0;
+        ((got - want).abs() > MAX_FROM_TARGET_UM).then(|| {
+            format!(
+                "pose {}'s interferometer value is ok but {:.4} mm from its target (read {:.1} µm, the target {} mm from the datum at {} mm expects {:.1} µm); no machine errs by more than {} mm: its steady window holds another pose's samples, so no value of this run can be trusted",
+                row.pose,
+                (got - want).abs() / 1000.0,
+                got,
+                row.x_mm,
+                datum_x_mm,
+                want,
+                MAX_FROM_TARGET_UM / 1000.0
+            )
+        })
+    })
 }
 
 fn no_data(log: &LogContents, what: String, hint: &str) -> AnalysisError {
@@ -549,6 +588,36 @@ mod tests {
         // 10, 20, 30 and the return to 0, all on the run's first zero.
         assert_eq!(d.readings.len(), 4);
         assert!(d.readings.iter().all(|r| r.deviation_um.abs() < 1e-9));
+    }
+
+    /// A value `ok` but 100 mm off its target (seen once in a HIL run under overload: pose 12
+    /// read the X 0 of pose 13) refuses the run; 1.9 mm of error is still a machine's.
+    #[test]
+    fn a_value_another_pose_s_is_refused_and_a_large_error_is_not() {
+        let xs = [100.0, 200.0, 0.0, 100.0, 200.0, 0.0];
+        let l = log(&xs, |no, x| Some(if no == 5 { -2.8 } else { x * 1000.0 }));
+        let e = positioning_from_contents(&l, &PositioningOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("pose 5's interferometer value is ok but 200.0028 mm"),
+            "{e}"
+        );
+        assert!(e.contains("another pose's samples"), "{e}");
+        let l = log(&xs, |_, x| Some(x * 1000.0 + 1900.0));
+        let d = positioning_from_contents(&l, &PositioningOptions::default()).unwrap();
+        assert!(
+            d.readings
+                .iter()
+                .all(|r| (r.deviation_um - 1900.0).abs() < 1e-6)
+        );
+        // The same 100 mm misreading is fine when the datum really is elsewhere.
+        let l = log(&xs, |_, x| Some((x - 50.0) * 1000.0));
+        let opts = PositioningOptions {
+            datum_x_mm: Some(50.0),
+            ..PositioningOptions::default()
+        };
+        assert!(positioning_from_contents(&l, &opts).is_ok());
     }
 
     #[test]

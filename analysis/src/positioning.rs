@@ -331,7 +331,7 @@ fn header_metadata(log: &LogContents, m: &mut std::collections::BTreeMap<String,
 /// position is not what the log says.
 pub const MAX_FROM_TARGET_UM: f64 = 2000.0;
 
-const MISPLACED_HINT: &str = "check --datum-x-mm (or the run metadata's datum_x_mm); if it is right, the run's pose values cannot be trusted: measure it again";
+const MISPLACED_HINT: &str = "check the datum position (the run metadata's datum_x_mm, 0 when absent); if it is right, the run's pose values cannot be trusted: measure it again";
 
 /// The first `ok` value of the run farther than [`MAX_FROM_TARGET_UM`] from its target (its
 /// reading `position_um` against `(x_mm − datum_x_mm)·1000`), described.

@@ -86,12 +86,8 @@ fn a_trial_count_past_the_limit_is_a_usage_error() {
 #[test]
 fn a_check_seed_count_past_the_limit_is_a_usage_error() {
     for v in ["18446744073709551615", "4294967296", "101", "0"] {
-        let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-            .args(["diagnose", "run.csv", "--check-seeds", v])
-            .output()
-            .expect("metrolog runs");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{v}: {err}");
+        let (code, err) = exit_and_stderr(&["diagnose", "run.csv", "--check-seeds", v]);
+        assert_eq!(code, Some(2), "{v}: {err}");
         assert!(
             err.contains("--check-seeds") && err.contains("100"),
             "{v}: {err}"
@@ -106,13 +102,10 @@ fn a_trajectory_pose_count_past_the_limit_is_a_usage_error() {
     let dir = tempfile::tempdir().expect("a temporary directory");
     let out_csv = dir.path().join("t.csv");
     for v in ["18446744073709551615", "100000000", "4"] {
-        let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-            .args(["identify", "trajectory", "--poses", v, "--out"])
-            .arg(&out_csv)
-            .output()
-            .expect("metrolog runs");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{v}: {err}");
+        let out_arg = out_csv.to_string_lossy();
+        let (code, err) =
+            exit_and_stderr(&["identify", "trajectory", "--poses", v, "--out", &out_arg]);
+        assert_eq!(code, Some(2), "{v}: {err}");
         assert!(
             err.contains("--poses") && err.contains("100000"),
             "{v}: {err}"
@@ -136,16 +129,25 @@ fn a_trajectory_that_cannot_identify_is_refused() {
         (&["--a-start-deg", "0", "--a-end-deg", "0"], 1, "singular"),
     ];
     for (args, code, words) in cases {
-        let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
-            .args(["identify", "trajectory"])
-            .args(args)
-            .arg("--out")
-            .arg(&out_csv)
-            .output()
-            .expect("metrolog runs");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
+        let out_arg = out_csv.to_string_lossy();
+        let mut all = vec!["identify", "trajectory"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--out", &out_arg]);
+        let (got, err) = exit_and_stderr(&all);
+        assert_eq!(got, Some(code), "{args:?}: {err}");
         assert!(err.contains(words), "{args:?}: {err}");
         assert!(!out_csv.exists(), "{args:?}: a file was written");
     }
+}
+
+/// Runs metrolog with `args`: its exit code and its stderr.
+fn exit_and_stderr(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
+        .args(args)
+        .output()
+        .expect("metrolog runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }

@@ -182,6 +182,9 @@ pub fn positioning_from_contents(
     if let Some(n) = datum_note {
         metadata.insert(DATUM_NOTE_KEY.into(), n);
     }
+    if let Some(n) = off_target_note(&traj, &visits, &values) {
+        metadata.insert(OFF_TARGET_NOTE_KEY.into(), n);
+    }
     if let Some(a) = alpha {
         metadata.insert("alpha_um_per_m_k".into(), a.to_string());
     }
@@ -204,6 +207,34 @@ pub fn positioning_from_contents(
 /// Key of the positioning data's metadata that notes the datum epochs a run went through
 /// (shown among the report's notes).
 pub const DATUM_NOTE_KEY: &str = "datum_note";
+
+/// Run metadata key of the note on the values the daemon marked `off_target` (shown among the
+/// report's notes).
+pub const OFF_TARGET_NOTE_KEY: &str = "off_target_note";
+
+/// The note on the run's `off_target` values (the daemon found them more than
+/// [`MAX_FROM_TARGET_UM`] from their targets, docs/design.md "Values off their target"): they
+/// are missing readings, and why.
+fn off_target_note(
+    traj: &[TrajectoryRow],
+    visits: &[(usize, Direction)],
+    values: &BTreeMap<u32, &PoseMsg>,
+) -> Option<String> {
+    let poses: Vec<String> = visits
+        .iter()
+        .filter_map(|(i, _)| values.get(&traj[*i].pose))
+        .filter(|p| p.status == types::PoseStatus::OffTarget)
+        .map(|p| p.pose.to_string())
+        .collect();
+    (!poses.is_empty()).then(|| {
+        format!(
+            "{} pose value(s) are off_target (pose {}): the interferometer read more than {} mm from the target there when it was recorded (another pose's samples, or a zero that was not the datum); they are missing readings",
+            poses.len(),
+            poses.join(", "),
+            MAX_FROM_TARGET_UM / 1000.0
+        )
+    })
+}
 
 /// A run whose interferometer lost its datum (beam interrupted, reconnect, a service start
 /// mid-program: pose values `datum_lost`, docs/design.md "Datum epochs") holds lengths against
@@ -329,7 +360,7 @@ fn header_metadata(log: &LogContents, m: &mut std::collections::BTreeMap<String,
 /// this evaluates errs by 2 mm; a value that far is another pose's (its dwell window was placed
 /// on the wrong samples, e.g. by a timing fault while the run was recorded), or the datum
 /// position is not what the log says.
-pub const MAX_FROM_TARGET_UM: f64 = 2000.0;
+pub const MAX_FROM_TARGET_UM: f64 = types::OFF_TARGET_TOL_UM;
 
 const MISPLACED_HINT: &str = "check the datum position (the run metadata's datum_x_mm, 0 when absent); if it is right, the run's pose values cannot be trusted: measure it again";
 
@@ -618,6 +649,25 @@ mod tests {
             ..PositioningOptions::default()
         };
         assert!(positioning_from_contents(&l, &opts).is_ok());
+    }
+
+    /// The same misreading, caught by the daemon (`off_target`): a missing reading, named in
+    /// the notes with its pose, and the run is evaluated.
+    #[test]
+    fn a_value_the_daemon_marked_off_target_is_a_missing_reading_with_a_note() {
+        let xs = [100.0, 200.0, 0.0, 100.0, 200.0, 0.0];
+        let mut l = log(&xs, |no, x| Some(if no == 5 { -2.8 } else { x * 1000.0 }));
+        for p in l.poses.iter_mut().filter(|p| p.msg.pose == 5) {
+            p.msg.status = PoseStatus::OffTarget;
+        }
+        let d = positioning_from_contents(&l, &PositioningOptions::default()).unwrap();
+        assert_eq!(d.readings.len(), 5);
+        let note = &d.metadata[OFF_TARGET_NOTE_KEY];
+        assert!(
+            note.starts_with("1 pose value(s) are off_target (pose 5)"),
+            "{note}"
+        );
+        assert!(note.contains("more than 2 mm"), "{note}");
     }
 
     #[test]

@@ -206,8 +206,13 @@ pub fn analyze_positioning_given(
             missing.len()
         ));
     }
-    if let Some(n) = data.metadata.get(crate::positioning::DATUM_NOTE_KEY) {
-        notes.push(n.clone());
+    for key in [
+        crate::positioning::DATUM_NOTE_KEY,
+        crate::positioning::OFF_TARGET_NOTE_KEY,
+    ] {
+        if let Some(n) = data.metadata.get(key) {
+            notes.push(n.clone());
+        }
     }
     if !data.has_times {
         notes.push(

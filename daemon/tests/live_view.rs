@@ -346,6 +346,11 @@ async fn the_live_view_streams_what_the_log_holds_and_the_page_shows_poses() {
         wait_line(&rx, "subscribed", &mut out);
         (Reaped(c), rx)
     });
+    // Every device configured and the CAN channel open (the program start frame is not sent
+    // into a closed channel, which would make the run start mid-program).
+    tokio::time::timeout(LIMIT, sim.wait_active(&sim::Device::ALL))
+        .await
+        .expect("the daemon did not open every device");
     sim.start_program();
     tokio::time::timeout(LIMIT, sim.program_done())
         .await
@@ -624,6 +629,11 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
         .split(' ')
         .next()
         .unwrap();
+    // Every device configured and the CAN channel open (the program start frame is not sent
+    // into a closed channel, which would make the run start mid-program).
+    tokio::time::timeout(LIMIT, sim.wait_active(&sim::Device::ALL))
+        .await
+        .expect("the daemon did not open every device");
     sim.start_program();
 
     // Running: a PSD pose value is shown, the pose being measured with its target, and the
@@ -652,9 +662,12 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
         .filter_map(|c| c.split_once(':'))
         .map(|(i, n)| (i, n.parse().unwrap()))
         .collect();
+    // The beam breaks 4 s into the program; on a loaded host the page may be first read after
+    // that, when the interferometer's last dwell had no valid sample (and the page says so).
+    let beam_broken = dom.contains("data-kind=\"beam\"");
     for inst in ["interferometer", "capball", "psd"] {
         assert!(
-            counts.get(inst).is_some_and(|n| *n > 0),
+            counts.get(inst).is_some_and(|n| *n > 0) || (inst == "interferometer" && beam_broken),
             "{inst}: {counts:?}"
         );
     }

@@ -1446,6 +1446,12 @@ async fn datum_capball_and_psd_unplugs_keep_their_values_right() {
         "a datum_lost value without an interferometer fault"
     );
     assert!(contents.rereferences.is_empty());
+    // The run holds where the interferometer must read at each pose: an `ok` value more than
+    // 2 mm from it (a dwell on another pose's samples) would have been `off_target`.
+    let detector: types::DetectorSettings =
+        serde_json::from_str(&contents.run_metadata["detector"]).unwrap();
+    let targets = detector.position_targets.expect("no position targets");
+    assert_eq!(targets.targets_um.len(), sc.program.poses.len());
     // The operator was told of both unplugs.
     assert!(
         stderr.matches("reconnect").count() + stderr.matches("connected").count() >= 2,

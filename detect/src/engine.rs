@@ -24,8 +24,8 @@
 use std::collections::VecDeque;
 
 use types::{
-    DetectorSettings, Instrument, NC_SETTLE_US, PoseMsg, PoseStatus, PoseValue, Sample,
-    SampleValues, SteadyError, Trigger, TriggerEvent, TriggerTime,
+    DetectorSettings, Instrument, NC_SETTLE_US, PoseMsg, PoseStatus, PoseValue, PositionTargets,
+    Sample, SampleValues, SteadyError, Trigger, TriggerEvent, TriggerTime,
 };
 
 use crate::clock::{NcClock, NcPoint};
@@ -48,6 +48,8 @@ struct Slot {
     queued: VecDeque<QueuedSample>,
     /// The interferometer's datum epochs, as its samples' flags say (default for the others).
     epochs: Epochs,
+    /// Where the interferometer must read at each pose (none for the other instruments).
+    targets: Option<PositionTargets>,
 }
 
 /// How far from zero the reference visit's value may read for a re-reference to stand, µm: the
@@ -158,10 +160,23 @@ impl Slot {
     fn out(&mut self, values: Vec<PoseValue>, out: &mut Vec<PoseMsg>) {
         for mut v in values {
             let epoch = self.epochs.judge(&mut v);
+            if self.off_target(&v) {
+                v.status = PoseStatus::OffTarget;
+            }
             let mut msg = PoseMsg::from_value(self.instrument, &v);
             msg.datum_epoch = epoch;
             out.push(msg);
         }
+    }
+
+    /// Whether `v` is an `ok` value farther from its pose's target than the tolerance.
+    fn off_target(&self, v: &PoseValue) -> bool {
+        let (Some(t), Some(got)) = (&self.targets, v.mean.first()) else {
+            return false;
+        };
+        v.status == PoseStatus::Ok
+            && t.target_um(v.pose)
+                .is_some_and(|want| (got - want).abs() > t.tol_um)
     }
 
     /// Feeds the queued samples up to `horizon` (all with `None`), after the held triggers
@@ -206,6 +221,9 @@ pub struct PoseEngine {
 
 impl PoseEngine {
     pub fn new(settings: &DetectorSettings) -> Result<PoseEngine, SteadyError> {
+        if let Some(t) = &settings.position_targets {
+            t.validate()?;
+        }
         let mut detectors = Vec::new();
         for (inst, cfg) in [
             (Instrument::Interferometer, &settings.interferometer),
@@ -220,6 +238,10 @@ impl PoseEngine {
                     newest_ns: 0,
                     queued: VecDeque::new(),
                     epochs: Epochs::new(settings.datum_epochs),
+                    targets: settings
+                        .position_targets
+                        .clone()
+                        .filter(|_| inst == Instrument::Interferometer),
                 });
             }
         }
@@ -508,7 +530,11 @@ mod tests {
             trigger_time,
             ..DetectorSettings::default()
         };
-        let mut engine = PoseEngine::new(&settings).unwrap();
+        poses_by(&settings, burst)
+    }
+
+    fn poses_by(settings: &DetectorSettings, burst: bool) -> Vec<PoseMsg> {
+        let mut engine = PoseEngine::new(settings).unwrap();
         let mut out = Vec::new();
         for ev in run_events(burst) {
             out.extend(match &ev {
@@ -593,6 +619,47 @@ mod tests {
                 assert!((got - f64::from(k) * 100_000.0).abs() < 1.0, "{wrong:?}");
             }
         }
+    }
+
+    /// With the trajectory's targets, the values the arrival placement takes from neighbouring
+    /// poses (100 mm off) are `off_target`, not `ok`; every `ok` value left is its own pose's.
+    /// The targets here are the generator's positions, not the engine's.
+    #[test]
+    fn with_targets_no_value_of_another_pose_is_ok() {
+        let targets = types::PositionTargets {
+            targets_um: (1..=POSES).map(pose_um).collect(),
+            tol_um: types::OFF_TARGET_TOL_UM,
+        };
+        let settings = DetectorSettings {
+            instruments: vec![Instrument::Interferometer],
+            trigger_time: TriggerTime::Arrival,
+            position_targets: Some(targets),
+            ..DetectorSettings::default()
+        };
+        let out = poses_by(&settings, false);
+        assert_eq!(out.len(), usize::from(POSES), "{out:#?}");
+        let off: Vec<u32> = out
+            .iter()
+            .filter(|p| p.status == PoseStatus::OffTarget)
+            .map(|p| p.pose)
+            .collect();
+        assert_eq!(off, vec![10, 11, 12, 15, 16], "{out:#?}");
+        for p in out.iter().filter(|p| p.status == PoseStatus::Ok) {
+            let got = p.mean.get("position_um").copied().unwrap_or(f64::NAN);
+            assert!((got - pose_um(p.pose as u16)).abs() < 1.0, "{p:?}");
+        }
+        // Settings that cannot work are refused, not applied.
+        let mut bad = settings.clone();
+        if let Some(t) = bad.position_targets.as_mut() {
+            t.tol_um = f64::NAN;
+        }
+        assert!(PoseEngine::new(&bad).is_err());
+        // The key is written only when set, and logs without it read back without targets.
+        let json = serde_json::to_string(&settings).unwrap();
+        let back: DetectorSettings = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, settings);
+        let plain = serde_json::to_string(&DetectorSettings::default()).unwrap();
+        assert!(!plain.contains("position_targets"), "{plain}");
     }
 
     #[test]

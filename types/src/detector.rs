@@ -116,6 +116,49 @@ pub struct DetectorSettings {
     /// so replay reproduces them; new runs write `true`.
     #[serde(default)]
     pub datum_epochs: bool,
+    /// Where the interferometer must read at each pose (docs/design.md, "Values off their
+    /// target"): an `ok` value farther than the tolerance from its pose's target becomes
+    /// `off_target`. Runs without a trajectory, and logs written before this setting, have
+    /// none (a missing key reads `None`, so replay reproduces them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_targets: Option<PositionTargets>,
+}
+
+/// Largest distance of an `ok` interferometer value from its pose's target, µm: machine errors
+/// are micrometres to tenths of a millimetre; 2 mm more is a value from another pose (a dwell
+/// placed on the wrong samples) or a zero that is not the datum.
+pub const OFF_TARGET_TOL_UM: f64 = 2000.0;
+
+/// The interferometer reading each pose of the trajectory should give, µm: `(x_mm − datum
+/// X)·1000` of pose 1, 2, 3, … in order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PositionTargets {
+    /// Pose k's target is `targets_um[k − 1]`; poses past the end have none.
+    pub targets_um: Vec<f64>,
+    /// Largest distance of an `ok` value from its target, µm.
+    pub tol_um: f64,
+}
+
+impl PositionTargets {
+    /// The target of pose `pose` (1-based), if it has one.
+    pub fn target_um(&self, pose: u32) -> Option<f64> {
+        let k = usize::try_from(pose).ok()?.checked_sub(1)?;
+        self.targets_um.get(k).copied()
+    }
+
+    pub fn validate(&self) -> Result<(), SteadyError> {
+        if !(self.tol_um.is_finite() && self.tol_um > 0.0) {
+            return Err(SteadyError::BadThreshold(
+                "position_targets.tol_um",
+                self.tol_um,
+            ));
+        }
+        match self.targets_um.iter().find(|t| !t.is_finite()) {
+            Some(t) => Err(SteadyError::BadThreshold("position_targets.targets_um", *t)),
+            None => Ok(()),
+        }
+    }
 }
 
 /// Which time of a CNC trigger places the dwells on the host axis, where the samples sit at
@@ -157,6 +200,7 @@ impl Default for DetectorSettings {
             psd: SteadyConfig::default(),
             trigger_time: TriggerTime::NcClockSettled,
             datum_epochs: true,
+            position_targets: None,
         }
     }
 }

@@ -24,6 +24,10 @@ pub enum PoseStatus {
     /// interrupted) or came back from a reconnect (power-cycled or re-zeroed), so its lengths
     /// are not comparable with the run's earlier ones; re-reference before using them.
     DatumLost,
+    /// The interferometer's steady value is farther from its pose's target than the machine's
+    /// errors can be (`DetectorSettings::position_targets`): the dwell took another pose's
+    /// samples, or the zero is not the datum. Not a measurement of this pose.
+    OffTarget,
 }
 
 impl PoseStatus {
@@ -35,6 +39,7 @@ impl PoseStatus {
             PoseStatus::DeviceAway => "device_away",
             PoseStatus::TriggerMissing => "trigger_missing",
             PoseStatus::DatumLost => "datum_lost",
+            PoseStatus::OffTarget => "off_target",
         }
     }
     pub fn from_name(name: &str) -> Option<PoseStatus> {
@@ -45,6 +50,7 @@ impl PoseStatus {
             PoseStatus::DeviceAway,
             PoseStatus::TriggerMissing,
             PoseStatus::DatumLost,
+            PoseStatus::OffTarget,
         ]
         .into_iter()
         .find(|s| s.name() == name)

@@ -58,6 +58,7 @@ pub fn alarm_of(status: PoseStatus) -> Option<&'static str> {
         | PoseStatus::DeviceAway => None,
         PoseStatus::BeamInvalid => Some("beam lost"),
         PoseStatus::DatumLost => Some("datum lost"),
+        PoseStatus::OffTarget => Some("off target"),
     }
 }
 
@@ -139,6 +140,7 @@ mod tests {
         ];
         assert_eq!(alarms_text(&a), "psd unplugged, interferometer datum lost");
         assert_eq!(alarm_of(PoseStatus::DatumLost), Some("datum lost"));
+        assert_eq!(alarm_of(PoseStatus::OffTarget), Some("off target"));
         assert_eq!(alarm_of(PoseStatus::Ok), None);
         assert_eq!(alarm_of(PoseStatus::DeviceAway), None);
     }

@@ -29,7 +29,22 @@ pub fn detector_settings(cfg: &Config) -> DetectorSettings {
             c.mode = types::DetectorMode::Plateaus;
         }
     }
+    s.position_targets = position_targets(cfg);
     s
+}
+
+/// Where the interferometer must read at each pose of the trajectory, when its poses are the
+/// CNC's (triggers) and it measures from the datum position: `(x_mm − DATUM_X_MM)·1000`.
+fn position_targets(cfg: &Config) -> Option<types::PositionTargets> {
+    let t = cfg.run.trajectory.as_ref()?;
+    (cfg.trigger.is_some() && cfg.interferometer.is_some()).then(|| types::PositionTargets {
+        targets_um: t
+            .rows
+            .iter()
+            .map(|r| (r.x_mm - super::config::DATUM_X_MM) * 1000.0)
+            .collect(),
+        tol_um: types::OFF_TARGET_TOL_UM,
+    })
 }
 
 /// The run metadata of a config, started at `now_ns`.

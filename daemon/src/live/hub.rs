@@ -25,6 +25,27 @@ fn latch_depth(topic: &str) -> usize {
     }
 }
 
+/// Which latched messages stand for the same thing: a `/pose` its instrument's (a new client
+/// must get every instrument's current pose, however many poses the others finished since),
+/// every other message the channel's one latest.
+fn latch_key(data: &[u8]) -> Option<String> {
+    #[derive(serde::Deserialize)]
+    struct Key {
+        instrument: String,
+    }
+    serde_json::from_slice::<Key>(data)
+        .ok()
+        .map(|k| k.instrument)
+}
+
+/// Drops the oldest latched message that a later one of the same key replaces (the oldest of
+/// all when none does).
+fn evict_one(q: &mut VecDeque<Arc<LiveMsg>>) {
+    let keys: Vec<Option<String>> = q.iter().map(|m| latch_key(&m.data)).collect();
+    let replaced = (0..keys.len()).find(|&i| keys[i + 1..].contains(&keys[i]));
+    q.remove(replaced.unwrap_or(0));
+}
+
 /// One message as the log holds it: channel (index into [`Hub::channels`]), log time, bytes.
 #[derive(Debug)]
 pub struct LiveMsg {
@@ -107,10 +128,10 @@ impl Hub {
             && let Ok(mut l) = self.latest.lock()
         {
             let q = &mut l[channel];
-            if q.len() == depth {
-                q.pop_front();
-            }
             q.push_back(msg.clone());
+            if q.len() > depth {
+                evict_one(q);
+            }
         }
         // Err only when no client is connected.
         let _ = self.tx.send(msg);
@@ -134,4 +155,46 @@ pub fn tap(hub: Arc<Hub>, raw_hz: u32) -> MessageTap {
         }
         hub.publish(i, log_ns, data);
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn channel(hub: &Hub, topic: &str) -> usize {
+        hub.channels.iter().position(|c| c.topic == topic).unwrap()
+    }
+
+    fn instruments(hub: &Hub, ch: usize) -> Vec<String> {
+        hub.latched(ch)
+            .iter()
+            .filter_map(|m| latch_key(&m.data))
+            .collect()
+    }
+
+    /// A PSD unplugged while the others go on: a page opened 20 poses later still gets the
+    /// PSD's last pose (it was lost from a plain last-8 latch), and at most 8 are latched.
+    #[test]
+    fn every_instrument_s_current_pose_stays_latched() {
+        let hub = Hub::new(RunInfo::default());
+        let ch = channel(&hub, "/pose");
+        let pose = |inst: &str, k: u32| format!(r#"{{"instrument":"{inst}","pose":{k}}}"#);
+        hub.publish(ch, 1, pose("psd", 1).as_bytes());
+        for k in 1..=20 {
+            hub.publish(ch, 2 * k as u64, pose("capball", k).as_bytes());
+            hub.publish(ch, 2 * k as u64 + 1, pose("interferometer", k).as_bytes());
+        }
+        let got = instruments(&hub, ch);
+        assert_eq!(got.len(), 8, "{got:?}");
+        assert_eq!(got[0], "psd", "{got:?}");
+        let last = hub.latched(ch).last().map(|m| m.data.clone()).unwrap();
+        assert_eq!(last, pose("interferometer", 20).into_bytes());
+        // A channel without the key keeps its latest (one for /status).
+        let st = channel(&hub, "/status");
+        for k in 0..3u64 {
+            hub.publish(st, k, format!(r#"{{"n":{k}}}"#).as_bytes());
+        }
+        let kept: Vec<Vec<u8>> = hub.latched(st).iter().map(|m| m.data.clone()).collect();
+        assert_eq!(kept, vec![br#"{"n":2}"#.to_vec()]);
+    }
 }

@@ -175,6 +175,23 @@ pub fn inspect(path: &Path) -> anyhow::Result<InfoReport> {
     })
 }
 
+/// A run metadata value as the text report shows it: the detector settings' per-pose targets
+/// as their count (a long run has thousands; `--json` keeps them).
+fn shown_run_value(key: &str, value: &str) -> String {
+    if key != metrolog_log::DETECTOR_KEY {
+        return value.to_string();
+    }
+    let Ok(mut v) = serde_json::from_str::<serde_json::Value>(value) else {
+        return value.to_string();
+    };
+    let Some(t) = v.pointer_mut("/position_targets/targets_um") else {
+        return value.to_string();
+    };
+    let n = t.as_array().map_or(0, Vec::len);
+    *t = serde_json::Value::String(format!("{n} poses"));
+    v.to_string()
+}
+
 fn print_text(r: &InfoReport) {
     println!("log        {}", r.path.display());
     let rd = &r.read;
@@ -217,7 +234,7 @@ fn print_text(r: &InfoReport) {
     }
     println!("\nrun");
     for (k, v) in &r.run {
-        println!("  {k:<22} {v}");
+        println!("  {k:<22} {}", shown_run_value(k, v));
     }
     for i in &r.instruments {
         println!(
@@ -293,4 +310,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         print_text(&r);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_detector_s_targets_are_shown_as_their_count() {
+        let mut s = types::DetectorSettings::default();
+        s.position_targets = Some(types::PositionTargets {
+            targets_um: vec![0.0, 100_000.0, 200_000.0],
+            tol_um: types::OFF_TARGET_TOL_UM,
+        });
+        let json = serde_json::to_string(&s).unwrap();
+        let shown = shown_run_value(metrolog_log::DETECTOR_KEY, &json);
+        assert!(shown.contains(r#""targets_um":"3 poses""#), "{shown}");
+        assert!(shown.contains(r#""tol_um":2000.0"#), "{shown}");
+        // Other keys, and settings without targets, as they are.
+        assert_eq!(shown_run_value("machine", "x"), "x");
+        let plain = serde_json::to_string(&types::DetectorSettings::default()).unwrap();
+        assert_eq!(shown_run_value(metrolog_log::DETECTOR_KEY, &plain), plain);
+    }
 }

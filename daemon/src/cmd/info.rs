@@ -318,11 +318,13 @@ mod tests {
 
     #[test]
     fn the_detector_s_targets_are_shown_as_their_count() {
-        let mut s = types::DetectorSettings::default();
-        s.position_targets = Some(types::PositionTargets {
-            targets_um: vec![0.0, 100_000.0, 200_000.0],
-            tol_um: types::OFF_TARGET_TOL_UM,
-        });
+        let s = types::DetectorSettings {
+            position_targets: Some(types::PositionTargets {
+                targets_um: vec![0.0, 100_000.0, 200_000.0],
+                tol_um: types::OFF_TARGET_TOL_UM,
+            }),
+            ..types::DetectorSettings::default()
+        };
         let json = serde_json::to_string(&s).unwrap();
         let shown = shown_run_value(metrolog_log::DETECTOR_KEY, &json);
         assert!(shown.contains(r#""targets_um":"3 poses""#), "{shown}");

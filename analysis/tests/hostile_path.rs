@@ -141,3 +141,27 @@ fn the_check_finds_non_finite_words() {
     assert_eq!(non_finite_word("x -inf"), Some("inf"));
     assert_eq!(non_finite_word("info infinite nano"), None);
 }
+
+/// The seeds of the `positioning_path` and `compensation_path` fuzz targets, and the inputs
+/// they found (`protocol/fuzz/corpus/positioning_csv`), through both paths.
+#[test]
+fn the_fuzz_corpus_passes_both_paths() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../protocol/fuzz/corpus/positioning_csv");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).expect("the positioning_csv corpus") {
+        let path = e.expect("a directory entry").path();
+        let text =
+            String::from_utf8_lossy(&std::fs::read(&path).expect("a corpus file")).into_owned();
+        let out = positioning_path(&text);
+        compensation_path(&text);
+        // Control characters in a `# reference:` line (found by the fuzzer): replaced, and the
+        // report still names the sensor.
+        if path.ends_with("crash-control-characters-in-metadata") {
+            let reports = out.expect("the file is read");
+            assert!(reports[0].contains("laser triang"), "{}", reports[0]);
+        }
+        n += 1;
+    }
+    assert!(n >= 5, "{n} corpus files");
+}

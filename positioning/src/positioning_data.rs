@@ -157,7 +157,8 @@ impl PositioningData {
     /// how), and passes that visit their targets against their direction (swapped labels?).
     pub fn from_csv_str_noted(text: &str) -> Result<(Self, Vec<String>), DatasetError> {
         let mut data = Self::from_csv_str_raw(text)?;
-        let mut notes = renumber(&mut data.readings);
+        let mut notes = control_character_notes(text);
+        notes.extend(renumber(&mut data.readings));
         data.validate()?;
         notes.extend(data.pass_direction_notes());
         Ok((data, notes))
@@ -176,7 +177,7 @@ impl PositioningData {
             if let Some((k, v)) = t.strip_prefix('#').and_then(|rest| rest.split_once(':')) {
                 let k = k.trim();
                 if !k.is_empty() && !k.contains(' ') {
-                    metadata.insert(k.to_string(), v.trim().to_string());
+                    metadata.insert(printable(k), printable(v.trim()));
                 }
             }
         }
@@ -625,6 +626,35 @@ fn parse_alpha(metadata: &BTreeMap<String, String>) -> Result<Option<f64>, Datas
     }
 }
 
+/// `s` with every control character but tab (a space) replaced by U+FFFD: a `# key: value` line is echoed into
+/// the reports, and a control character there (an escape sequence, a carriage return) would
+/// reach the terminal or a file another program reads.
+fn printable(s: &str) -> String {
+    s.chars()
+        .map(|c| match c {
+            '\t' => ' ',
+            c if c.is_control() => '\u{fffd}',
+            c => c,
+        })
+        .collect()
+}
+
+/// A note per metadata line (`# key: value`) holding control characters, which the reader
+/// replaced.
+fn control_character_notes(text: &str) -> Vec<String> {
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| l.trim_start().starts_with('#') && l.contains(':'))
+        .filter(|(_, l)| l.chars().any(|c| c.is_control() && c != '\t'))
+        .map(|(i, _)| {
+            format!(
+                "line {}: control characters in a `#` metadata line were replaced by \u{fffd}",
+                i + 1
+            )
+        })
+        .collect()
+}
+
 /// Renumbers cycles and targets 1, 2, 3, … in the order of their numbers when the file's do
 /// not count so (cycles 10…50 would otherwise be read as 50 cycles, 9 of them missing), and
 /// says how.
@@ -925,6 +955,30 @@ mod tests {
             .replace(",x,", ",-,");
         let (_, notes) = PositioningData::from_csv_str_noted(&swapped).unwrap();
         assert!(notes.iter().any(|n| n.contains("swapped")), "{notes:?}");
+    }
+
+    /// Found by the `positioning_path` fuzz target: control characters in a `# reference:`
+    /// line reached the text and HTML reports (a terminal escape sequence, a carriage return).
+    #[test]
+    fn control_characters_in_metadata_are_replaced_and_noted() {
+        let text = format!(
+            "# reference: laser\u{1b}[2J\u{f}inf\u{f}\ttriang\r\n# axis: X\n{}",
+            run([1, 2], [1, 2, 3])
+        );
+        let (d, notes) = PositioningData::from_csv_str_noted(&text).unwrap();
+        assert_eq!(
+            d.metadata["reference"],
+            "laser\u{fffd}[2J\u{fffd}inf\u{fffd} triang"
+        );
+        assert!(
+            d.metadata
+                .values()
+                .all(|v| !v.chars().any(char::is_control))
+        );
+        assert_eq!(
+            notes,
+            vec!["line 1: control characters in a `#` metadata line were replaced by \u{fffd}"]
+        );
     }
 
     #[test]

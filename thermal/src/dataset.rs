@@ -201,6 +201,14 @@ fn parse_header(names: &[String], line: usize) -> Result<(Vec<Col>, ThermalDatas
     };
     let mut cols = Vec::with_capacity(names.len());
     for name in names {
+        if name.chars().any(char::is_control) {
+            return Err(ThermalError::Header {
+                line,
+                what: format!(
+                    "column name {name:?} holds a control character; names are printed in the reports and written into the model and prediction files"
+                ),
+            });
+        }
         let col = classify(name, &mut ds, &cols, line)?;
         cols.push(col);
     }
@@ -308,6 +316,19 @@ mod tests {
         assert_eq!(ds.channel_names, vec!["x"]);
         assert_eq!(ds.spindle_rpm.as_deref(), Some(&[0.0, 1000.0, 1000.0][..]));
         assert_eq!(ds.temperatures_c[1], vec![21.0, 21.2, 21.3]);
+    }
+
+    /// A name is printed in the reports: an escape sequence in it would reach the terminal.
+    #[test]
+    fn a_column_name_with_a_control_character_is_refused() {
+        let e = ThermalDataset::from_csv("time_s,d\u{1b}[31m_um,t1_c\n0,0,20\n1,0,20\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("line 1: column name \"d\\u{1b}[31m_um\""),
+            "{e}"
+        );
+        assert!(e.contains("control character"), "{e}");
     }
 
     #[test]

@@ -269,6 +269,42 @@ pub struct Report {
     pub validation: Vec<Validation>,
 }
 
+/// The budget's free texts (title, descriptions, units, groups) are printed in the report: a
+/// control character there (an escape sequence) would reach the terminal. Line breaks and tabs
+/// are text.
+fn check_printable(f: &BudgetFile) -> Result<(), UncertaintyError> {
+    let quantities = f.intermediates.iter().chain(&f.outputs);
+    let texts = [
+        ("title", Some(&f.title)),
+        ("description", f.description.as_ref()),
+    ]
+    .into_iter()
+    .chain(f.inputs.iter().flat_map(|i| {
+        [
+            ("description", i.description.as_ref()),
+            ("unit", i.unit.as_ref()),
+            ("group", i.group.as_ref()),
+        ]
+    }))
+    .chain(quantities.flat_map(|q| {
+        [
+            ("description", q.description.as_ref()),
+            ("unit", q.unit.as_ref()),
+        ]
+    }));
+    for (field, text) in texts {
+        if let Some(t) = text
+            && t.chars()
+                .any(|c| c.is_control() && !matches!(c, '\n' | '\r' | '\t'))
+        {
+            return Err(UncertaintyError::Format(format!(
+                "{field} {t:?} holds a control character (other than a line break or a tab); it is printed in the report"
+            )));
+        }
+    }
+    Ok(())
+}
+
 impl Budget {
     /// Parses and checks a budget file's text.
     pub fn from_toml(text: &str) -> Result<Budget, UncertaintyError> {
@@ -298,6 +334,7 @@ impl Budget {
             }
             names.push(n);
         }
+        check_printable(&f)?;
         for i in &f.inputs {
             i.distribution.validate(&i.name)?;
             if let Some(d) = i.dof
@@ -673,6 +710,23 @@ mod tests {
              [[output]]\nname = \"y\"\nexpr = \"x\"\n"
         ))
         .unwrap()
+    }
+
+    /// An escape sequence in a text the report prints is refused; line breaks are text.
+    #[test]
+    fn control_characters_in_printed_texts_are_refused() {
+        let budget = |title: &str, unit: &str| {
+            Budget::from_toml(&format!(
+                "title = \"{title}\"\ndescription = \"\"\"\nline 1\r\n\tline 2\n\"\"\"\n\
+                 [[input]]\nname = \"x\"\nunit = \"{unit}\"\ndistribution = \"normal\"\n\
+                 mean = 0\nu = 1\n[[output]]\nname = \"y\"\nexpr = \"x\"\n"
+            ))
+        };
+        assert!(budget("plain", "mm").is_ok());
+        for (title, unit) in [("a \\u001b[2J b", "mm"), ("plain", "m\\u0007m")] {
+            let e = budget(title, unit).unwrap_err().to_string();
+            assert!(e.contains("control character"), "{e}");
+        }
     }
 
     fn draws(b: &Budget, n: usize) -> Vec<f64> {

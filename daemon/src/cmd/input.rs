@@ -234,14 +234,28 @@ impl UnitArgs {
     }
 }
 
-/// Writes a report to stdout; a closed pipe (`| head`) is not an error.
+/// Writes a report to stdout; a closed pipe (`| head`) is not an error. A control character
+/// other than a line break or a tab (an escape sequence from an input's text that a reader let
+/// through) is printed as U+FFFD, never sent to the terminal.
 pub fn print_out(text: &str) -> anyhow::Result<()> {
     use std::io::Write as _;
+    let shown = terminal_safe(text);
     let mut out = std::io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+    match out.write_all(shown.as_bytes()).and_then(|_| out.flush()) {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
         _ => Ok(()),
     }
+}
+
+/// `text` with every control character but `\n`, `\r` and `\t` replaced by U+FFFD.
+fn terminal_safe(text: &str) -> std::borrow::Cow<'_, str> {
+    let unsafe_char = |c: char| c.is_control() && !matches!(c, '\n' | '\r' | '\t');
+    if !text.chars().any(unsafe_char) {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    text.chars()
+        .map(|c| if unsafe_char(c) { '\u{fffd}' } else { c })
+        .collect()
 }
 
 /// A thermal test (`time_s`, temperatures `_c`, optional `spindle_rpm` and displacements `_um`,
@@ -419,5 +433,21 @@ pub fn ndig_arg(s: &str) -> Result<u32, String> {
             "`{s}`: the significant digits of the tolerance are a whole number from 1 to \
              {MAX_NDIG} (each digit needs about 100 times the trials)"
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn reports_reach_the_terminal_without_escape_sequences() {
+        let plain = "a\tb\r\nc µm\n";
+        assert!(matches!(
+            super::terminal_safe(plain),
+            std::borrow::Cow::Borrowed(_)
+        ));
+        assert_eq!(
+            super::terminal_safe("x\u{1b}[2Jy\u{7}"),
+            "x\u{fffd}[2Jy\u{fffd}"
+        );
     }
 }

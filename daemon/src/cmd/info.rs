@@ -192,27 +192,35 @@ fn shown_run_value(key: &str, value: &str) -> String {
     v.to_string()
 }
 
-fn print_text(r: &InfoReport) {
-    println!("log        {}", r.path.display());
+/// The text report, written with [`super::input::print_out`]: a log's strings (machine name,
+/// identities, topic and attachment names) are another program's, and reach the terminal
+/// without control characters.
+fn print_text(r: &InfoReport) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let _ = writeln!(out, "log        {}", r.path.display());
     let rd = &r.read;
     if !rd.parts.is_empty() {
-        println!(
+        let _ = writeln!(
+            out,
             "parts      {} (a split run, read as one; sizes and counts are over all parts)",
             rd.parts.len()
         );
         for p in &rd.parts {
-            println!("           {}", p.display());
+            let _ = writeln!(out, "           {}", p.display());
         }
     }
     if rd.clean_close && rd.missing_messages > 0 {
-        println!(
+        let _ = writeln!(
+            out,
             "closed     cleanly but DAMAGED — {} messages its summary counts are missing ({} read)",
             rd.missing_messages, rd.messages
         );
     } else if rd.clean_close {
-        println!("closed     cleanly ({} bytes)", rd.file_bytes);
+        let _ = writeln!(out, "closed     cleanly ({} bytes)", rd.file_bytes);
     } else {
-        println!(
+        let _ = writeln!(
+            out,
             "closed     NOT cleanly — recovered {} messages from {} bytes{}",
             rd.messages,
             rd.file_bytes,
@@ -222,52 +230,57 @@ fn print_text(r: &InfoReport) {
         );
     }
     if let Some(e) = &rd.error {
-        println!("           damage: {e}");
+        let _ = writeln!(out, "           damage: {e}");
     }
     if let (Some(a), Some(b)) = (rd.first_log_ns, rd.last_log_ns) {
-        println!(
+        let _ = writeln!(
+            out,
             "span       {} .. {} ({:.1} s)",
             log::rfc3339(a),
             log::rfc3339(b),
             (b.saturating_sub(a)) as f64 * 1e-9
         );
     }
-    println!("\nrun");
+    let _ = writeln!(out, "\nrun");
     for (k, v) in &r.run {
-        println!("  {k:<22} {}", shown_run_value(k, v));
+        let _ = writeln!(out, "  {k:<22} {}", shown_run_value(k, v));
     }
     for i in &r.instruments {
-        println!(
+        let _ = writeln!(
+            out,
             "  connected: {} on {}: {}",
             i.get("instrument").map_or("?", |s| s),
             i.get("port").map_or("?", |s| s),
             i.get("identity").map_or("?", |s| s)
         );
     }
-    println!("\ntopics{:>34} {:>12}", "messages", "rate");
+    let _ = writeln!(out, "\ntopics{:>34} {:>12}", "messages", "rate");
     for (name, t) in &r.topics {
         let rate = t
             .rate_hz
             .map(|h| format!("{h:.1} Hz"))
             .unwrap_or_else(|| "-".into());
-        println!("  {name:<30} {:>10} {rate:>12}", t.messages);
+        let _ = writeln!(out, "  {name:<30} {:>10} {rate:>12}", t.messages);
     }
-    println!("\nposes ({} distinct)", r.distinct_poses);
+    let _ = writeln!(out, "\nposes ({} distinct)", r.distinct_poses);
     if r.poses.is_empty() {
-        println!("  none");
+        let _ = writeln!(out, "  none");
     }
     for (inst, by) in &r.poses {
         let s: Vec<String> = by.iter().map(|(k, v)| format!("{k} {v}")).collect();
-        println!("  {inst:<16} {}", s.join(", "));
+        let _ = writeln!(out, "  {inst:<16} {}", s.join(", "));
     }
-    println!("\ncounters (last /status)");
+    let _ = writeln!(out, "\ncounters (last /status)");
     match &r.last_status {
-        None => println!("  no /status record"),
+        None => {
+            let _ = writeln!(out, "  no /status record");
+        }
         Some(st) => {
-            println!("  log messages {}", st.log_messages);
+            let _ = writeln!(out, "  log messages {}", st.log_messages);
             for (inst, c) in &st.instruments {
                 let rej: u64 = c.rejections.values().sum();
-                println!(
+                let _ = writeln!(
+                    out,
                     "  {inst:<16} samples {} gaps {} ({} samples) rejections {rej} resyncs {} reconnects {} disconnects {} dropped {} invalid {} device errors {} clock drift {}",
                     c.samples,
                     c.gaps,
@@ -283,23 +296,25 @@ fn print_text(r: &InfoReport) {
                         .unwrap_or_else(|| "-".into())
                 );
                 for (k, v) in &c.rejections {
-                    println!("  {:<16}   rejected {k}: {v}", "");
+                    let _ = writeln!(out, "  {:<16}   rejected {k}: {v}", "");
                 }
             }
         }
     }
     if !r.attachments.is_empty() {
-        println!("\nattachments");
+        let _ = writeln!(out, "\nattachments");
         for a in &r.attachments {
-            println!("  {} ({}, {} bytes)", a.name, a.media_type, a.bytes);
+            let _ = writeln!(out, "  {} ({}, {} bytes)", a.name, a.media_type, a.bytes);
         }
     }
     if r.undecodable > 0 {
-        println!(
+        let _ = writeln!(
+            out,
             "\n{} messages did not decode as their topic's type",
             r.undecodable
         );
     }
+    super::input::print_out(&out)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -307,7 +322,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
-        print_text(&r);
+        print_text(&r)?;
     }
     Ok(())
 }

@@ -11,8 +11,28 @@ use crate::positioning_report::{analyze_positioning, render_text};
 
 /// A NaN or an infinity written as a number: a word `nan`, `inf` or `infinity` (any case).
 pub fn non_finite_word(text: &str) -> Option<&str> {
+    non_finite_word_except(text, &[])
+}
+
+/// [`non_finite_word`], except the words in `echoed`: words of the input's own free text (a
+/// title, a sensor's name) that an output repeats are not numbers the analysis wrote.
+pub fn non_finite_word_except<'a>(text: &'a str, echoed: &[&str]) -> Option<&'a str> {
+    words(text).find(|w| {
+        matches!(w.to_ascii_lowercase().as_str(), "nan" | "inf" | "infinity") && !echoed.contains(w)
+    })
+}
+
+/// The non-finite words of free texts an output may repeat.
+pub fn echoed_words<'a>(texts: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
+    texts
+        .into_iter()
+        .flat_map(words)
+        .filter(|w| non_finite_word_except(w, &[]).is_some())
+        .collect()
+}
+
+fn words(text: &str) -> impl Iterator<Item = &str> {
     text.split(|c: char| !c.is_alphanumeric() && c != '_')
-        .find(|w| matches!(w.to_ascii_lowercase().as_str(), "nan" | "inf" | "infinity"))
 }
 
 /// CSV text → the positioning reader → ISO 230-2, drift elimination and the standards → the
@@ -41,17 +61,15 @@ pub fn positioning_path(text: &str) -> Option<Vec<String>> {
         results_csv(&standards),
         positioning_html(&data, &an, &standards, &h),
     ];
-    // A word of the file's own `# key: value` lines is echoed (the sensor's reference): it is
-    // not a number the analysis wrote.
-    let echoed: Vec<&str> = data
-        .metadata
-        .values()
-        .flat_map(|v| v.split(|c: char| !c.is_alphanumeric() && c != '_'))
-        .filter(|w| non_finite_word(w).is_some())
-        .collect();
+    // A word of the file's own `# key: value` lines is echoed (the sensor's reference, a key
+    // shown as a label): it is not a number the analysis wrote.
+    let echoed = echoed_words(
+        data.metadata
+            .iter()
+            .flat_map(|(k, v)| [k.as_str(), v.as_str()]),
+    );
     for o in &outputs {
-        let mut words = o.split(|c: char| !c.is_alphanumeric() && c != '_');
-        if let Some(w) = words.find(|w| non_finite_word(w).is_some() && !echoed.contains(w)) {
+        if let Some(w) = non_finite_word_except(o, &echoed) {
             panic!("`{w}` in an output of an accepted file:\n{o}\n--- input:\n{text}");
         }
         if let Some(l) = o

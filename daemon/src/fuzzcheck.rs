@@ -125,24 +125,7 @@ pub fn budget_path(text: &str) -> Option<String> {
         .ok()?;
     let t = metrolog_analysis::uncertainty_text::budget_text(&report, &budget);
     // The budget's own texts are printed as they are (a title "infinity model").
-    let texts = [Some(&budget.title), budget.description.as_ref()]
-        .into_iter()
-        .chain(
-            budget
-                .inputs
-                .iter()
-                .flat_map(|i| [i.description.as_ref(), i.unit.as_ref(), i.group.as_ref()]),
-        )
-        .chain(
-            budget
-                .intermediates
-                .iter()
-                .chain(&budget.outputs)
-                .flat_map(|q| [q.description.as_ref(), q.unit.as_ref()]),
-        )
-        .flatten()
-        .map(String::as_str);
-    let echoed = metrolog_analysis::fuzzcheck::echoed_words(texts);
+    let echoed = metrolog_analysis::fuzzcheck::echoed_words(budget.free_texts());
     if let Some(w) = metrolog_analysis::fuzzcheck::non_finite_word_except(&t, &echoed) {
         panic!("`{w}` in the budget report of an accepted input:\n{t}\n--- input:\n{text}");
     }

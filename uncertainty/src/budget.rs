@@ -269,33 +269,42 @@ pub struct Report {
     pub validation: Vec<Validation>,
 }
 
-/// The budget's free texts (title, descriptions, units, groups) are printed in the report: a
-/// control character there (an escape sequence) would reach the terminal. Line breaks and tabs
-/// are text.
-fn check_printable(f: &BudgetFile) -> Result<(), UncertaintyError> {
-    let quantities = f.intermediates.iter().chain(&f.outputs);
-    let texts = [
-        ("title", Some(&f.title)),
-        ("description", f.description.as_ref()),
+/// A budget's free texts as (field, text): the title, descriptions, units and groups, which
+/// the report prints as they are.
+fn free_texts<'a>(
+    title: &'a str,
+    description: Option<&'a String>,
+    inputs: &'a [Input],
+    quantities: impl Iterator<Item = &'a Quantity> + 'a,
+) -> impl Iterator<Item = (&'static str, &'a str)> + 'a {
+    [
+        ("title", Some(title)),
+        ("description", description.map(String::as_str)),
     ]
     .into_iter()
-    .chain(f.inputs.iter().flat_map(|i| {
+    .chain(inputs.iter().flat_map(|i| {
         [
-            ("description", i.description.as_ref()),
-            ("unit", i.unit.as_ref()),
-            ("group", i.group.as_ref()),
+            ("description", i.description.as_deref()),
+            ("unit", i.unit.as_deref()),
+            ("group", i.group.as_deref()),
         ]
     }))
     .chain(quantities.flat_map(|q| {
         [
-            ("description", q.description.as_ref()),
-            ("unit", q.unit.as_ref()),
+            ("description", q.description.as_deref()),
+            ("unit", q.unit.as_deref()),
         ]
-    }));
-    for (field, text) in texts {
-        if let Some(t) = text
-            && t.chars()
-                .any(|c| c.is_control() && !matches!(c, '\n' | '\r' | '\t'))
+    }))
+    .filter_map(|(field, text)| text.map(|t| (field, t)))
+}
+
+/// The budget's free texts ([`free_texts`]) are printed in the report: a control character
+/// there (an escape sequence) would reach the terminal. Line breaks and tabs are text.
+fn check_printable(f: &BudgetFile) -> Result<(), UncertaintyError> {
+    let quantities = f.intermediates.iter().chain(&f.outputs);
+    for (field, t) in free_texts(&f.title, f.description.as_ref(), &f.inputs, quantities) {
+        if t.chars()
+            .any(|c| c.is_control() && !matches!(c, '\n' | '\r' | '\t'))
         {
             return Err(UncertaintyError::Format(format!(
                 "{field} {t:?} holds a control character (other than a line break or a tab); it is printed in the report"
@@ -430,6 +439,19 @@ impl Budget {
             draws,
             t_scales,
         })
+    }
+
+    /// The budget's free texts: title, descriptions, units and groups, as the report prints
+    /// them.
+    pub fn free_texts(&self) -> impl Iterator<Item = &str> + '_ {
+        let quantities = self.intermediates.iter().chain(&self.outputs);
+        free_texts(
+            &self.title,
+            self.description.as_ref(),
+            &self.inputs,
+            quantities,
+        )
+        .map(|(_, t)| t)
     }
 
     /// The GUM view of the inputs.

@@ -6,7 +6,8 @@ fn main() -> std::process::ExitCode {
     match metrolog::cli::run(cli) {
         Ok(()) => std::process::ExitCode::from(metrolog::exit::OK),
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // An error quotes its input (a column name, a log's string): no control characters.
+            metrolog::cmd::input::print_err(&format!("error: {e:#}"));
             // Distinct codes so that systemd does not restart what a restart cannot cure
             // (see daemon/src/exit.rs and the README's deploy section).
             std::process::ExitCode::from(metrolog::exit::code_for(&e))

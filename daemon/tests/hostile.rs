@@ -201,6 +201,13 @@ const CASES: &[Case] = &[
         0,
         &["variance ratio after/before: not defined"],
     ),
+    // A value quoted in the message: its escape sequences (clear the screen, set the window
+    // title) reached the terminal verbatim.
+    case(
+        "parts {c}/parts-escape-in-a-value.csv {x}/models/parts_after.csv --tolerance=-10,10",
+        1,
+        &["line 3", "is not a number", "\u{fffd}[2J"],
+    ),
     // Found by the budget_path fuzz target: ν_eff of 7·10²⁶ (a dominant input without ν) made
     // statrs' t quantile loop for ever; the expansion about the normal quantile answers.
     case(
@@ -440,6 +447,13 @@ fn check(args: &[String], out_dir: &Path, o: &Output, code: i32, words: &[&str])
     }
     if let Some(t) = non_finite_token(&stdout) {
         bad.push(format!("stdout holds `{t}`"));
+    }
+    // Nothing read from an input reaches the terminal as a control sequence.
+    let control = |c: char| c.is_control() && !matches!(c, '\n' | '\r' | '\t');
+    for (name, text) in [("stdout", &stdout), ("stderr", &stderr)] {
+        if let Some(c) = text.chars().find(|&c| control(c)) {
+            bad.push(format!("{name} holds the control character {c:?}"));
+        }
     }
     let written: Vec<PathBuf> = std::fs::read_dir(out_dir)
         .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())

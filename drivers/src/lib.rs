@@ -38,6 +38,7 @@ pub mod synthetic;
 #[cfg(test)]
 mod test_port;
 mod trigger;
+mod tty_port;
 
 #[cfg(feature = "socketcan")]
 pub use can_socket::{from_socketcan, spawn_socketcan};

@@ -261,6 +261,7 @@ async fn stream<D: SerialDriver, P: Port>(
                 s.path.tick(false);
                 cycle = cycle.wrapping_add(1);
                 if !coalesce.is_zero() && n < FULL_READ && !cycle.is_multiple_of(PROBE_EVERY) {
+                    s.link.detach();
                     tokio::time::sleep_until(next_tick(coalesce)).await;
                 }
             }

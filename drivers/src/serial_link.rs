@@ -9,14 +9,34 @@ use protocol::{Decoded, StreamDecoder};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio_serial::SerialPort;
 
+use crate::tty_port::TtyPort;
 use crate::{DriverError, HostClock};
 
 /// Read buffer: large, so that one read takes everything the kernel holds.
 const READ_BUF: usize = 64 * 1024;
 
 /// A byte stream a serial driver talks over.
-pub(crate) trait Port: AsyncRead + AsyncWrite + Unpin + Send {}
-impl<T: AsyncRead + AsyncWrite + Unpin + Send> Port for T {}
+pub(crate) trait Port: AsyncRead + AsyncWrite + Unpin + Send {
+    /// Stop waking the process for arriving bytes until the next wait (a coalescing reader's
+    /// pause; see [`TtyPort`]). Nothing for a stream without a reactor registration.
+    fn detach(&mut self) {}
+    /// One non-blocking read while detached; `None` when the stream can only be awaited.
+    fn read_detached(&mut self, _buf: &mut [u8]) -> Option<std::io::Result<usize>> {
+        None
+    }
+}
+
+impl Port for TtyPort {
+    fn detach(&mut self) {
+        TtyPort::detach(self);
+    }
+    fn read_detached(&mut self, buf: &mut [u8]) -> Option<std::io::Result<usize>> {
+        TtyPort::read_detached(self, buf)
+    }
+}
+
+#[cfg(test)]
+impl Port for tokio::io::DuplexStream {}
 
 /// An open stream, its decoder and its read buffer.
 pub(crate) struct SerialLink<D, P> {
@@ -28,17 +48,17 @@ pub(crate) struct SerialLink<D, P> {
 }
 
 /// Open `path` at `baud`, 8N1, no flow control, and forget whatever the device sent before.
-pub(crate) fn open_port(path: &str, baud: u32) -> std::io::Result<tokio_serial::SerialStream> {
+pub(crate) fn open_port(path: &str, baud: u32) -> std::io::Result<TtyPort> {
     let builder = tokio_serial::new(path, baud)
         .data_bits(tokio_serial::DataBits::Eight)
         .parity(tokio_serial::Parity::None)
         .stop_bits(tokio_serial::StopBits::One)
         .flow_control(tokio_serial::FlowControl::None);
-    let port = tokio_serial::SerialStream::open(&builder).map_err(std::io::Error::from)?;
+    let port = mio_serial::SerialStream::open(&builder).map_err(std::io::Error::from)?;
     // Whatever the device sent before we looked is stale.
     port.clear(tokio_serial::ClearBuffer::All)
         .map_err(std::io::Error::from)?;
-    Ok(port)
+    Ok(TtyPort::new(port))
 }
 
 impl<D: StreamDecoder + Send, P: Port> SerialLink<D, P> {
@@ -60,7 +80,17 @@ impl<D: StreamDecoder + Send, P: Port> SerialLink<D, P> {
         &mut self,
         mut sink: impl FnMut(Decoded<D::Frame>, u64),
     ) -> Result<usize, DriverError> {
-        let n = match self.port.read(&mut self.buf).await {
+        // Out of the reactor (a coalesced read on its tick): one plain read, and a wait only
+        // if nothing is there.
+        let read = match self.port.read_detached(&mut self.buf) {
+            Some(Err(e)) if e.kind() == std::io::ErrorKind::WouldBlock => None,
+            other => other,
+        };
+        let read = match read {
+            Some(r) => r,
+            None => self.port.read(&mut self.buf).await,
+        };
+        let n = match read {
             Ok(0) => return Err(DriverError::EndOfFile),
             Ok(n) => n,
             Err(e) => return Err(DriverError::ReadFailed { cause: e.into() }),
@@ -84,6 +114,11 @@ impl<D: StreamDecoder + Send, P: Port> SerialLink<D, P> {
             .flush()
             .await
             .map_err(|e| DriverError::FlushFailed { cause: e.into() })
+    }
+
+    /// Leave the reactor until the next wait (see [`Port::detach`]).
+    pub(crate) fn detach(&mut self) {
+        self.port.detach();
     }
 
     /// Forget a partial frame.

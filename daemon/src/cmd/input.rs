@@ -33,7 +33,7 @@ pub fn load_positioning_with(
     // What a metrologist must know about the file's shape (renumbered cycles or targets,
     // passes against their direction): on stderr, so the results on stdout stay as they are.
     for n in notes {
-        eprintln!("note: {}: {n}", path.display());
+        errln!("note: {}: {n}", path.display());
     }
     Ok(data)
 }
@@ -247,8 +247,15 @@ pub fn print_out(text: &str) -> anyhow::Result<()> {
     }
 }
 
+/// One line on stderr, without control characters (see [`print_out`]); a stderr that cannot be
+/// written is ignored, as `eprintln!` cannot report it either.
+pub fn print_err(line: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr().lock(), "{}", terminal_safe(line));
+}
+
 /// `text` with every control character but `\n`, `\r` and `\t` replaced by U+FFFD.
-fn terminal_safe(text: &str) -> std::borrow::Cow<'_, str> {
+pub fn terminal_safe(text: &str) -> std::borrow::Cow<'_, str> {
     let unsafe_char = |c: char| c.is_control() && !matches!(c, '\n' | '\r' | '\t');
     if !text.chars().any(unsafe_char) {
         return std::borrow::Cow::Borrowed(text);

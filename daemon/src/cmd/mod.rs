@@ -12,6 +12,29 @@
 //!   how an input is read: CSV or log), [`plots`] (the one place commands draw from),
 //!   [`progress`] (progress bars).
 
+/// `println!` for a report's text: the line reaches the terminal without control characters
+/// (a name read from an input cannot move the cursor or recolour it) and a stdout that cannot
+/// be written is an error, not a panic ([`input::print_out`]). Evaluates to `anyhow::Result`.
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::cmd::input::print_out(&format!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `print!` as [`outln!`] prints a line.
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::cmd::input::print_out(&format!($($arg)*))
+    };
+}
+
+/// `eprintln!` for notes and warnings that quote an input: without control characters.
+macro_rules! errln {
+    ($($arg:tt)*) => {
+        $crate::cmd::input::print_err(&format!($($arg)*))
+    };
+}
+
 pub mod analyze;
 pub mod compensate;
 #[cfg(feature = "sim")]

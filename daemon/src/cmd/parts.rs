@@ -47,18 +47,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&r)?);
         return Ok(());
     }
-    println!("tolerance [{lo}, {hi}]");
-    println!(
+    outln!("tolerance [{lo}, {hi}]")?;
+    outln!(
         "{:<8} {:>5} {:>14} {:>14} {:>18} {:>17}",
-        "sample", "n", "mean", "std dev", "reject (normal) %", "reject (seen) %"
-    );
+        "sample",
+        "n",
+        "mean",
+        "std dev",
+        "reject (normal) %",
+        "reject (seen) %"
+    )?;
     for (name, s) in [("before", &r.before), ("after", &r.after)] {
-        println!(
+        outln!(
             "{name:<8} {:>5} {:>14.6} {:>14.6} {:>18.3} {:>17.3}",
-            s.n, s.mean, s.std_dev, s.predicted_reject_pct, s.observed_reject_pct
-        );
+            s.n,
+            s.mean,
+            s.std_dev,
+            s.predicted_reject_pct,
+            s.observed_reject_pct
+        )?;
     }
-    println!(
+    outln!(
         "mean shift {:.6}; Welch t = {:.3}, dof = {:.1}, p = {:.3e}: {}",
         r.mean_shift,
         r.t,
@@ -69,14 +78,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             "not significant at 5 %"
         }
-    );
+    )?;
     match r.variance_ratio {
-        Some(f) => println!(
+        Some(f) => outln!(
             "variance ratio after/before {f:.3} (a correction of systematic errors leaves it near 1)"
         ),
         None => {
-            println!("variance ratio after/before: not defined (the before sample has no scatter)")
+            outln!("variance ratio after/before: not defined (the before sample has no scatter)")
         }
     }
-    Ok(())
 }

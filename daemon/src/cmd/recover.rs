@@ -26,7 +26,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("cannot recover {}", args.log.display()))?;
     drop(bar);
     if let Some(note) = s.split_note() {
-        eprintln!("note: {note}; written as one file");
+        errln!("note: {note}; written as one file");
     }
     anyhow::ensure!(
         s.messages > 0,
@@ -36,14 +36,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     super::input::finish_new_output(tmp, &args.output)?;
     match &s.error {
-        None => println!(
+        None => outln!(
             "{} was intact (closed cleanly: {}); copied its {} messages to {}",
             args.log.display(),
             s.clean_close,
             s.messages,
             args.output.display()
         ),
-        Some(e) => println!(
+        Some(e) => outln!(
             "recovered {} messages ({} of {} bytes read) into {}; damage: {e}",
             s.messages,
             s.bytes_read,
@@ -51,5 +51,4 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.output.display()
         ),
     }
-    Ok(())
 }

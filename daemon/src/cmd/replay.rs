@@ -287,7 +287,7 @@ pub fn replay(path: &Path, opts: &ReplayOptions) -> anyhow::Result<ReplayOutcome
     let read = read_log_progress(path, |d, t| bar.update(d, t), &mut on_item)?;
     drop(bar);
     if let Some(note) = read.split_note() {
-        eprintln!("note: {note}");
+        errln!("note: {note}");
     }
     if let Some(e) = first_error {
         return Err(e);
@@ -356,7 +356,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     if !out.read.clean_close || out.read.error.is_some() {
-        println!(
+        outln!(
             "note: the log is damaged or was not closed cleanly; replayed its intact part ({} messages){}",
             out.read.messages,
             out.read
@@ -364,7 +364,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .as_ref()
                 .map(|e| format!(": {e}"))
                 .unwrap_or_default()
-        );
+        )?;
     }
     let mut by_status: BTreeMap<(String, String), usize> = BTreeMap::new();
     for (_, p) in &out.replayed {
@@ -372,7 +372,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .entry((p.instrument.name().into(), p.status.name().into()))
             .or_default() += 1;
     }
-    println!(
+    outln!(
         "replayed {} pose values ({} logged) with samples = {}/{}/{} (interferometer/capball/psd){}",
         out.replayed.len(),
         out.logged.len(),
@@ -384,49 +384,49 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             ", NOT the logged settings"
         }
-    );
+    )?;
     for ((i, s), n) in &by_status {
-        println!("  {i:<16} {s:<16} {n}");
+        outln!("  {i:<16} {s:<16} {n}")?;
     }
     if out.temperatures.samples > 0 {
-        println!("temperatures: {}", out.temperatures.line());
+        outln!("temperatures: {}", out.temperatures.line())?;
     }
     if out.same_settings {
         if out.reproduces_log() {
-            println!(
+            outln!(
                 "all {} logged pose values reproduced exactly",
                 out.logged.len()
-            );
+            )?;
         } else {
-            println!(
+            outln!(
                 "{} of {} logged pose values reproduced exactly; first differences:",
                 out.identical,
                 out.logged.len()
-            );
+            )?;
             let mut shown = 0;
             for i in 0..out.logged.len().max(out.replayed.len()) {
                 let a = out.logged.get(i).map(|x| &x.1);
                 let b = out.replayed.get(i).map(|x| &x.1);
                 if a.map(json) != b.map(json) && shown < 10 {
                     shown += 1;
-                    println!(
+                    outln!(
                         "  logged   {}",
                         a.map(fmt_pose).unwrap_or_else(|| "-".into())
-                    );
-                    println!(
+                    )?;
+                    outln!(
                         "  replayed {}",
                         b.map(fmt_pose).unwrap_or_else(|| "-".into())
-                    );
+                    )?;
                 }
             }
         }
     } else {
         for (_, p) in &out.replayed {
-            println!("  {}", fmt_pose(p));
+            outln!("  {}", fmt_pose(p))?;
         }
     }
     if let Some(o) = &out.output {
-        println!("wrote {} (new {} records)", o.display(), PoseMsg::TOPIC);
+        outln!("wrote {} (new {} records)", o.display(), PoseMsg::TOPIC)?;
     }
     Ok(())
 }

@@ -97,10 +97,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print!(
+        out!(
             "{}",
             metrolog_analysis::uncertainty_text::budget_text(&report, &budget)
-        );
+        )?;
     }
     Ok(())
 }

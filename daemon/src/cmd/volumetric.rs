@@ -106,7 +106,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?;
         std::fs::write(p, &cec.ini).with_context(|| format!("writing {}", p.display()))?;
         for o in &cec.omitted {
-            eprintln!("CEC table left out (--cec-tables {}): {o}", args.cec_tables);
+            errln!("CEC table left out (--cec-tables {}): {o}", args.cec_tables);
         }
         cec_resid = Some(cec.max_separation_residual_um);
     }
@@ -119,11 +119,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
-    println!(
+    outln!(
         "machine {} — {} grid points",
-        machine.chain, summary.n_points
-    );
-    println!(
+        machine.chain,
+        summary.n_points
+    )?;
+    outln!(
         "largest volumetric error {:.2} µm at ({:.1}, {:.1}, {:.1}) mm; RMS x {:.2} y {:.2} z {:.2} µm",
         summary.max_norm_um,
         summary.max_at_mm[0],
@@ -132,21 +133,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         summary.rms_um[0],
         summary.rms_um[1],
         summary.rms_um[2]
-    );
+    )?;
     if !outside.is_empty() {
-        println!(
+        outln!(
             "warning: the grid goes beyond these tables (end values held): {}",
             outside.join(", ")
-        );
+        )?;
     }
     if let Some(p) = &args.out {
-        println!("compensation table (CSV): {}", p.display());
+        outln!("compensation table (CSV): {}", p.display())?;
     }
     if let (Some(p), Some(r)) = (&args.siemens, cec_resid) {
-        println!(
+        outln!(
             "SINUMERIK CEC tables: {} (nine 1-D tables; they miss up to {r:.2} µm of the correction: the non-separable part)",
             p.display()
-        );
+        )?;
     }
     Ok(())
 }

@@ -42,12 +42,12 @@ pub fn run(a: CapballArgs) -> anyhow::Result<()> {
     let input = load_capball(&a.data, given)?;
     report_skipped(&a.data, &input.skipped);
     if let Some(name) = &input.machine_name {
-        eprintln!("{}: machine {name}", a.data.display());
+        errln!("{}: machine {name}", a.data.display());
     }
     let damage = input.damage.clone();
     // A result built on a damaged log says so before anything else (JSON: `log_damage`).
     if let Some(note) = input.damage_note().filter(|_| !a.json) {
-        println!("{note}");
+        outln!("{note}")?;
     }
     let (machine, recs) = (input.machine, input.records);
     if a.mc.uncertainty.is_some() {
@@ -104,7 +104,7 @@ pub fn run(a: CapballArgs) -> anyhow::Result<()> {
             .and_then(|(v, _)| id.validation_excess(v, n_val_poses))
             .map(|e| metrolog_analysis::identify_text::validation_excess_warning(&e));
         if let Some(w) = &warning {
-            eprintln!("run {run}: warning: {w}");
+            errln!("run {run}: warning: {w}");
         }
         extra.push((own, val.as_ref().map(|x| x.1.clone()), warning));
         results.push((*run, setup.ball_mm, id, val.map(|x| x.0)));
@@ -126,21 +126,21 @@ pub fn run(a: CapballArgs) -> anyhow::Result<()> {
                 })
             })
             .collect();
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({ "runs": v, "log_damage": damage }))?
-        );
+        )?;
         return Ok(());
     }
     for (run, ball, id, val) in &results {
-        print!("{}", identification_text(*run, ball, id, val.as_ref()));
+        out!("{}", identification_text(*run, ball, id, val.as_ref()))?;
     }
     Ok(())
 }
 
 fn report_skipped(p: &Path, skipped: &[(u32, String)]) {
     for (pose, status) in skipped {
-        eprintln!("{}: CapBall pose {pose} skipped ({status})", p.display());
+        errln!("{}: CapBall pose {pose} skipped ({status})", p.display());
     }
 }
 

@@ -84,7 +84,7 @@ fn triple(s: &str, what: &str) -> anyhow::Result<[f64; 3]> {
 
 fn drift_model(a: &CapballMcArgs) -> anyhow::Result<DriftModel> {
     let Some(p) = &a.drift_record else {
-        eprintln!(
+        errln!(
             "no --drift-record: the drift is left out of the Monte Carlo (paper 001 found it \
              dominates every parameter); record the ball at one fixed pose to include it"
         );
@@ -135,7 +135,7 @@ pub fn run(
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print!("{}", capball_mc_text(&report));
+        out!("{}", capball_mc_text(&report))?;
     }
     Ok(())
 }

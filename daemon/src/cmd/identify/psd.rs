@@ -70,15 +70,15 @@ pub fn run(a: PsdArgs) -> anyhow::Result<()> {
             .iter()
             .map(|(run, e)| serde_json::json!({ "run": run, "errors": e, "names": e.names(), "std_uncertainty": u }))
             .collect();
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(
                 &serde_json::json!({ "reference": a.reference, "runs": v })
             )?
-        );
+        )?;
         return Ok(());
     }
-    print!("{}", errors_text(a.reference, &out, &u));
+    out!("{}", errors_text(a.reference, &out, &u))?;
     Ok(())
 }
 

@@ -80,7 +80,7 @@ pub fn run(
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print!("{}", psd_mc_text(&report));
+        out!("{}", psd_mc_text(&report))?;
     }
     Ok(())
 }

@@ -48,17 +48,21 @@ pub fn run(a: SensorFrameArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&f)?);
         return Ok(());
     }
-    println!(
+    outln!(
         "sensor frame from {} points (residual RMS {:.3} µm)",
-        f.n_points, f.residual_rms_um
-    );
+        f.n_points,
+        f.residual_rms_um
+    )?;
     for row in &f.t {
-        println!(
+        outln!(
             "  [{:>10.6} {:>10.6} {:>10.6} {:>10.3}]",
-            row[0], row[1], row[2], row[3]
-        );
+            row[0],
+            row[1],
+            row[2],
+            row[3]
+        )?;
     }
-    println!(
+    outln!(
         "gains {:.5} {:.5} {:.5} ({:+.2} %, {:+.2} %, {:+.2} %)",
         f.gains[0],
         f.gains[1],
@@ -66,16 +70,21 @@ pub fn run(a: SensorFrameArgs) -> anyhow::Result<()> {
         f.gain_error_pct[0],
         f.gain_error_pct[1],
         f.gain_error_pct[2]
-    );
+    )?;
     let n = f.non_orthogonality_urad;
-    println!(
+    outln!(
         "non-orthogonality (cosines) t1·t2 {:.0} t1·t3 {:.0} t2·t3 {:.0} µrad",
-        n[0], n[1], n[2]
-    );
+        n[0],
+        n[1],
+        n[2]
+    )?;
     let o = f.offsets_um;
-    println!(
+    outln!(
         "offsets {:.3} {:.3} {:.3} µm; last row {:?}",
-        o[0], o[1], o[2], f.last_row
-    );
+        o[0],
+        o[1],
+        o[2],
+        f.last_row
+    )?;
     Ok(())
 }

@@ -84,11 +84,11 @@ pub fn run(a: TrajectoryArgs) -> anyhow::Result<()> {
         .map(|(k, p)| trajectory_row(k, p))
         .collect();
     crate::cmd::input::write_output(&a.out, &write_trajectory(&rows))?;
-    println!(
+    outln!(
         "{} poses written to {}; identification Jacobian condition number {condition:.1}",
         poses.len(),
         a.out.display(),
-    );
+    )?;
     Ok(())
 }
 

@@ -115,7 +115,7 @@ pub fn run(c: Command) -> anyhow::Result<()> {
     crate::cmd::input::write_output(&prog, &p.part_program(a.dialect))?;
     let targets: Vec<String> = p.targets_mm.iter().map(|t| format!("{t:.3}")).collect();
     for b in positioning::plan::below_minimums(&o) {
-        eprintln!("warning: below ISO 230-2's minimums: {b}");
+        errln!("warning: below ISO 230-2's minimums: {b}");
     }
     crate::cmd::input::print_out(&format!(
         "targets (mm): {}\n{} poses, {} measured stops\ntrajectory: {}\npart program ({:?}): {}\n",

@@ -65,13 +65,13 @@ fn read(path: &Path) -> anyhow::Result<Read> {
     })
     .with_context(|| format!("reading {}", path.display()))?;
     if let Some(note) = summary.split_note() {
-        eprintln!("note: {note}");
+        errln!("note: {note}");
     }
     if let Some(e) = bad {
         anyhow::bail!("{}: {e}", path.display());
     }
     if !summary.clean_close {
-        eprintln!(
+        errln!(
             "note: {} was not closed cleanly; its intact part is used",
             path.display()
         );
@@ -188,7 +188,7 @@ pub fn dataset_from_log(path: &Path) -> anyhow::Result<thermal::ThermalDataset> 
         );
     };
     if counts.len() > 1 {
-        eprintln!(
+        errln!(
             "note: {}: the thermal test is pose {pose} (visited most); poses {:?} are left out",
             path.display(),
             counts.keys().filter(|p| **p != pose).collect::<Vec<_>>()
@@ -244,7 +244,7 @@ fn build(
         .map(|i| names[i].as_str())
         .collect();
     if !dropped.is_empty() {
-        eprintln!(
+        errln!(
             "note: {}: sensors {dropped:?} have no reading for some visit (a sensor fault) and are left out",
             path.display()
         );

@@ -123,7 +123,38 @@ impl LogContents {
             std::ops::ControlFlow::Continue(())
         })?;
         c.summary = summary;
+        c.distrust_misplaced_dwells();
         Ok(c)
+    }
+
+    /// A pose whose interferometer value the daemon marked `off_target` was measured in a dwell
+    /// that was not its own (another pose's samples; docs/design.md, "Values off their target"),
+    /// or against a zero that was not the datum. The other instruments' values of that pose
+    /// came from the same triggers' window, and which of the two happened the log cannot tell:
+    /// their `ok` values are taken as `off_target` too, so no analysis uses them (the CapBall
+    /// and PSD analyses list them as skipped with that status). Returns how many changed.
+    fn distrust_misplaced_dwells(&mut self) -> usize {
+        let misplaced: std::collections::BTreeSet<u32> = self
+            .poses
+            .iter()
+            .filter(|p| {
+                p.msg.instrument == Instrument::Interferometer
+                    && p.msg.status == PoseStatus::OffTarget
+            })
+            .map(|p| p.msg.pose)
+            .collect();
+        let mut changed = 0;
+        for p in &mut self.poses {
+            let m = &mut p.msg;
+            if m.instrument != Instrument::Interferometer
+                && m.status == PoseStatus::Ok
+                && misplaced.contains(&m.pose)
+            {
+                m.status = PoseStatus::OffTarget;
+                changed += 1;
+            }
+        }
+        changed
     }
 
     /// Where the log is damaged and how much of it was read, when it is (a torn or corrupt
@@ -251,4 +282,55 @@ pub fn is_mcap(path: &Path) -> bool {
     path.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
         || (path.is_dir() && metrolog_log::split::resolve(path).is_ok())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn value(instrument: Instrument, pose: u32, status: PoseStatus) -> LoggedPose {
+        LoggedPose {
+            log_ns: u64::from(pose),
+            msg: PoseMsg {
+                instrument,
+                pose,
+                status,
+                n: 150,
+                mean: BTreeMap::new(),
+                std: BTreeMap::new(),
+                t_first_ns: u64::from(pose) * 1_000_000_000,
+                t_last_ns: u64::from(pose) * 1_000_000_000 + 1,
+                datum_epoch: 0,
+            },
+        }
+    }
+
+    /// Pose 3's interferometer value was another pose's: the CapBall's `ok` value of pose 3
+    /// is not used either; the CapBall's other poses, its own failures and the PSD's poses
+    /// whose interferometer value was right stay as logged.
+    #[test]
+    fn the_other_instruments_values_of_a_misplaced_dwell_are_not_used() {
+        use Instrument::{Capball, Interferometer, Psd};
+        use PoseStatus::{NeverSteady, OffTarget, Ok};
+        let mut c = LogContents::default();
+        for pose in 1..=4 {
+            let status = if pose == 3 { OffTarget } else { Ok };
+            c.poses.push(value(Interferometer, pose, status));
+            c.poses.push(value(Capball, pose, Ok));
+            c.poses
+                .push(value(Psd, pose, if pose == 3 { NeverSteady } else { Ok }));
+        }
+        assert_eq!(c.distrust_misplaced_dwells(), 1);
+        let status = |i, pose| c.pose_values(i)[&pose].status;
+        assert_eq!(status(Capball, 3), OffTarget);
+        assert_eq!(status(Psd, 3), NeverSteady);
+        for pose in [1, 2, 4] {
+            assert_eq!((status(Capball, pose), status(Psd, pose)), (Ok, Ok));
+        }
+        assert_eq!(status(Interferometer, 3), OffTarget);
+        // A log without an off-target value is left as it is.
+        let mut clean = LogContents::default();
+        clean.poses.push(value(Capball, 1, Ok));
+        assert_eq!(clean.distrust_misplaced_dwells(), 0);
+    }
 }

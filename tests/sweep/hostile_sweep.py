@@ -12,6 +12,7 @@ binary on each under a 1 GiB address-space limit and a deadline, and reports eve
 - hangs (no end within the deadline);
 - prints "panicked" or a Rust backtrace;
 - leaves a NaN or an infinity in its stdout or in a text file it wrote;
+- prints a control character (an escape sequence from an input) on stdout or stderr;
 - writes anything outside its output directory, or leaves files there after a failure.
 
 Usage:  python3 tests/sweep/hostile_sweep.py BINARY [--seed N] [--runs N] [--jobs N]
@@ -41,8 +42,12 @@ NONFINITE = re.compile(r"(?<![A-Za-z_])(?:[-+]?inf(?:inity)?|nan)(?![A-Za-z_])",
 BAD_NUMBERS = [
     "1e308", "-1e308", "1e155", "-1e155", "nan", "NaN", "inf", "-inf", "+inf", "1e-320",
     "0", "-0", "4294967296", "18446744073709551616", "-1", "", "abc", "0x10", "1_000",
-    "1e", ".", "--1", "9" * 400, "1,5", "١٢", "1e-9", "1e9",
+    "1e", ".", "--1", "9" * 400, "1,5", "١٢", "1e-9", "1e9", "1\x1b[2J",
 ]
+
+
+# A control character a terminal acts on (all but tab, newline and carriage return).
+CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
 
 
 def seeds():
@@ -189,13 +194,15 @@ def mutate(data: bytes, rng: random.Random) -> bytes:
         if rng.random() < 0.5:
             cols[rng.randrange(len(cols))] = cols[j]
         else:
-            cols[j] = rng.choice(["", "x", cols[j].upper(), cols[j] + " ", "\u00e9" + cols[j]])
+            cols[j] = rng.choice(["", "x", cols[j].upper(), cols[j] + " ", "\u00e9" + cols[j],
+                                  cols[j] + "\x1b[2J", "\x1b]0;title\x07" + cols[j]])
         lines[hi] = ",".join(cols)
     elif op == 7:  # comment lines that try to inject
         lines.insert(0, rng.choice([
             "# axis: X]=0 ;", "# axis: ../../escaped", "# axis: X\r\nM30",
             "# alpha_um_per_m_k: NaN", "# alpha_um_per_m_k: 1e308", "# units: parsecs",
             "# source: " + "A" * 100000, "# material_temperature_c: inf",
+            "# source: \x1b[2J\x1b[31mred", "# axis: X\x1b[1A", "\x1b[2J,\x07,\x08",
         ]))
     elif op == 8:
         return mutate_bytes(data, rng)
@@ -277,6 +284,10 @@ def run_one(binary, args, work: Path, inp_text=""):
     err = p.stderr.decode(errors="replace")
     if "panicked" in err or "RUST_BACKTRACE" in err:
         bad.append("panic: " + err[-300:])
+    for name, text in (("stdout", p.stdout.decode(errors="replace")), ("stderr", err)):
+        c = CONTROL.search(text)
+        if c:
+            bad.append(f"control character in {name}: …{text[max(0, c.start() - 60):c.end() + 20]!r}")
     if p.returncode == 0:
         s = p.stdout.decode(errors="replace")
         m = NONFINITE.search(s)

@@ -720,3 +720,79 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
     assert!(status.success(), "{}", err.join("\n"));
     sim.shutdown().await;
 }
+
+/// The program the machine runs is not the trajectory the daemon was given (every X 10 mm
+/// off, as with a wrong trajectory file): every interferometer value is more than 2 mm from
+/// its target, none is shown as a measurement, the page raises `OFF TARGET` and the terminal
+/// says `off target at pose k`. Screenshot: `live_page_off_target.png`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_raises_off_target_when_values_are_not_their_poses() {
+    let (Some(modules), Some(browser)) = (node_modules(), chromium()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (ports, logs) = (dir.path().join("ports"), dir.path().join("logs"));
+    std::fs::create_dir_all(&ports).unwrap();
+    let mut sc = sim::Scenario::demo();
+    sc.program.start = sim::ProgramStart::Manual;
+    sc.faults = Default::default();
+    let sim = sim::Sim::start(sc, &ports).unwrap();
+    let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
+    // The daemon's trajectory: the simulator's, every X 10 mm further.
+    let traj = ports.join("trajectory.csv");
+    let text = std::fs::read_to_string(&traj).unwrap();
+    let mut lines = text.lines();
+    let mut shifted = format!("{}\n", lines.next().unwrap());
+    for l in lines {
+        let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+        f[1] = (f[1].parse::<f64>().unwrap() + 10.0).to_string();
+        shifted += &(f.join(",") + "\n");
+    }
+    std::fs::write(&traj, shifted).unwrap();
+    let cfg = dir.path().join("metrolog.toml");
+    std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
+    let (mut daemon, err_rx, mut err, line) = start_live(&cfg);
+    let url = line
+        .split("page ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap();
+    tokio::time::timeout(LIMIT, sim.wait_active(&sim::Device::ALL))
+        .await
+        .expect("the daemon did not open every device");
+    sim.start_program();
+    let said = wait_line(&err_rx, "interferometer: off target at pose", &mut err);
+    let dom = render_dom(
+        &browser,
+        &modules,
+        url,
+        "#alarms [data-kind=\"target\"]",
+        "live_page_off_target.png",
+    );
+    assert_fits(&dom);
+    assert!(
+        dom.contains(">OFF TARGET: interferometer pose "),
+        "no OFF TARGET banner: {dom}"
+    );
+    // No interferometer pose value on the page is shown as a measurement; they are off_target.
+    let rows: Vec<&str> = dom
+        .split("<tr class=\"pose\" data-instrument=\"interferometer\"")
+        .skip(1)
+        .map(|r| r.split("</tr>").next().unwrap_or(""))
+        .collect();
+    assert!(
+        rows.iter().any(|r| r.contains("<td>off_target</td>")),
+        "{said}\n{dom}"
+    );
+    assert!(
+        !rows.iter().any(|r| r.contains("<td>ok</td>")),
+        "{said}\n{dom}"
+    );
+    sigterm(&daemon.0);
+    let status = daemon.0.wait().unwrap();
+    drain(&err_rx, &mut err);
+    assert!(status.success(), "{}", err.join("\n"));
+    sim.shutdown().await;
+}

@@ -783,13 +783,29 @@ async fn the_page_raises_off_target_when_values_are_not_their_poses() {
         .map(|r| r.split("</tr>").next().unwrap_or(""))
         .collect();
     assert!(
-        rows.iter().any(|r| r.contains("<td>off_target</td>")),
+        rows.iter().any(|r| r.contains(">off_target</td>")),
         "{said}\n{dom}"
     );
     assert!(
-        !rows.iter().any(|r| r.contains("<td>ok</td>")),
+        !rows.iter().any(|r| r.contains(">ok</td>")),
         "{said}\n{dom}"
     );
+    // The CapBall's and the PSD's values of those poses came from the same dwells: not ok.
+    let off: Vec<&str> = rows
+        .iter()
+        .filter(|r| r.contains(">off_target</td>"))
+        .filter_map(|r| attr(r, "data-pose"))
+        .collect();
+    for inst in ["capball", "psd"] {
+        for row in dom
+            .split(&format!("<tr class=\"pose\" data-instrument=\"{inst}\""))
+            .skip(1)
+            .map(|r| r.split("</tr>").next().unwrap_or(""))
+            .filter(|r| attr(r, "data-pose").is_some_and(|p| off.contains(&p)))
+        {
+            assert!(!row.contains(">ok</td>"), "{inst}: {row}");
+        }
+    }
     sigterm(&daemon.0);
     let status = daemon.0.wait().unwrap();
     drain(&err_rx, &mut err);

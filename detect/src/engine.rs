@@ -29,6 +29,7 @@ use types::{
 };
 
 use crate::clock::{NcClock, NcPoint};
+use crate::dwell_gate::DwellGate;
 use crate::steady::{LATE_MARGIN_NS, SteadyDetector};
 
 /// How far the triggers may run ahead of an instrument's samples before they are applied
@@ -217,6 +218,9 @@ pub struct PoseEngine {
     unplaced: VecDeque<(TriggerEvent, u32, NcPoint)>,
     /// A trigger came (the first one decides whether epoch 0 is the run's datum).
     trigger_seen: bool,
+    /// With position targets: the other instruments' values wait for the interferometer's
+    /// verdict on their pose ([`DwellGate`]).
+    gate: Option<DwellGate>,
 }
 
 impl PoseEngine {
@@ -249,13 +253,26 @@ impl PoseEngine {
             TriggerTime::NcClock | TriggerTime::NcClockSettled => Some(NcClock::default()),
             TriggerTime::Arrival => None,
         };
+        let gate = (settings.position_targets.is_some()
+            && settings.instruments.contains(&Instrument::Interferometer)
+            && detectors.len() > 1)
+            .then(DwellGate::default);
         Ok(PoseEngine {
             detectors,
             nc_clock,
             settle: settings.trigger_time == TriggerTime::NcClockSettled,
             unplaced: VecDeque::new(),
             trigger_seen: false,
+            gate,
         })
+    }
+
+    /// The values that may go now (all of `out` without position targets).
+    fn gated(&mut self, out: Vec<PoseMsg>) -> Vec<PoseMsg> {
+        match &mut self.gate {
+            Some(g) => g.pass(out),
+            None => out,
+        }
     }
 
     /// Whether a trigger is placed as it comes: not while [`TriggerTime::NcClockSettled`]
@@ -295,7 +312,7 @@ impl PoseEngine {
         let mut out = Vec::new();
         slot.queued.push_back((s.fitted_ns, values, n, s.valid));
         slot.drain(horizon, &mut out);
-        out
+        self.gated(out)
     }
 
     /// The time up to which samples may be fed: that of the oldest trigger waiting to be
@@ -334,7 +351,7 @@ impl PoseEngine {
                 self.dispatch(kind, u32::from(t.pose), t_ns, &mut out);
             }
         }
-        out
+        self.gated(out)
     }
 
     /// Places the waiting triggers whose time the fit now knows (all with `all`).
@@ -381,7 +398,10 @@ impl PoseEngine {
             let v = slot.det.finish(t_ns);
             slot.out(v, &mut out);
         }
-        out
+        match &mut self.gate {
+            Some(g) => g.flush(out),
+            None => out,
+        }
     }
 }
 

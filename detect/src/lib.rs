@@ -10,6 +10,7 @@
 #![warn(unreachable_pub)]
 
 mod clock;
+mod dwell_gate;
 mod engine;
 mod steady;
 

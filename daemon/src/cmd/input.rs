@@ -242,7 +242,10 @@ pub fn print_out(text: &str) -> anyhow::Result<()> {
     let shown = terminal_safe(text);
     let mut out = std::io::stdout().lock();
     match out.write_all(shown.as_bytes()).and_then(|_| out.flush()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        // As the panic hook says it for `println!` (main.rs): the I/O error code.
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(crate::exit::OutputWriteFailed(format!("cannot write the output: {e}")).into())
+        }
         _ => Ok(()),
     }
 }

@@ -16,6 +16,9 @@ use types::{Instrument, PoseMsg, PoseStatus};
 /// How many interferometer verdicts are remembered (a run visits poses in order; the values
 /// waiting here are of the last few).
 const VERDICTS_KEPT: usize = 64;
+/// Most values held: past it the oldest goes unjudged (an interferometer that never decides
+/// must not make the others' values pile up for the length of a run).
+const WAITING_MAX: usize = 1024;
 
 /// Values waiting for the interferometer's verdict on their pose.
 #[derive(Debug, Clone, Default)]
@@ -73,7 +76,8 @@ impl DwellGate {
     fn release(&mut self, all: bool, out: &mut Vec<PoseMsg>) {
         while let Some(m) = self.waiting.front() {
             let verdict = self.verdicts.get(&m.pose).copied();
-            if !(all || verdict.is_some() || m.t_last_ns < self.passed_ns) {
+            let full = self.waiting.len() > WAITING_MAX;
+            if !(all || full || verdict.is_some() || m.t_last_ns < self.passed_ns) {
                 break;
             }
             let Some(mut m) = self.waiting.pop_front() else {
@@ -160,5 +164,15 @@ mod tests {
         }
         assert_eq!(g.verdicts.len(), VERDICTS_KEPT);
         assert_eq!(g.order.len(), VERDICTS_KEPT);
+        // The interferometer decides nothing more: the others' values do not pile up.
+        let mut g = DwellGate::default();
+        let mut out = 0;
+        for pose in 0..5000 {
+            out += g
+                .pass(vec![value(Instrument::Capball, pose, PoseStatus::Ok)])
+                .len();
+        }
+        assert_eq!(g.waiting.len(), WAITING_MAX);
+        assert_eq!(out, 5000 - WAITING_MAX);
     }
 }

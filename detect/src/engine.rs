@@ -253,10 +253,13 @@ impl PoseEngine {
             TriggerTime::NcClock | TriggerTime::NcClockSettled => Some(NcClock::default()),
             TriggerTime::Arrival => None,
         };
-        let gate = (settings.position_targets.is_some()
-            && settings.instruments.contains(&Instrument::Interferometer)
-            && detectors.len() > 1)
-            .then(DwellGate::default);
+        let gate = settings
+            .position_targets
+            .clone()
+            .filter(|_| {
+                settings.instruments.contains(&Instrument::Interferometer) && detectors.len() > 1
+            })
+            .map(DwellGate::new);
         Ok(PoseEngine {
             detectors,
             nc_clock,
@@ -308,6 +311,9 @@ impl PoseEngine {
         };
         if let SampleValues::Position { flags, .. } = &s.values {
             slot.epochs.observe(s.fitted_ns, *flags);
+            if let Some(g) = &mut self.gate {
+                g.observe(s.fitted_ns, values[0], s.valid);
+            }
         }
         let mut out = Vec::new();
         slot.queued.push_back((s.fitted_ns, values, n, s.valid));

@@ -73,11 +73,13 @@ async function main() {
     (await call("Runtime.evaluate", { expression, returnByValue: true }, sessionId)).result.value;
   await call("Runtime.enable", {}, sessionId);
   pageText = () => evaluate("document.body.innerText");
-  const query = `document.querySelectorAll(${JSON.stringify(selector)}).length`;
-  while (!((await evaluate(query)) > 0)) {
+  // The condition and the HTML in one evaluation: the page's scripts cannot run between them,
+  // so the HTML returned is one the selector matches (a later read could see the next dwell).
+  const query = `document.querySelectorAll(${JSON.stringify(selector)}).length > 0 ? document.documentElement.outerHTML : null`;
+  let html = null;
+  while ((html = await evaluate(query)) === null) {
     await new Promise((r) => setTimeout(r, 200)); // poll the condition
   }
-  const html = await evaluate("document.documentElement.outerHTML");
   const { data } = await call("Page.captureScreenshot", { format: "png" }, sessionId);
   fs.writeFileSync(shot, Buffer.from(data, "base64"));
   await call("Browser.close").catch(() => {});

@@ -293,6 +293,36 @@ fn start_live(cfg: &Path) -> (Reaped, mpsc::Receiver<String>, Vec<String>, Strin
     (daemon, err_rx, err, line)
 }
 
+/// The daemon on `toml` with its live view, then the simulator's program started once every
+/// device is configured and the CAN channel open (a program start frame sent into a closed
+/// channel would make the run start mid-program): as [`start_live`], with the page's address.
+async fn run_program_live(
+    dir: &Path,
+    toml: &str,
+    sim: &sim::SimHandle,
+) -> (Reaped, mpsc::Receiver<String>, Vec<String>, String) {
+    let cfg = dir.join("metrolog.toml");
+    std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
+    let (daemon, err_rx, err, line) = start_live(&cfg);
+    let url = page_url(&line);
+    tokio::time::timeout(LIMIT, sim.wait_active(&sim::Device::ALL))
+        .await
+        .expect("the daemon did not open every device");
+    sim.start_program();
+    (daemon, err_rx, err, url)
+}
+
+/// The operator page's address in the daemon's `live view: operator page URL …` line.
+fn page_url(line: &str) -> String {
+    line.split("page ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .to_string()
+}
+
 fn sigterm(child: &Child) {
     let pid = libc::pid_t::try_from(child.id()).unwrap();
     // SAFETY: kill(2) on our own child's pid.
@@ -428,13 +458,7 @@ async fn the_page_shows_the_temperatures() {
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, toml).unwrap();
     let (mut daemon, err_rx, mut err, line) = start_live(&cfg);
-    let url = line
-        .split("page ")
-        .nth(1)
-        .unwrap()
-        .split(' ')
-        .next()
-        .unwrap();
+    let url = page_url(&line);
     let ws = url
         .replace("http://", "ws://")
         .trim_end_matches('/')
@@ -460,7 +484,7 @@ async fn the_page_shows_the_temperatures() {
     let dom = render_dom(
         &browser,
         &modules,
-        url,
+        &url,
         "tr.temp td[data-value]",
         "live_page_temperatures.png",
     );
@@ -618,23 +642,9 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
     }];
     let sim = sim::Sim::start(sc, &ports).unwrap();
     let toml = metrolog::cmd::sim::write_daemon_config(&sim, &ports, &logs, false).unwrap();
-    let cfg = dir.path().join("metrolog.toml");
-    std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
     let trajectory = trajectory_rows(&ports.join("trajectory.csv"));
-    let (mut daemon, err_rx, mut err, line) = start_live(&cfg);
-    let url = line
-        .split("page ")
-        .nth(1)
-        .unwrap()
-        .split(' ')
-        .next()
-        .unwrap();
-    // Every device configured and the CAN channel open (the program start frame is not sent
-    // into a closed channel, which would make the run start mid-program).
-    tokio::time::timeout(LIMIT, sim.wait_active(&sim::Device::ALL))
-        .await
-        .expect("the daemon did not open every device");
-    sim.start_program();
+    let (mut daemon, err_rx, mut err, url) = run_program_live(dir.path(), &toml, &sim).await;
+    let url = url.as_str();
 
     // Running: a PSD pose value is shown, the pose being measured with its target, and the
     // triggers are counted (they read 0 until the 256th trigger before).
@@ -749,20 +759,8 @@ async fn the_page_raises_off_target_when_values_are_not_their_poses() {
         shifted += &(f.join(",") + "\n");
     }
     std::fs::write(&traj, shifted).unwrap();
-    let cfg = dir.path().join("metrolog.toml");
-    std::fs::write(&cfg, format!("{toml}\n[live]\nlisten = \"127.0.0.1:0\"\n")).unwrap();
-    let (mut daemon, err_rx, mut err, line) = start_live(&cfg);
-    let url = line
-        .split("page ")
-        .nth(1)
-        .unwrap()
-        .split(' ')
-        .next()
-        .unwrap();
-    tokio::time::timeout(LIMIT, sim.wait_active(&sim::Device::ALL))
-        .await
-        .expect("the daemon did not open every device");
-    sim.start_program();
+    let (mut daemon, err_rx, mut err, url) = run_program_live(dir.path(), &toml, &sim).await;
+    let url = url.as_str();
     let said = wait_line(&err_rx, "interferometer: off target at pose", &mut err);
     let dom = render_dom(
         &browser,

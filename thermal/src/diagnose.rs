@@ -620,6 +620,7 @@ fn families(
     ]
     .into_iter()
     .flatten()
+    .chain(s.lag_beside_spindle(&s1.specs, pool))
     .collect();
     let members = with_variants(s, members);
     let best = best_by_score(members.iter(), |_| true)?.clone();

@@ -355,6 +355,55 @@ impl Search<'_> {
     }
 }
 
+impl Search<'_> {
+    /// Each static sensor term of `base` in turn lagged beside one spindle term, the two time
+    /// constants searched together on the grid, then every term's searched again. A greedy
+    /// path adds one term at a time, and the first (a spindle term of some τ, or a lag) can
+    /// stand in for both: a mass heated through a sensed part lags it by τ_L, which reads
+    /// like the sensed part plus a heat source of about τ_L beside the real one.
+    pub(crate) fn lag_beside_spindle(&self, base: &[Spec], pool: &Pool) -> Vec<Selection> {
+        if !self.sensor_lags || !self.inputs.has_spindle() || pool.max_spindle_terms == 0 {
+            return vec![];
+        }
+        let mut out = vec![];
+        for (idx, term) in base.iter().enumerate() {
+            let Src::Sensor(i) = term.src else { continue };
+            if term.tau_heat_s != 0.0 {
+                continue;
+            }
+            for &p in &pool.spindle_exponents {
+                if let Some(m) = self.joint_lag_spindle(base, idx, i, p) {
+                    out.push(m);
+                }
+            }
+        }
+        out
+    }
+
+    /// `base` with term `idx` (sensor `i`) lagged and a spindle term of exponent `p` added,
+    /// the best pair of time constants on the grid, then backfitted.
+    fn joint_lag_spindle(&self, base: &[Spec], idx: usize, i: usize, p: u32) -> Option<Selection> {
+        let spindle: Vec<Spec> = self
+            .grid
+            .iter()
+            .map(|&t| Spec::symmetric(Src::Spindle(p), t))
+            .collect();
+        let (mut specs, _) = self
+            .grid
+            .iter()
+            .filter_map(|&tau_lag| {
+                let mut specs = base.to_vec();
+                specs[idx] = Spec::symmetric(Src::Sensor(i), tau_lag);
+                let (sp, sc) = best_of(self.scores_with(&specs, &spindle).into_iter())?;
+                specs.push(sp);
+                Some((specs, sc))
+            })
+            .min_by(|a, b| a.1.total().total_cmp(&b.1.total()))?;
+        let score = self.backfit(&mut specs)?;
+        Some(Selection { specs, score })
+    }
+}
+
 fn without(specs: &[Spec], idx: usize) -> Vec<Spec> {
     specs
         .iter()

@@ -103,9 +103,15 @@ impl Network {
     }
 }
 
-/// One generated run as CSV text, and its hidden lag of the mass `L` (s).
+/// One generated run as CSV text, with what a bound on separability needs: the
+/// displacement without its noise and the inputs as the CSV has them.
 pub struct Run {
     pub csv: String,
+    /// Displacement without noise, µm (the CSV's `x_um` less its noise, unrounded).
+    pub truth_um: Vec<f64>,
+    /// Per row: time (s), speed (rpm) and the temperatures the sensors read, without their
+    /// noise: housing, column, ambient (°C).
+    pub inputs: Vec<[f64; 5]>,
 }
 
 fn speed_schedule(rng: &mut ChaCha8Rng, hours: f64) -> Vec<(f64, f64)> {
@@ -210,6 +216,7 @@ pub fn generate(class: &[Effect], seed: u64, hours: f64, dt_s: f64) -> Run {
     }
     let mut csv = format!("# generated: {}\n{header}\n", class_name(class));
     let first = rows[0].2;
+    let (mut truth_um, mut inputs) = (Vec::with_capacity(n), Vec::with_capacity(n));
     for (k, (t, rpm, m, amb)) in rows.iter().enumerate() {
         let drive = if has(Effect::Lag) {
             a_h * (m[L] - first[L])
@@ -217,14 +224,21 @@ pub fn generate(class: &[Effect], seed: u64, hours: f64, dt_s: f64) -> Run {
             a_h * (m[H] - first[H])
         };
         let mut d = drive + a_c * (m[C] - first[C]) + noise_d.sample(&mut rng);
+        let mut clean = drive + a_c * (m[C] - first[C]);
         if unseen {
             d += a_s * (m[S] - first[S]);
+            clean += a_s * (m[S] - first[S]);
         }
-        let mut line = format!(
-            "{t},{rpm},{d:.4},{:.4},{:.4},{:.4}",
+        truth_um.push(clean);
+        let read = [
             m[H] + noise_t.sample(&mut rng),
             m[C] + noise_t.sample(&mut rng),
-            amb + noise_t.sample(&mut rng)
+            amb + noise_t.sample(&mut rng),
+        ];
+        inputs.push([*t, *rpm, m[H], m[C], *amb]);
+        let mut line = format!(
+            "{t},{rpm},{d:.4},{:.4},{:.4},{:.4}",
+            read[0], read[1], read[2]
         );
         if has(Effect::Noisy) {
             let jump: f64 = jump_at
@@ -243,5 +257,9 @@ pub fn generate(class: &[Effect], seed: u64, hours: f64, dt_s: f64) -> Run {
         csv += &line;
         csv.push('\n');
     }
-    Run { csv }
+    Run {
+        csv,
+        truth_um,
+        inputs,
+    }
 }

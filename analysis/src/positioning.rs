@@ -212,8 +212,8 @@ pub const DATUM_NOTE_KEY: &str = "datum_note";
 /// report's notes).
 pub const OFF_TARGET_NOTE_KEY: &str = "off_target_note";
 
-/// The note on the run's `off_target` values (the daemon found them more than
-/// [`MAX_FROM_TARGET_UM`] from their targets, docs/design.md "Values off their target"): they
+/// The note on the run's `off_target` values (the daemon found them farther than the pose's
+/// tolerance from their targets, docs/design.md "Values off their target"): they
 /// are missing readings, and why.
 fn off_target_note(
     traj: &[TrajectoryRow],
@@ -228,10 +228,11 @@ fn off_target_note(
         .collect();
     (!poses.is_empty()).then(|| {
         format!(
-            "{} pose value(s) are off_target (pose {}): the interferometer read more than {} mm from the target there when it was recorded (another pose's samples, or a zero that was not the datum); they are missing readings",
+            "{} pose value(s) are off_target (pose {}): the interferometer read farther from the target there than its tolerance when it was recorded ({} mm, or half the way to the nearest other target but at least {} mm in runs since that rule; another pose's samples, or a zero that was not the datum); they are missing readings",
             poses.len(),
             poses.join(", "),
-            MAX_FROM_TARGET_UM / 1000.0
+            types::OFF_TARGET_TOL_UM / 1000.0,
+            types::OFF_TARGET_FLOOR_UM / 1000.0
         )
     })
 }
@@ -667,7 +668,10 @@ mod tests {
             note.starts_with("1 pose value(s) are off_target (pose 5)"),
             "{note}"
         );
-        assert!(note.contains("more than 2 mm"), "{note}");
+        assert!(
+            note.contains("than its tolerance") && note.contains("(2 mm, or half the way"),
+            "{note}"
+        );
     }
 
     #[test]

@@ -448,7 +448,7 @@ async fn the_page_shows_the_temperatures() {
     )
     .unwrap();
     let mut toml = format!(
-        "[run]\nmachine = \"m\"\noutput_dir = \"{}\"\n[live]\nlisten = \"127.0.0.1:0\"\n[temperature]\nport = \"{}\"\nunit = 4\npoll_period_s = 0.2\n",
+        "[run]\nmachine = \"m\"\noutput_dir = \"{}\"\n[live]\nlisten = \"127.0.0.1:0\"\n[temperature]\nport = \"{}\"\nunit = 4\npoll_period_s = 0.2\ntimeout_s = 2.0\n",
         logs.display(),
         link.display()
     );

@@ -98,7 +98,8 @@ impl DwellGate {
             .filter(|b| b.0 >= first && b.0 <= last)
             .fold((0.0, 0u32), |(s, n), b| (s + b.1, n + b.2));
         let want = self.targets.target_um(m.pose)?;
-        (n > 0).then(|| (sum / f64::from(n) - want).abs() <= self.targets.tol_um)
+        let tol = self.targets.tolerance_um(m.pose)?;
+        (n > 0).then(|| (sum / f64::from(n) - want).abs() <= tol)
     }
 
     /// The values of `out` that may go now, in order, with those released by it.
@@ -191,6 +192,7 @@ mod tests {
         PositionTargets {
             targets_um: (1..=10_000).map(|k| f64::from(k) * 1000.0).collect(),
             tol_um: 2000.0,
+            floor_um: None,
         }
     }
 

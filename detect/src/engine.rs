@@ -177,7 +177,8 @@ impl Slot {
         };
         v.status == PoseStatus::Ok
             && t.target_um(v.pose)
-                .is_some_and(|want| (got - want).abs() > t.tol_um)
+                .zip(t.tolerance_um(v.pose))
+                .is_some_and(|(want, tol)| (got - want).abs() > tol)
     }
 
     /// Feeds the queued samples up to `horizon` (all with `None`), after the held triggers
@@ -655,6 +656,7 @@ mod tests {
         let targets = types::PositionTargets {
             targets_um: (1..=POSES).map(pose_um).collect(),
             tol_um: types::OFF_TARGET_TOL_UM,
+            floor_um: None,
         };
         let settings = DetectorSettings {
             instruments: vec![Instrument::Interferometer],
@@ -686,6 +688,56 @@ mod tests {
         assert_eq!(back, settings);
         let plain = serde_json::to_string(&DetectorSettings::default()).unwrap();
         assert!(!plain.contains("position_targets"), "{plain}");
+    }
+
+    /// The same run with its poses 1.2 mm apart (the interferometer's readings scaled): the
+    /// neighbours' values the arrival placement takes are within the 2 mm of a fixed
+    /// tolerance and passed as `ok`; with the floor set (new runs), a pose's tolerance is half
+    /// the distance to its nearest other target (0.6 mm) and they are `off_target`.
+    #[test]
+    fn with_close_targets_a_neighbours_value_is_off_target_only_with_the_floor() {
+        const SCALE: f64 = 1.2 / 100.0;
+        let scaled = || {
+            run_events(false).into_iter().map(|ev| match ev {
+                Ev::Sample(mut s) => {
+                    if let SampleValues::Position { position_um, .. } = &mut s.values {
+                        *position_um *= SCALE;
+                    }
+                    Ev::Sample(s)
+                }
+                t => t,
+            })
+        };
+        let off_with = |floor_um: Option<f64>| {
+            let settings = DetectorSettings {
+                instruments: vec![Instrument::Interferometer],
+                trigger_time: TriggerTime::Arrival,
+                position_targets: Some(types::PositionTargets {
+                    targets_um: (1..=POSES).map(|k| pose_um(k) * SCALE).collect(),
+                    tol_um: types::OFF_TARGET_TOL_UM,
+                    floor_um,
+                }),
+                ..DetectorSettings::default()
+            };
+            let mut engine = PoseEngine::new(&settings).unwrap();
+            let mut out = Vec::new();
+            for ev in scaled() {
+                out.extend(match &ev {
+                    Ev::Sample(s) => engine.on_sample(s),
+                    Ev::Trigger(t) => engine.on_trigger(t),
+                });
+            }
+            out.extend(engine.finish(u64::MAX));
+            out.iter()
+                .filter(|p| p.status == PoseStatus::OffTarget)
+                .map(|p| p.pose)
+                .collect::<Vec<u32>>()
+        };
+        assert_eq!(off_with(None), Vec::<u32>::new());
+        assert_eq!(
+            off_with(Some(types::OFF_TARGET_FLOOR_UM)),
+            vec![10, 11, 12, 15, 16]
+        );
     }
 
     #[test]

@@ -39,7 +39,9 @@ fn driver_config(port: &str, unit: u8, channels: usize) -> ModbusTempConfig {
         offset_c: 0.0,
         fault_values: vec![i16::MIN, i16::MAX],
         poll_period_s: 0.05,
-        timeout_s: 0.3,
+        // Long enough that only the injected no-answer times out on a loaded machine (an
+        // answer later than this is counted as a timeout too).
+        timeout_s: 2.0,
         silence_s: 10.0,
     }
 }

@@ -129,6 +129,10 @@ pub struct DetectorSettings {
 /// placed on the wrong samples) or a zero that is not the datum.
 pub const OFF_TARGET_TOL_UM: f64 = 2000.0;
 
+/// Least tolerance of a pose near another target, µm: below half a millimetre a worn
+/// machine's own error could be read as a misplaced dwell.
+pub const OFF_TARGET_FLOOR_UM: f64 = 500.0;
+
 /// The interferometer reading each pose of the trajectory should give, µm: `(x_mm − datum
 /// X)·1000` of pose 1, 2, 3, … in order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -138,6 +142,13 @@ pub struct PositionTargets {
     pub targets_um: Vec<f64>,
     /// Largest distance of an `ok` value from its target, µm.
     pub tol_um: f64,
+    /// When set, a pose's tolerance is also at most half the distance to the nearest other
+    /// target, but not below this (µm; targets closer than it count as the same position):
+    /// a dwell placed on the samples of a pose 1.2 mm away is caught, not only of one 2 mm
+    /// away. Logs written before this key have `tol_um` for every pose (a missing key reads
+    /// `None`, so replay reproduces them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub floor_um: Option<f64>,
 }
 
 impl PositionTargets {
@@ -147,12 +158,30 @@ impl PositionTargets {
         self.targets_um.get(k).copied()
     }
 
+    /// Largest distance of an `ok` value of pose `pose` from its target, µm, if it has one.
+    pub fn tolerance_um(&self, pose: u32) -> Option<f64> {
+        let want = self.target_um(pose)?;
+        let Some(floor) = self.floor_um else {
+            return Some(self.tol_um);
+        };
+        let nearest = self
+            .targets_um
+            .iter()
+            .map(|t| (t - want).abs())
+            .filter(|d| *d > floor)
+            .fold(f64::INFINITY, f64::min);
+        Some((nearest / 2.0).min(self.tol_um).max(floor.min(self.tol_um)))
+    }
+
     pub fn validate(&self) -> Result<(), SteadyError> {
         if !(self.tol_um.is_finite() && self.tol_um > 0.0) {
             return Err(SteadyError::BadThreshold(
                 "position_targets.tol_um",
                 self.tol_um,
             ));
+        }
+        if let Some(f) = self.floor_um.filter(|f| !(f.is_finite() && *f > 0.0)) {
+            return Err(SteadyError::BadThreshold("position_targets.floor_um", f));
         }
         match self.targets_um.iter().find(|t| !t.is_finite()) {
             Some(t) => Err(SteadyError::BadThreshold("position_targets.targets_um", *t)),
@@ -212,5 +241,51 @@ impl DetectorSettings {
         self.capball.samples = samples;
         self.psd.samples = samples;
         self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn targets(floor_um: Option<f64>) -> PositionTargets {
+        PositionTargets {
+            // Poses 1-5: an overtravel 3 mm before, targets 1.2 mm apart, a repeat of the
+            // last (the same position counts once), then one far away.
+            targets_um: vec![-3000.0, 0.0, 1200.0, 1200.0, 50_000.0, 50_100.0],
+            tol_um: OFF_TARGET_TOL_UM,
+            floor_um,
+        }
+    }
+
+    #[test]
+    fn a_poses_tolerance_is_half_the_way_to_its_nearest_other_target_within_floor_and_limit() {
+        let t = targets(Some(OFF_TARGET_FLOOR_UM));
+        let tol: Vec<Option<f64>> = (1..=7).map(|k| t.tolerance_um(k)).collect();
+        assert_eq!(
+            tol,
+            vec![
+                Some(1500.0),
+                Some(600.0),
+                Some(600.0),
+                Some(600.0),
+                Some(2000.0),
+                Some(2000.0),
+                None
+            ]
+        );
+        // Without the floor (logs written before it), the fixed tolerance for every pose.
+        let old = targets(None);
+        assert!((1..=6).all(|k| old.tolerance_um(k) == Some(OFF_TARGET_TOL_UM)));
+        assert_eq!(old.tolerance_um(0), None);
+        // A floor above the limit does not raise the limit.
+        let mut high = targets(Some(5000.0));
+        high.tol_um = 1000.0;
+        assert_eq!(high.tolerance_um(2), Some(1000.0));
+        // A floor that is not a positive number is refused.
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert!(targets(Some(bad)).validate().is_err(), "{bad}");
+        }
+        assert!(t.validate().is_ok());
     }
 }

@@ -13,8 +13,8 @@ mod pose;
 mod sample;
 
 pub use detector::{
-    DetectorMode, DetectorSettings, NC_SETTLE_US, OFF_TARGET_TOL_UM, PositionTargets, SteadyConfig,
-    SteadyError, TriggerTime,
+    DetectorMode, DetectorSettings, NC_SETTLE_US, OFF_TARGET_FLOOR_UM, OFF_TARGET_TOL_UM,
+    PositionTargets, SteadyConfig, SteadyError, TriggerTime,
 };
 pub use host_clock::HostClock;
 pub use instrument::Instrument;

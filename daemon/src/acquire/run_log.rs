@@ -44,6 +44,7 @@ fn position_targets(cfg: &Config) -> Option<types::PositionTargets> {
             .map(|r| (r.x_mm - super::config::DATUM_X_MM) * 1000.0)
             .collect(),
         tol_um: types::OFF_TARGET_TOL_UM,
+        floor_um: Some(types::OFF_TARGET_FLOOR_UM),
     })
 }
 

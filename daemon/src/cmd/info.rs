@@ -337,6 +337,7 @@ mod tests {
             position_targets: Some(types::PositionTargets {
                 targets_um: vec![0.0, 100_000.0, 200_000.0],
                 tol_um: types::OFF_TARGET_TOL_UM,
+                floor_um: None,
             }),
             ..types::DetectorSettings::default()
         };

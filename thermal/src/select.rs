@@ -473,3 +473,66 @@ fn with_tau(s: Spec, tau: f64, heat: bool) -> Spec {
 fn best_of(it: impl Iterator<Item = (Spec, CvScore)>) -> Option<(Spec, CvScore)> {
     it.min_by(|a, b| a.1.total().total_cmp(&b.1.total()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dataset::ThermalDataset;
+    use crate::model::{FitOptions, reference_temperatures, searcher};
+
+    /// A displacement that is a housing sensor lagged by 50 min plus a heat source no sensor
+    /// reads (speed² through 20 min), written with its own fine Euler steps: the joint search
+    /// from the static housing term finds both time constants.
+    #[test]
+    fn the_joint_search_finds_a_lag_beside_a_spindle_term() {
+        let (dt, n, sub) = (60.0, 1200usize, 20);
+        let (tau_lag, tau_sp) = (3000.0, 1200.0);
+        let mut csv = String::from("time_s,spindle_rpm,x_um,housing_c\n");
+        let (mut lagged, mut heat) = (0.0f64, 0.0f64);
+        for k in 0..n {
+            let t = k as f64 * dt;
+            // Speed steps every 2.5 h; the housing a slow drift with a kink per step.
+            let krpm = [0.0, 4.0, 0.0, 6.0, 2.0, 0.0, 5.0, 0.0][(k / 150) % 8];
+            let housing = |t: f64| 2.0 * (t / 20_000.0).sin() + 0.3 * (t / 3_000.0).sin();
+            let y = 3.0 * lagged + 2.0 * heat + 0.002 * (((k * 7919) % 13) as f64 - 6.0);
+            csv += &format!("{t},{},{y},{}\n", krpm * 1000.0, 20.0 + housing(t));
+            for j in 0..sub {
+                let h = dt / sub as f64;
+                let tt = t + j as f64 * h;
+                lagged += (housing(tt) - lagged) * h / tau_lag;
+                heat += (krpm * krpm - heat) * h / tau_sp;
+            }
+        }
+        let ds = ThermalDataset::from_csv(&csv).expect("reads");
+        let inputs = Inputs::new(&ds, &reference_temperatures(&ds)).with_spindle_hold(1.0);
+        let s = searcher(&inputs, &ds.displacements_um[0], &FitOptions::default());
+        let pool = Pool {
+            sensors: vec![0],
+            spindle_exponents: vec![2],
+            asymmetric: false,
+            max_spindle_terms: 1,
+        };
+        let found = s.lag_beside_spindle(&[Spec::symmetric(Src::Sensor(0), 0.0)], &pool);
+        assert_eq!(found.len(), 1);
+        let m = &found[0];
+        let tau_of = |pred: fn(&Src) -> bool| {
+            m.specs
+                .iter()
+                .find(|sp| pred(&sp.src))
+                .map(|sp| sp.tau_heat_s)
+        };
+        let lag = tau_of(|s| matches!(s, Src::Sensor(_))).expect("a sensor term");
+        let sp = tau_of(|s| matches!(s, Src::Spindle(_))).expect("a spindle term");
+        assert!(
+            (lag / tau_lag - 1.0).abs() < 0.15,
+            "lag τ {lag} s: {:?}",
+            m.specs
+        );
+        assert!(
+            (sp / tau_sp - 1.0).abs() < 0.15,
+            "spindle τ {sp} s: {:?}",
+            m.specs
+        );
+        assert!(m.score.rms() < 0.05, "held-out RMS {}", m.score.rms());
+    }
+}

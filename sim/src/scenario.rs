@@ -840,6 +840,19 @@ impl Scenario {
                 ));
             }
         }
+        // A noise that is not a finite number ≥ 0 used to turn silently into no noise at all.
+        for (what, v) in [
+            (
+                "interferometer.sample_noise_nm",
+                self.interferometer.sample_noise_nm,
+            ),
+            ("capball.noise_um", self.capball.noise_um),
+            ("psd.noise_um", self.psd.noise_um),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(format!("{what} must be a finite number ≥ 0, got {v}"));
+            }
+        }
         for (i, dir) in self.capball.sensor_directions.iter().enumerate() {
             let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
             if !finite_pos(n) {
@@ -1013,6 +1026,13 @@ mod tests {
         assert!(s.validate().unwrap_err().to_string().contains("ey0c_um"));
         let mut s = Scenario::demo();
         s.capball.truth.drift_um_per_h[1] = f64::NAN;
+        assert!(s.validate().is_err());
+        let mut s = Scenario::demo();
+        s.psd.noise_um = f64::INFINITY;
+        let e = s.validate().expect_err("infinite noise");
+        assert!(e.to_string().contains("psd.noise_um"), "{e}");
+        let mut s = Scenario::demo();
+        s.interferometer.sample_noise_nm = -1.0;
         assert!(s.validate().is_err());
     }
 

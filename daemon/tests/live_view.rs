@@ -766,7 +766,11 @@ async fn the_page_raises_off_target_when_values_are_not_their_poses() {
         &browser,
         &modules,
         url,
-        "#alarms [data-kind=\"target\"]",
+        // The banner naming the interferometer's pose (a page that connected between the
+        // interferometer's value and the CapBall's of the same dwell names only the latter
+        // until the next pose's: seen in 2 of about 10 runs; why the first was not among the
+        // latched values it got is not known).
+        "#alarms [data-kind=\"target\"][data-pose]",
         "live_page_off_target.png",
     );
     assert_fits(&dom);

@@ -190,6 +190,75 @@ mod tests {
         drop(c);
     }
 
+    /// A client that stalls while a pose value is published, long enough that the value is
+    /// skipped for it: when it reads again it still gets that value (the latched ones it has
+    /// not had are sent after a skip), not only the messages after the skip.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_client_that_lagged_gets_the_latched_pose_it_missed() {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let cfg = LiveConfig {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            raw_hz: 10,
+        };
+        let view = LiveView::start(&cfg, RunInfo::default()).await.unwrap();
+        let sock = tokio::net::TcpSocket::new_v4().unwrap();
+        sock.set_recv_buffer_size(4096).unwrap();
+        let mut c = sock.connect(view.addr()).await.unwrap();
+        let hello = "GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
+        c.write_all(hello.as_bytes()).await.unwrap();
+        let mut head = [0u8; 12];
+        c.read_exact(&mut head).await.unwrap();
+        assert_eq!(&head, b"HTTP/1.1 101");
+        let (status, pose) = (
+            topic_index(&view.hub, "/status") + 1,
+            topic_index(&view.hub, "/pose") + 1,
+        );
+        let sub = format!(
+            r#"{{"op":"subscribe","subscriptions":[{{"id":0,"channelId":{status}}},{{"id":1,"channelId":{pose}}}]}}"#
+        );
+        // A client frame: text, masked with a zero key (RFC 6455 5.3), 16-bit length.
+        let mut frame = vec![0x81, 0x80 | 126, (sub.len() >> 8) as u8, sub.len() as u8];
+        frame.extend_from_slice(&[0, 0, 0, 0]);
+        frame.extend_from_slice(sub.as_bytes());
+        c.write_all(&frame).await.unwrap();
+        let mut tap = view.tap();
+        tap("/status", 0, b"{\"latched\":1}");
+        let mut got = Vec::new();
+        let mut read_until = async |c: &mut tokio::net::TcpStream, what: &[u8]| {
+            while !got.windows(what.len()).any(|w| w == what) {
+                let mut buf = [0u8; 65536];
+                let n = c.read(&mut buf).await.unwrap();
+                assert!(n > 0, "closed early");
+                got.extend_from_slice(&buf[..n]);
+            }
+        };
+        read_until(&mut c, b"{\"latched\":1}").await;
+        // The client stalls; meanwhile a pose value, and more than the backlog after it.
+        let big = vec![b' '; 64 << 10];
+        for k in 0..64u64 {
+            tap("/status", k, &big);
+        }
+        tap(
+            "/pose",
+            1,
+            br#"{"instrument":"interferometer","pose":3,"status":"MISSED"}"#,
+        );
+        for k in 0..(2 * BACKLOG as u64) {
+            tap("/status", k, b"{}");
+        }
+        tap("/status", 2, b"{\"last\":1}");
+        // Reading again: the pose value comes (after the skip), and the stream goes on.
+        let read = async {
+            read_until(&mut c, b"\"MISSED\"").await;
+        };
+        tokio::time::timeout(std::time::Duration::from_secs(60), read)
+            .await
+            .expect("the pose value skipped for the slow client reaches it after the skip");
+        let dropped = view.stop().await;
+        assert!(dropped > 0, "the client did lag: {dropped}");
+        drop(c);
+    }
+
     #[test]
     fn a_slow_client_loses_the_oldest_and_the_sender_never_waits() {
         let hub = Arc::new(Hub::new(RunInfo::default()));

@@ -210,8 +210,8 @@ async fn send(ws: &mut Ws, msg: Message, peer: SocketAddr) -> bool {
 struct Session {
     hub: Arc<Hub>,
     peer: SocketAddr,
-    /// Subscription id by channel index, and the last latched message sent on subscribing
-    /// (the stream may still hold it: not sent twice).
+    /// Subscription id by channel index, and the newest message sent on it (the stream may
+    /// still hold a latched one sent on subscribing or after a lag: not sent twice).
     subs: HashMap<usize, (u32, Option<u64>)>,
     dropped: u64,
     last_warn: Option<Instant>,
@@ -263,7 +263,10 @@ impl Session {
                 },
                 r = rx.recv() => match r {
                     Ok(m) => self.forward(&mut ws, &m).await,
-                    Err(RecvError::Lagged(n)) => { self.lagged(n); true }
+                    Err(RecvError::Lagged(n)) => {
+                        self.lagged(n);
+                        self.resync(&mut ws).await
+                    }
                     Err(RecvError::Closed) => false,
                 },
             };
@@ -280,15 +283,32 @@ impl Session {
         self.dropped
     }
 
-    async fn forward(&self, ws: &mut Ws, m: &LiveMsg) -> bool {
-        let Some(&(sub, latched)) = self.subs.get(&m.channel) else {
+    async fn forward(&mut self, ws: &mut Ws, m: &LiveMsg) -> bool {
+        let Some(&(sub, newest)) = self.subs.get(&m.channel) else {
             return true;
         };
-        if latched.is_some_and(|seq| m.seq <= seq) {
+        if newest.is_some_and(|seq| m.seq <= seq) {
             return true;
         }
         let frame = protocol::message_data(sub, m.log_ns, &m.data);
+        self.subs.insert(m.channel, (sub, Some(m.seq)));
         send(ws, Message::binary(frame), self.peer).await
+    }
+
+    /// After messages were skipped for a slow client: the latched ones it has not had (each
+    /// instrument's current pose, the last status and events), so a pose value or an alarm
+    /// lost in the skip is not missing from its screen until the next one.
+    async fn resync(&mut self, ws: &mut Ws) -> bool {
+        let mut channels: Vec<usize> = self.subs.keys().copied().collect();
+        channels.sort_unstable();
+        for i in channels {
+            for m in self.hub.latched(i) {
+                if !self.forward(ws, &m).await {
+                    return false;
+                }
+            }
+        }
+        true
     }
 
     /// What the client will not get any more: counted as skipped when it leaves.
@@ -331,14 +351,11 @@ impl Session {
                         continue;
                     };
                     self.subs.insert(i, (sub, None));
-                    let latched = self.hub.latched(i);
-                    for m in &latched {
+                    for m in &self.hub.latched(i) {
                         if !self.forward(ws, m).await {
                             return false;
                         }
                     }
-                    let last = latched.last().map(|m| m.seq);
-                    self.subs.insert(i, (sub, last));
                 }
                 true
             }

@@ -137,10 +137,9 @@ mod tests {
         assert_eq!(latched[0].log_ns, 2);
     }
 
-    /// A client that subscribes and then reads nothing: the tap goes on at once whatever it
-    /// is sent, the client is counted as skipping messages, and stopping the view ends.
-    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn a_stalled_client_neither_blocks_the_writer_nor_the_stop() {
+    /// A live view and a raw WebSocket client of it with a 4 KB receive buffer (it stalls
+    /// when it does not read), past the handshake.
+    async fn view_and_small_client() -> (LiveView, tokio::net::TcpStream) {
         use tokio::io::{AsyncReadExt, AsyncWriteExt};
         let cfg = LiveConfig {
             listen: "127.0.0.1:0".parse().unwrap(),
@@ -155,6 +154,15 @@ mod tests {
         let mut head = [0u8; 12];
         c.read_exact(&mut head).await.unwrap();
         assert_eq!(&head, b"HTTP/1.1 101");
+        (view, c)
+    }
+
+    /// A client that subscribes and then reads nothing: the tap goes on at once whatever it
+    /// is sent, the client is counted as skipping messages, and stopping the view ends.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_stalled_client_neither_blocks_the_writer_nor_the_stop() {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let (view, mut c) = view_and_small_client().await;
         let status = view
             .hub
             .channels
@@ -196,19 +204,7 @@ mod tests {
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_client_that_lagged_gets_the_latched_pose_it_missed() {
         use tokio::io::{AsyncReadExt, AsyncWriteExt};
-        let cfg = LiveConfig {
-            listen: "127.0.0.1:0".parse().unwrap(),
-            raw_hz: 10,
-        };
-        let view = LiveView::start(&cfg, RunInfo::default()).await.unwrap();
-        let sock = tokio::net::TcpSocket::new_v4().unwrap();
-        sock.set_recv_buffer_size(4096).unwrap();
-        let mut c = sock.connect(view.addr()).await.unwrap();
-        let hello = "GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
-        c.write_all(hello.as_bytes()).await.unwrap();
-        let mut head = [0u8; 12];
-        c.read_exact(&mut head).await.unwrap();
-        assert_eq!(&head, b"HTTP/1.1 101");
+        let (view, mut c) = view_and_small_client().await;
         let (status, pose) = (
             topic_index(&view.hub, "/status") + 1,
             topic_index(&view.hub, "/pose") + 1,

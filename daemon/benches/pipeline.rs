@@ -204,6 +204,11 @@ async fn run_metrolog(
     let sim = start_sim(program_s, &ports);
     let toml = metrolog::cmd::sim::write_daemon_config_with_rates(&sim, &ports, &logs, true, rates)
         .unwrap();
+    // `BENCH_RUN_EXTRA`: lines added to the config's `[run]` table (e.g. `read_coalesce_ms = 20`).
+    let toml = match std::env::var("BENCH_RUN_EXTRA") {
+        Ok(extra) => toml.replacen("[run]\n", &format!("[run]\n{extra}\n"), 1),
+        Err(_) => toml,
+    };
     let cfg = dir.path().join("metrolog.toml");
     std::fs::write(&cfg, toml).unwrap();
     let child = Command::new(bin)

@@ -86,6 +86,10 @@ const LATE_MARGIN_WINDOWS: u64 = 4;
 /// (2¹⁸ samples: 13 s at 20 kHz).
 pub const LATE_MARGIN_NS: u64 = 10_000_000_000;
 
+/// Samples fed between two trims of the history: the history may hold up to this many
+/// samples more than the states need (and than `max_history`).
+const TRIM_EVERY: u64 = 32;
+
 /// Statistics of one window.
 struct Window {
     steady: bool,
@@ -208,7 +212,11 @@ impl SteadyDetector {
         }
         let mut out = Vec::new();
         self.advance(&mut out);
-        self.trim();
+        // Trimming looks up the late margin in the history: once every TRIM_EVERY samples
+        // (a function of the input alone, so a replay trims where the run did).
+        if self.end() % TRIM_EVERY == 0 {
+            self.trim();
+        }
         out
     }
 
@@ -596,16 +604,15 @@ impl SteadyDetector {
             State::Dwell(_) => recent.min(late),
         };
         let keep_from = keep_from.max(end.saturating_sub(self.cfg.max_history as u64));
-        while self.base < keep_from {
-            self.times.pop_front();
-            if let Some(v) = self.invalid_upto.pop_front() {
-                self.invalid_before = v;
-            }
-            for _ in 0..self.channels {
-                self.values.pop_front();
-            }
-            self.base += 1;
+        let drop = keep_from.saturating_sub(self.base).min(self.times.len() as u64) as usize;
+        if drop == 0 {
+            return;
         }
+        self.invalid_before = self.invalid_upto[drop - 1];
+        self.times.drain(..drop);
+        self.invalid_upto.drain(..drop);
+        self.values.drain(..drop * self.channels);
+        self.base += drop as u64;
     }
 }
 

@@ -34,18 +34,25 @@ const BACKOFF_MAX: Duration = Duration::from_secs(2);
 /// the period since the first tick asked for), so the readers wake together. The default
 /// period; `set_read_coalesce` changes it (the daemon's `[run] read_coalesce_ms`), zero turns
 /// coalescing off.
-pub const READ_COALESCE_DEFAULT: Duration = Duration::from_millis(10);
+pub const READ_COALESCE_DEFAULT: Duration = Duration::from_millis(20);
 /// The coalescing period in µs (see [`READ_COALESCE_DEFAULT`]).
 static READ_COALESCE_US: AtomicU64 = AtomicU64::new(READ_COALESCE_DEFAULT.as_micros() as u64);
 /// A read at least this long is read again at once, without the pause: the tty layer hands
 /// out at most its 4 KiB line-discipline buffer per read (N_TTY_BUF_SIZE), so a full read
-/// means more is waiting (the LI-80 at 10 kHz sends 4.5 kB per 10 ms).
+/// means more is waiting (the LI-80 at 10 kHz sends 9 kB per 20 ms).
 const FULL_READ: usize = 3 * 1024;
-/// Every this many coalesced reads, one read waits for the next bytes without the pause: its
-/// arrival time is then the write time plus the wake-up latency only, which gives the clock fit
+/// About this often one read waits for the next bytes without the pause: its arrival time is
+/// then the write time plus the wake-up latency only, which gives the clock fit
 /// ([`detect::ClockFit`], windows of 0.5 s) the least-delayed points it needs (a coalesced read
-/// dates everything in it by the read, up to a period late). About ten probes per second.
-const PROBE_EVERY: u32 = 10;
+/// dates everything in it by the read, up to a period late). Ten probes per second whatever
+/// the period ([`probe_every`]).
+const PROBE_PERIOD: Duration = Duration::from_millis(100);
+
+/// Reads per probe at the coalescing period `period` (at least 1: every read a probe).
+fn probe_every(period: Duration) -> u32 {
+    let p = period.as_micros().max(1);
+    (PROBE_PERIOD.as_micros() / p).clamp(1, 1000) as u32
+}
 
 /// Sets the read coalescing period of every serial reader started from now on (zero: read as
 /// soon as bytes arrive).
@@ -260,7 +267,7 @@ async fn stream<D: SerialDriver, P: Port>(
                 driver.serve(s).await?;
                 s.path.tick(false);
                 cycle = cycle.wrapping_add(1);
-                if !coalesce.is_zero() && n < FULL_READ && !cycle.is_multiple_of(PROBE_EVERY) {
+                if !coalesce.is_zero() && n < FULL_READ && !cycle.is_multiple_of(probe_every(coalesce)) {
                     s.link.detach();
                     tokio::time::sleep_until(next_tick(coalesce)).await;
                 }
@@ -371,4 +378,17 @@ pub(crate) async fn run<D: SerialDriver, P: Port>(
         backoff = (backoff * 2).min(BACKOFF_MAX);
     }
     path.tick(true);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn probes_come_ten_times_a_second_whatever_the_period() {
+        assert_eq!(probe_every(Duration::from_millis(10)), 10);
+        assert_eq!(probe_every(Duration::from_millis(20)), 5);
+        assert_eq!(probe_every(Duration::from_millis(150)), 1);
+        assert_eq!(probe_every(Duration::from_micros(50)), 1000);
+    }
 }

@@ -361,6 +361,7 @@ impl Search<'_> {
     /// path adds one term at a time, and the first (a spindle term of some τ, or a lag) can
     /// stand in for both: a mass heated through a sensed part lags it by τ_L, which reads
     /// like the sensed part plus a heat source of about τ_L beside the real one.
+    /// The spindle term is searched symmetric, and asymmetric when the pool allows it.
     pub(crate) fn lag_beside_spindle(&self, base: &[Spec], pool: &Pool) -> Vec<Selection> {
         if !self.sensor_lags || !self.inputs.has_spindle() || pool.max_spindle_terms == 0 {
             return vec![];
@@ -372,29 +373,40 @@ impl Search<'_> {
                 continue;
             }
             for &p in &pool.spindle_exponents {
-                if let Some(m) = self.joint_lag_spindle(base, idx, i, p) {
-                    out.push(m);
+                let terms: Vec<Spec> = self
+                    .grid
+                    .iter()
+                    .map(|&t| Spec::symmetric(Src::Spindle(p), t))
+                    .collect();
+                out.extend(self.joint_lag_spindle(base, idx, i, &terms));
+                // The asymmetric spindle term searched with the lag too: made asymmetric
+                // after a symmetric joint search, it starts from a lag τ that was standing in
+                // for the asymmetry.
+                if pool.asymmetric {
+                    let asymmetric = self.asymmetric_candidates(p);
+                    out.extend(self.joint_lag_spindle(base, idx, i, &asymmetric));
                 }
             }
         }
         out
     }
 
-    /// `base` with term `idx` (sensor `i`) lagged and a spindle term of exponent `p` added,
-    /// the best pair of time constants on the grid, then backfitted.
-    fn joint_lag_spindle(&self, base: &[Spec], idx: usize, i: usize, p: u32) -> Option<Selection> {
-        let spindle: Vec<Spec> = self
-            .grid
-            .iter()
-            .map(|&t| Spec::symmetric(Src::Spindle(p), t))
-            .collect();
+    /// `base` with term `idx` (sensor `i`) lagged and the best of the `spindle` terms added,
+    /// the lag's τ on the grid searched together with the spindle term's, then backfitted.
+    fn joint_lag_spindle(
+        &self,
+        base: &[Spec],
+        idx: usize,
+        i: usize,
+        spindle: &[Spec],
+    ) -> Option<Selection> {
         let (mut specs, _) = self
             .grid
             .iter()
             .filter_map(|&tau_lag| {
                 let mut specs = base.to_vec();
                 specs[idx] = Spec::symmetric(Src::Sensor(i), tau_lag);
-                let (sp, sc) = best_of(self.scores_with(&specs, &spindle).into_iter())?;
+                let (sp, sc) = best_of(self.scores_with(&specs, spindle).into_iter())?;
                 specs.push(sp);
                 Some((specs, sc))
             })

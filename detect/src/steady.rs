@@ -604,7 +604,9 @@ impl SteadyDetector {
             State::Dwell(_) => recent.min(late),
         };
         let keep_from = keep_from.max(end.saturating_sub(self.cfg.max_history as u64));
-        let drop = keep_from.saturating_sub(self.base).min(self.times.len() as u64) as usize;
+        let drop = keep_from
+            .saturating_sub(self.base)
+            .min(self.times.len() as u64) as usize;
         if drop == 0 {
             return;
         }

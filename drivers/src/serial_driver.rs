@@ -267,7 +267,10 @@ async fn stream<D: SerialDriver, P: Port>(
                 driver.serve(s).await?;
                 s.path.tick(false);
                 cycle = cycle.wrapping_add(1);
-                if !coalesce.is_zero() && n < FULL_READ && !cycle.is_multiple_of(probe_every(coalesce)) {
+                if !coalesce.is_zero()
+                    && n < FULL_READ
+                    && !cycle.is_multiple_of(probe_every(coalesce))
+                {
                     s.link.detach();
                     tokio::time::sleep_until(next_tick(coalesce)).await;
                 }

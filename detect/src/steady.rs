@@ -214,7 +214,7 @@ impl SteadyDetector {
         self.advance(&mut out);
         // Trimming looks up the late margin in the history: once every TRIM_EVERY samples
         // (a function of the input alone, so a replay trims where the run did).
-        if self.end() % TRIM_EVERY == 0 {
+        if self.end().is_multiple_of(TRIM_EVERY) {
             self.trim();
         }
         out

@@ -402,13 +402,13 @@ async fn stream_for(rate_hz: u32, secs: u32) -> Vec<Sample> {
 }
 
 /// Read coalescing (docs/design.md, "Where the daemon's CPU goes"): at 1 kHz and at 5 kHz the
-/// driver reads about once per coalescing tick (10 ms) plus a probe read every tenth tick,
-/// ~110 reads a second whatever the rate, not once per device write (1000 a second); every
+/// driver reads about once per coalescing tick (20 ms) plus a probe read every 100 ms,
+/// 60-90 reads a second whatever the rate, not once per device write (1000 a second); every
 /// sample arrives once, in order. A read is told by the arrival time it gives all its samples
 /// (the host clock, which runs on while tokio's clock is paused).
 #[tokio::test(start_paused = true)]
 async fn a_stream_is_read_about_once_per_coalescing_tick_whatever_its_rate() {
-    assert_eq!(crate::read_coalesce(), std::time::Duration::from_millis(10));
+    assert_eq!(crate::read_coalesce(), std::time::Duration::from_millis(20));
     for rate_hz in [1000, 5000] {
         let secs = 2;
         let samples = stream_for(rate_hz, secs).await;
@@ -421,7 +421,8 @@ async fn a_stream_is_read_about_once_per_coalescing_tick_whatever_its_rate() {
         }
         let per_s = reads as f64 / f64::from(secs);
         assert!(
-            (90.0..=125.0).contains(&per_s),
+            // 5 kHz sends about 4 kB a tick: a read of 3 KiB or more is read again at once.
+            (50.0..=95.0).contains(&per_s),
             "{rate_hz} Hz: {per_s} reads a second"
         );
     }

@@ -260,6 +260,7 @@ async fn stream<D: SerialDriver, P: Port>(
 ) -> Result<(), DriverError> {
     let idle = driver.idle_timeout();
     let coalesce = driver.coalesce();
+    let probe = probe_every(coalesce);
     let mut cycle = 0u32;
     loop {
         match tokio::time::timeout(idle, s.read_once()).await {
@@ -267,10 +268,7 @@ async fn stream<D: SerialDriver, P: Port>(
                 driver.serve(s).await?;
                 s.path.tick(false);
                 cycle = cycle.wrapping_add(1);
-                if !coalesce.is_zero()
-                    && n < FULL_READ
-                    && !cycle.is_multiple_of(probe_every(coalesce))
-                {
+                if !coalesce.is_zero() && n < FULL_READ && !cycle.is_multiple_of(probe) {
                     s.link.detach();
                     tokio::time::sleep_until(next_tick(coalesce)).await;
                 }

@@ -366,26 +366,28 @@ impl Search<'_> {
         if !self.sensor_lags || !self.inputs.has_spindle() || pool.max_spindle_terms == 0 {
             return vec![];
         }
+        // Per spindle exponent, the symmetric terms on the grid and, when the pool allows
+        // it, the asymmetric ones: made asymmetric only after a symmetric joint search, the
+        // spindle term would start from a lag τ that was standing in for the asymmetry.
+        let mut spindle_sets: Vec<Vec<Spec>> = vec![];
+        for &p in &pool.spindle_exponents {
+            let symmetric = self
+                .grid
+                .iter()
+                .map(|&t| Spec::symmetric(Src::Spindle(p), t));
+            spindle_sets.push(symmetric.collect());
+            if pool.asymmetric {
+                spindle_sets.push(self.asymmetric_candidates(p));
+            }
+        }
         let mut out = vec![];
         for (idx, term) in base.iter().enumerate() {
             let Src::Sensor(i) = term.src else { continue };
             if term.tau_heat_s != 0.0 {
                 continue;
             }
-            for &p in &pool.spindle_exponents {
-                let terms: Vec<Spec> = self
-                    .grid
-                    .iter()
-                    .map(|&t| Spec::symmetric(Src::Spindle(p), t))
-                    .collect();
-                out.extend(self.joint_lag_spindle(base, idx, i, &terms));
-                // The asymmetric spindle term searched with the lag too: made asymmetric
-                // after a symmetric joint search, it starts from a lag τ that was standing in
-                // for the asymmetry.
-                if pool.asymmetric {
-                    let asymmetric = self.asymmetric_candidates(p);
-                    out.extend(self.joint_lag_spindle(base, idx, i, &asymmetric));
-                }
+            for terms in &spindle_sets {
+                out.extend(self.joint_lag_spindle(base, idx, i, terms));
             }
         }
         out

@@ -238,6 +238,20 @@ fn diagnose_names_an_effect_on_the_real_file() {
     println!("{text}");
     assert!(text.contains("finding:"), "{text}");
     assert!(!text.contains("findings: none") || text.matches("finding:").count() > 0);
+    // A lag, heat source or asymmetry is named on a gain: its t is positive (a lag chosen
+    // over spindle heat once read "1.036 → 1.299 µm, t = -1.7" on ch5).
+    for line in text.lines().filter(|l| {
+        l.contains("finding: the displacement lags")
+            || l.contains("finding: a heat source")
+            || l.contains("finding: spindle heating")
+    }) {
+        let t: f64 = line
+            .rsplit("t = ")
+            .next()
+            .and_then(|v| v.trim_end_matches(')').parse().ok())
+            .unwrap_or_else(|| panic!("no t in {line}"));
+        assert!(t > 0.0, "an effect named on a loss: {line}");
+    }
 }
 
 #[test]

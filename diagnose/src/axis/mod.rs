@@ -162,8 +162,13 @@ pub fn diagnose(data: &PositioningData, opt: &Options) -> Result<Diagnosis, Diag
         let demoted = verdict::demoted_next_to_unexplained(&found, res.rms_left_um);
         for &(i, why) in demoted.iter().rev() {
             let f = found.remove(i);
+            let change = if f.heldout_rms_after_um < f.heldout_rms_before_um {
+                "would lower"
+            } else {
+                "would not lower"
+            };
             notes.push(format!(
-                "{} would lower the held-out error from {:.2} to {:.2} µm: not reported, {why}",
+                "{} {change} the held-out error ({:.2} → {:.2} µm): not reported, {why}",
                 f.effect, f.heldout_rms_before_um, f.heldout_rms_after_um
             ));
         }

@@ -112,11 +112,10 @@ pub(super) fn unexplained_finding(obs: &Obs, fin: &FinalFit, res: &Residue) -> F
         heldout_rms_after_um: ho,
         cause: format!(
             "after the best model {:.2} µm RMS is left, {against_noise}{share}: the data hold \
-             structure no effect \
-             of the vocabulary explains. Suspect the measuring system first — a reference \
-             sensor that jumps or is out of range, a loose sensor or target mount, a beam cut \
-             or misaligned — then the axis; check the reference against a second one and \
-             repeat the run",
+             structure no effect of the vocabulary explains. Suspect the measuring system \
+             first — a reference sensor that jumps or is out of range, a loose sensor or target \
+             mount, a beam cut or misaligned — then the axis; check the reference against a \
+             second one and repeat the run",
             res.rms_left_um
         ),
         alternatives: Vec::new(),

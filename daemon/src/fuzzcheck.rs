@@ -1,6 +1,6 @@
 //! The analysis paths of the CapBall, PSD, thermal and uncertainty-budget inputs, as their
 //! commands take them (issue 27): shared by the cargo-fuzz targets `capball_path`, `psd_path`,
-//! `thermal_path` and `budget_path` (`protocol/fuzz`) and the corpus replay test
+//! `thermal_path`, `thermal_fit_path` and `budget_path` (`protocol/fuzz`) and the corpus replay test
 //! (`daemon/tests/fuzz_paths.rs`). Each panics when the path breaks a promise on its input: no
 //! panic anywhere, and no NaN or infinity in a text, JSON or CSV output of an input the reader
 //! accepts. Not part of the API.
@@ -69,19 +69,29 @@ pub fn psd_path(text: &str) -> Option<String> {
 /// Thermal CSV → the dataset reader → ISO 230-3 (ETVE) → the thermal model: fitted, written as
 /// JSON, read back, described, predicting the same data → the diagnosis.
 pub fn thermal_path(text: &str) -> Option<Vec<String>> {
+    thermal_outputs(text, true)
+}
+
+/// `thermal_path` without the diagnosis (the cargo-fuzz target `thermal_fit_path`): the same
+/// reader, ISO 230-3, fit, JSON and prediction at the speed a fuzzer needs (the diagnosis'
+/// model search runs at 5–30 inputs a second).
+pub fn thermal_fit_path(text: &str) -> Option<Vec<String>> {
+    thermal_outputs(text, false)
+}
+
+fn thermal_outputs(text: &str, diagnose: bool) -> Option<Vec<String>> {
     let ds = thermal::ThermalDataset::from_csv(text).ok()?;
     let mut out = vec![];
     if let Ok(r) = iso230_3::evaluate(&ds, None, Path::new(INPUT)) {
         out.push(iso230_3::render(&r, INPUT));
     }
-    if ds.channel_names.is_empty() {
-        return Some(out);
-    }
-    if let Ok(model) = thermal::fit(&ds, &thermal::FitOptions::default()) {
-        out.extend(thermal_model_outputs(&model, &ds, text));
-    }
-    if let Ok(d) = thermal::diagnose(&ds, &thermal::DiagnoseOptions::default()) {
-        out.push(d.render());
+    if !ds.channel_names.is_empty() {
+        if let Ok(model) = thermal::fit(&ds, &thermal::FitOptions::default()) {
+            out.extend(thermal_model_outputs(&model, &ds, text));
+        }
+        if diagnose && let Ok(d) = thermal::diagnose(&ds, &thermal::DiagnoseOptions::default()) {
+            out.push(d.render());
+        }
     }
     for o in &out {
         assert_finite_text("a thermal output", o, text);

@@ -7,7 +7,8 @@
 use std::path::PathBuf;
 
 use metrolog::fuzzcheck::{
-    budget_path, capball_path, diagnose_path, parts_path, psd_path, thermal_path, volumetric_path,
+    budget_path, capball_path, diagnose_path, parts_path, psd_path, thermal_fit_path, thermal_path,
+    volumetric_path,
 };
 
 fn corpus(target: &str) -> Vec<(String, String)> {
@@ -64,6 +65,20 @@ fn thermal_path_corpus() {
             let outputs = out.unwrap_or_else(|| panic!("{name} refused"));
             // ETVE, the model's description, the prediction CSV, the model JSON, the diagnosis.
             assert_eq!(outputs.len(), 5, "{outputs:#?}");
+        }
+    }
+}
+
+/// The fast target's path (`thermal_fit_path`) shares the thermal corpus: its findings are kept
+/// there and replayed by both.
+#[test]
+fn thermal_fit_path_corpus() {
+    for (name, text) in corpus("thermal_path") {
+        let out = thermal_fit_path(&text);
+        if name == "real_spindle_excerpt.csv" {
+            let outputs = out.unwrap_or_else(|| panic!("{name} refused"));
+            // ETVE, the model's description, the prediction CSV, the model JSON.
+            assert_eq!(outputs.len(), 4, "{outputs:#?}");
         }
     }
 }

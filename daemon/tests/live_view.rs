@@ -699,9 +699,12 @@ async fn the_page_shows_the_pose_being_measured_and_alarms() {
     assert_fits(&dom);
     assert!(dom.contains(">PSD UNPLUGGED since "), "{dom}");
     assert!(dom.contains(">BEAM LOST: interferometer signal "), "{dom}");
+    // Invalid, whatever else the tile says: on a loaded machine the readings may also have
+    // gone stale by the time the page is rendered ("tile invalid stale" in one CI run).
+    let classes = attr_of_id(&dom, "tile-interferometer", "class");
     assert!(
-        dom.contains("class=\"tile invalid\" id=\"tile-interferometer\""),
-        "the reading is not marked invalid: {dom}"
+        classes.split_whitespace().any(|c| c == "invalid"),
+        "the reading is not marked invalid ({classes}): {dom}"
     );
     assert!(
         dom.contains("<tr class=\"pose old\" data-instrument=\"psd\""),

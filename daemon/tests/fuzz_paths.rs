@@ -57,30 +57,30 @@ fn psd_path_corpus() {
     }
 }
 
-#[test]
-fn thermal_path_corpus() {
+/// The thermal corpus through `path`: no panic on any file, and `outputs` outputs for the real
+/// excerpt.
+fn replay_thermal(path: fn(&str) -> Option<Vec<String>>, outputs: usize) {
     for (name, text) in corpus("thermal_path") {
-        let out = thermal_path(&text);
+        let out = path(&text);
         if name == "real_spindle_excerpt.csv" {
-            let outputs = out.unwrap_or_else(|| panic!("{name} refused"));
-            // ETVE, the model's description, the prediction CSV, the model JSON, the diagnosis.
-            assert_eq!(outputs.len(), 5, "{outputs:#?}");
+            let got = out.unwrap_or_else(|| panic!("{name} refused"));
+            assert_eq!(got.len(), outputs, "{got:#?}");
         }
     }
+}
+
+#[test]
+fn thermal_path_corpus() {
+    // ETVE, the model's description, the prediction CSV, the model JSON, the diagnosis.
+    replay_thermal(thermal_path, 5);
 }
 
 /// The fast target's path (`thermal_fit_path`) shares the thermal corpus: its findings are kept
 /// there and replayed by both.
 #[test]
 fn thermal_fit_path_corpus() {
-    for (name, text) in corpus("thermal_path") {
-        let out = thermal_fit_path(&text);
-        if name == "real_spindle_excerpt.csv" {
-            let outputs = out.unwrap_or_else(|| panic!("{name} refused"));
-            // ETVE, the model's description, the prediction CSV, the model JSON.
-            assert_eq!(outputs.len(), 4, "{outputs:#?}");
-        }
-    }
+    // ETVE, the model's description, the prediction CSV, the model JSON.
+    replay_thermal(thermal_fit_path, 4);
 }
 
 #[test]

@@ -50,7 +50,10 @@ pub use modbus::{
     ModbusConfigError, ModbusTempConfig, Parity, RegisterKind, TempSensor, spawn_modbus_temperature,
 };
 pub use psd::{HeadCorrection, PsdAxis, PsdConfig, spawn_psd};
-pub use serial_driver::{READ_COALESCE_DEFAULT, next_read_tick, read_coalesce, set_read_coalesce};
+pub use serial_driver::{
+    READ_COALESCE_DEFAULT, TAKE_AFTER_TICK, late_reads, next_read_tick, read_coalesce,
+    set_read_coalesce,
+};
 pub use trigger::{SlcanConfig, SocketCanConfig, spawn_slcan, trigger_from_frame};
 /// The shared vocabulary the drivers' events are made of (`metrolog-types`).
 pub use types::{Counters, HostClock, Instrument, Sample, SampleValues, Trigger};

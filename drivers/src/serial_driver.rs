@@ -65,6 +65,20 @@ pub fn read_coalesce() -> Duration {
     Duration::from_micros(READ_COALESCE_US.load(Ordering::Relaxed))
 }
 
+/// How long after a tick a consumer takes what the readers read on it
+/// ([`next_read_tick`]): a read of the tick that ends later is late, and says so
+/// ([`late_reads`]).
+pub const TAKE_AFTER_TICK: Duration = Duration::from_millis(1);
+
+/// Notified when a reader's read of a tick ended more than [`TAKE_AFTER_TICK`] after the tick
+/// (a burst of full reads, a loaded host): its samples missed the consumer's take of that tick
+/// and would wait a whole period for the next one (docs/design.md, "Where the daemon's CPU
+/// goes"). One permit is kept while nobody waits.
+pub fn late_reads() -> &'static tokio::sync::Notify {
+    static LATE: OnceLock<tokio::sync::Notify> = OnceLock::new();
+    LATE.get_or_init(tokio::sync::Notify::new)
+}
+
 /// The next tick of the read coalescing period after now (see [`READ_COALESCE_DEFAULT`]):
 /// the readers read again then, so a consumer that takes their data just after it wakes once
 /// for all of them. Now itself when coalescing is off.
@@ -262,20 +276,38 @@ async fn stream<D: SerialDriver, P: Port>(
     let coalesce = driver.coalesce();
     let probe = probe_every(coalesce);
     let mut cycle = 0u32;
+    // The tick this read belongs to: the one slept until (a full read's next read too); none
+    // for a probe, which reads when bytes come.
+    let mut tick: Option<tokio::time::Instant> = None;
     loop {
         match tokio::time::timeout(idle, s.read_once()).await {
             Ok(Ok(n)) => {
                 driver.serve(s).await?;
                 s.path.tick(false);
                 cycle = cycle.wrapping_add(1);
+                tell_if_late(&mut tick, n, late_reads());
                 if !coalesce.is_zero() && n < FULL_READ && !cycle.is_multiple_of(probe) {
                     s.link.detach();
-                    tokio::time::sleep_until(next_tick(coalesce)).await;
+                    let t = next_tick(coalesce);
+                    tokio::time::sleep_until(t).await;
+                    tick = Some(t);
                 }
             }
             Ok(Err(e)) => return Err(e),
             Err(_) => return Err(DriverError::Silent { idle }),
         }
+    }
+}
+
+/// After a read of `n` bytes: when it ends the reads of `tick` (it is not full) later than
+/// [`TAKE_AFTER_TICK`] after it, tells `late`. A full read is read again at once, for the same
+/// tick.
+fn tell_if_late(tick: &mut Option<tokio::time::Instant>, n: usize, late: &tokio::sync::Notify) {
+    if n < FULL_READ
+        && let Some(t) = tick.take()
+        && t.elapsed() > TAKE_AFTER_TICK
+    {
+        late.notify_one();
     }
 }
 
@@ -391,5 +423,41 @@ mod tests {
         assert_eq!(probe_every(Duration::from_millis(20)), 5);
         assert_eq!(probe_every(Duration::from_millis(150)), 1);
         assert_eq!(probe_every(Duration::from_micros(50)), 1000);
+    }
+
+    /// Whether `late` holds a notice (taking it).
+    async fn noticed(late: &tokio::sync::Notify) -> bool {
+        tokio::time::timeout(Duration::ZERO, late.notified())
+            .await
+            .is_ok()
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_tick_read_that_ends_after_the_take_says_so_once() {
+        let late = tokio::sync::Notify::new();
+        let t0 = tokio::time::Instant::now();
+        // On time: the tick's one read ends within TAKE_AFTER_TICK.
+        let mut tick = Some(t0);
+        tell_if_late(&mut tick, 100, &late);
+        assert!(!noticed(&late).await, "a read on time");
+        assert_eq!(tick, None, "the tick's reads are done");
+        // A burst of full reads that ends 2 ms after its tick: one notice, at its last read.
+        let mut tick = Some(tokio::time::Instant::now());
+        tokio::time::advance(Duration::from_millis(2)).await;
+        tell_if_late(&mut tick, FULL_READ, &late);
+        assert!(
+            !noticed(&late).await,
+            "a full read is read again for the same tick"
+        );
+        tell_if_late(&mut tick, 10, &late);
+        assert!(
+            noticed(&late).await,
+            "the burst's last read ended after the take"
+        );
+        tell_if_late(&mut tick, 10, &late);
+        assert!(
+            !noticed(&late).await,
+            "a probe read (no tick) is not a tick's read"
+        );
     }
 }

@@ -37,8 +37,9 @@ use super::sink::EventSink;
 pub const QUEUE_CAPACITY: usize = 1 << 16;
 
 /// While the drivers coalesce their reads (`drivers::read_coalesce`), the pipeline takes the
-/// queue this long after their tick: their reads of the tick are then queued.
-const BATCH_AFTER_TICK: Duration = Duration::from_millis(1);
+/// queue this long after their tick: their reads of the tick are then queued (a read that
+/// ends later says so, `drivers::late_reads`, and is taken then).
+const BATCH_AFTER_TICK: Duration = drivers::TAKE_AFTER_TICK;
 /// Longest wait, after the program end that stops a run, for the streaming readers' samples
 /// up to that instant ([`Pipeline::catch_up_readers`]).
 const CATCH_UP_LIMIT: Duration = Duration::from_secs(1);
@@ -752,7 +753,7 @@ impl Pipeline {
                         break r;
                     }
                 }
-                _ = tokio::time::sleep_until(batch_at), if coalesced => {
+                _ = batch_due(batch_at), if coalesced => {
                     if rx.is_closed() && rx.is_empty() {
                         break StopReason::DriversGone;
                     }
@@ -777,6 +778,15 @@ impl Pipeline {
         let out = self.finish(reason, rx.len())?;
         progress.send_replace(out.status.clone());
         Ok(out)
+    }
+}
+
+/// When the pipeline takes the queue while the readers coalesce: just after their tick, or
+/// when a read of the tick ended after that take (its samples would otherwise wait a period).
+async fn batch_due(at: tokio::time::Instant) {
+    tokio::select! {
+        _ = tokio::time::sleep_until(at) => {}
+        _ = drivers::late_reads().notified() => {}
     }
 }
 

@@ -1,9 +1,9 @@
 //! The analysis paths of the CapBall, PSD, thermal and uncertainty-budget inputs, as their
 //! commands take them (issue 27): shared by the cargo-fuzz targets `capball_path`, `psd_path`,
 //! `thermal_path`, `thermal_fit_path` and `budget_path` (`protocol/fuzz`) and the corpus
-//! replay test (`daemon/tests/fuzz_paths.rs`). Each panics when the path breaks a promise on its input: no
-//! panic anywhere, and no NaN or infinity in a text, JSON or CSV output of an input the reader
-//! accepts. Not part of the API.
+//! replay test (`daemon/tests/fuzz_paths.rs`). Each panics when the path breaks a promise on
+//! its input: no panic anywhere, and no NaN or infinity in a text, JSON or CSV output of an
+//! input the reader accepts. Not part of the API.
 
 use std::path::Path;
 

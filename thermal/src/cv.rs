@@ -89,9 +89,10 @@ impl BlockStats {
             n: self.n.clone(),
         };
         for (k, r) in blocks.0.iter().enumerate() {
-            let mut g = self.g[k].clone().resize(p, p, 0.0);
+            let mut g = DMatrix::zeros(p, p);
+            g.view_mut((0, 0), (p - 1, p - 1)).copy_from(&self.g[k]);
             let cs = &c[r.clone()];
-            g[(0, p - 1)] = cs.iter().sum();
+            g[(0, p - 1)] = sum(cs);
             for (j, col) in cols.iter().enumerate() {
                 g[(j + 1, p - 1)] = dot(&col[r.clone()], cs);
             }
@@ -99,7 +100,8 @@ impl BlockStats {
             for j in 0..p - 1 {
                 g[(p - 1, j)] = g[(j, p - 1)];
             }
-            let mut b = self.b[k].clone().resize_vertically(p, 0.0);
+            let mut b = DVector::zeros(p);
+            b.rows_mut(0, p - 1).copy_from(&self.b[k]);
             b[p - 1] = dot(cs, &y[r.clone()]);
             out.g.push(g);
             out.b.push(b);
@@ -119,7 +121,16 @@ impl BlockStats {
 
     /// Coefficients (intercept first) fitted on every block but `k`, or on all with `None`.
     pub(crate) fn coefficients(&self, held_out: Option<usize>) -> Option<DVector<f64>> {
-        let (mut g, mut b) = self.totals();
+        self.coefficients_from(&self.totals(), held_out)
+    }
+
+    /// As [`Self::coefficients`], from the products' `totals` summed once by the caller.
+    fn coefficients_from(
+        &self,
+        totals: &(DMatrix<f64>, DVector<f64>),
+        held_out: Option<usize>,
+    ) -> Option<DVector<f64>> {
+        let (mut g, mut b) = totals.clone();
         if let Some(k) = held_out {
             g -= &self.g[k];
             b -= &self.b[k];
@@ -155,8 +166,9 @@ impl BlockStats {
     /// Held-out sums of squares, each block predicted from the others.
     pub(crate) fn score(&self) -> Option<CvScore> {
         let mut sse = Vec::with_capacity(self.g.len());
+        let totals = self.totals();
         for k in 0..self.g.len() {
-            let beta = self.coefficients(Some(k))?;
+            let beta = self.coefficients_from(&totals, Some(k))?;
             let s = self.yy[k] - 2.0 * beta.dot(&self.b[k]) + (&self.g[k] * &beta).dot(&beta);
             sse.push(s.max(0.0));
         }
@@ -168,25 +180,23 @@ impl BlockStats {
 }
 
 /// Solves the normal equations by Cholesky, with a tiny ridge on a near-singular matrix.
-fn solve(g: DMatrix<f64>, b: DVector<f64>) -> Option<DVector<f64>> {
-    let scale: Vec<f64> = (0..g.nrows())
-        .map(|i| g[(i, i)].max(1e-300).sqrt())
-        .collect();
+fn solve(g: DMatrix<f64>, mut bs: DVector<f64>) -> Option<DVector<f64>> {
+    let scale = DVector::from_fn(g.nrows(), |i, _| g[(i, i)].max(1e-300).sqrt());
     let mut a = g;
     for i in 0..a.nrows() {
         for j in 0..a.ncols() {
             a[(i, j)] /= scale[i] * scale[j];
         }
     }
-    let bs = DVector::from_iterator(b.len(), b.iter().zip(&scale).map(|(v, s)| v / s));
+    bs.component_div_assign(&scale);
     for ridge in [0.0, 1e-12, 1e-9, 1e-6] {
         let mut m = a.clone();
         for i in 0..m.nrows() {
             m[(i, i)] += ridge;
         }
         if let Some(ch) = m.cholesky() {
-            let x = ch.solve(&bs);
-            let x = DVector::from_iterator(x.len(), x.iter().zip(&scale).map(|(v, s)| v / s));
+            let mut x = ch.solve(&bs);
+            x.component_div_assign(&scale);
             if x.iter().all(|v| v.is_finite()) {
                 return Some(x);
             }
@@ -195,16 +205,50 @@ fn solve(g: DMatrix<f64>, b: DVector<f64>) -> Option<DVector<f64>> {
     None
 }
 
+/// Σ aᵢ, in eight interleaved partial sums (as [`dot`]).
+fn sum(a: &[f64]) -> f64 {
+    const L: usize = 8;
+    let mut acc = [0.0; L];
+    let chunks = a.chunks_exact(L);
+    let tail: f64 = chunks.remainder().iter().sum();
+    for x in chunks {
+        for k in 0..L {
+            acc[k] += x[k];
+        }
+    }
+    acc.iter().sum::<f64>() + tail
+}
+
+/// Σ aᵢbᵢ over the shorter of the two, in eight interleaved partial sums: independent
+/// additions the compiler can vectorise (a single running sum cannot be reordered), which
+/// made the diagnosis' column products about 4× faster (docs/design.md).
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    const L: usize = 8;
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0; L];
+    let (ac, bc) = (a.chunks_exact(L), b.chunks_exact(L));
+    let tail: f64 = ac
+        .remainder()
+        .iter()
+        .zip(bc.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ac.zip(bc) {
+        for k in 0..L {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    acc.iter().sum::<f64>() + tail
 }
 
 /// Residuals of `y` held out block by block (each block predicted by a fit on the others).
 pub(crate) fn heldout_residuals(cols: &[&[f64]], y: &[f64], blocks: &Blocks) -> Option<Vec<f64>> {
     let stats = BlockStats::new(cols, y, blocks);
     let mut res = vec![0.0; y.len()];
+    let totals = stats.totals();
     for (k, r) in blocks.0.iter().enumerate() {
-        let beta = stats.coefficients(Some(k))?;
+        let beta = stats.coefficients_from(&totals, Some(k))?;
         for i in r.clone() {
             res[i] = y[i] - predict_row(&beta, cols, i);
         }

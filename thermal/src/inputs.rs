@@ -3,7 +3,7 @@
 use crate::dataset::ThermalDataset;
 use crate::filter::{lag_held, zero_phase};
 use std::cell::RefCell;
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::rc::Rc;
 
 /// Where a term's input comes from.
@@ -62,7 +62,61 @@ pub(crate) struct Inputs {
     /// Weight of a step's first speed reading in the speed over the step (0.5: a change
     /// halfway between readings).
     spindle_hold: f64,
-    cache: RefCell<HashMap<Key, Rc<Vec<f64>>>>,
+    cache: RefCell<ColumnCache>,
+}
+
+/// Lagged columns computed once: those of the time constants on the search grid (and 0) for
+/// the whole search, the others (a golden-section search's trials, a refined model's) only the
+/// [`OFF_GRID_KEPT`] most recent. Keeping every trial held 0.8 GB for the real spindle file.
+#[derive(Default)]
+struct ColumnCache {
+    grid: Vec<u64>,
+    columns: HashMap<Key, Rc<Vec<f64>>>,
+    off_grid: VecDeque<Key>,
+}
+
+/// Columns off the search grid kept at most (each is one value per sample).
+const OFF_GRID_KEPT: usize = 512;
+
+impl ColumnCache {
+    fn new(time_s: &[f64]) -> Self {
+        let taus = if time_s.is_empty() {
+            vec![]
+        } else {
+            tau_grid(time_s)
+        };
+        let mut grid: Vec<u64> = taus.iter().map(|t| t.to_bits()).collect();
+        grid.push(0.0f64.to_bits());
+        Self {
+            grid,
+            ..Self::default()
+        }
+    }
+
+    fn on_grid(&self, key: &Key) -> bool {
+        self.grid.contains(&key.1) && self.grid.contains(&key.2)
+    }
+
+    fn get(&self, key: &Key) -> Option<Rc<Vec<f64>>> {
+        self.columns.get(key).cloned()
+    }
+
+    fn insert(&mut self, key: Key, col: Rc<Vec<f64>>) {
+        if !self.on_grid(&key) {
+            self.off_grid.push_back(key);
+            if self.off_grid.len() > OFF_GRID_KEPT
+                && let Some(old) = self.off_grid.pop_front()
+            {
+                self.columns.remove(&old);
+            }
+        }
+        self.columns.insert(key, col);
+    }
+
+    fn clear(&mut self) {
+        self.columns.clear();
+        self.off_grid.clear();
+    }
 }
 
 impl Inputs {
@@ -83,7 +137,7 @@ impl Inputs {
             rises,
             krpm,
             spindle_hold: 0.5,
-            cache: RefCell::new(HashMap::new()),
+            cache: RefCell::new(ColumnCache::new(&ds.time_s)),
         }
     }
 
@@ -116,7 +170,7 @@ impl Inputs {
     /// The lagged column of `spec` (computed once per dataset).
     pub(crate) fn column(&self, spec: &Spec) -> Option<Rc<Vec<f64>>> {
         if let Some(c) = self.cache.borrow().get(&spec.key()) {
-            return Some(Rc::clone(c));
+            return Some(c);
         }
         let raw = self.raw(spec.src)?;
         let w = match spec.src {

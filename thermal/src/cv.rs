@@ -405,6 +405,19 @@ mod tests {
     }
 
     #[test]
+    fn partial_sums_match_a_running_sum_at_every_length() {
+        for n in 0..40 {
+            let a: Vec<f64> = (0..n).map(|i| (i as f64 * 0.7).sin() + 1.0).collect();
+            let b: Vec<f64> = (0..n + 3).map(|i| (i as f64 * 0.3).cos()).collect();
+            let plain: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+            assert!((dot(&a, &b) - plain).abs() < 1e-12, "dot, n = {n}");
+            assert!((dot(&b, &a) - plain).abs() < 1e-12, "dot reversed, n = {n}");
+            let total: f64 = a.iter().sum();
+            assert!((sum(&a) - total).abs() < 1e-12, "sum, n = {n}");
+        }
+    }
+
+    #[test]
     fn gain_rule_needs_consistent_gain() {
         let before = CvScore {
             sse: vec![4.0; 8],

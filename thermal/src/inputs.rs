@@ -203,3 +203,28 @@ pub(crate) fn tau_grid(time_s: &[f64]) -> Vec<f64> {
         .filter(|&t| t >= 2.0 * dt && t <= span / 2.0)
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn column_cache_keeps_the_grid_and_the_latest_off_grid_columns() {
+        let time_s: Vec<f64> = (0..2000).map(|i| 60.0 * i as f64).collect();
+        let mut cache = ColumnCache::new(&time_s);
+        let on = Spec::symmetric(Src::Sensor(0), tau_grid(&time_s)[0]).key();
+        let col = Rc::new(vec![1.0]);
+        cache.insert(on, Rc::clone(&col));
+        let off = |k: usize| Spec::symmetric(Src::Sensor(0), 61.5 + k as f64).key();
+        for k in 0..=OFF_GRID_KEPT {
+            cache.insert(off(k), Rc::clone(&col));
+        }
+        assert!(cache.get(&on).is_some(), "a grid column is kept");
+        assert!(
+            cache.get(&off(0)).is_none(),
+            "the oldest off-grid column is dropped"
+        );
+        assert!(cache.get(&off(1)).is_some() && cache.get(&off(OFF_GRID_KEPT)).is_some());
+        assert_eq!(cache.columns.len(), OFF_GRID_KEPT + 1);
+    }
+}

@@ -358,6 +358,39 @@ fn synthetic() -> String {
     s
 }
 
+/// A short test (55 visits, as a run that lost some): fit and diagnose hold out 5 blocks of 11
+/// and say so; 8 blocks asked for are refused with what is needed.
+#[test]
+fn a_short_test_is_fitted_on_fewer_blocks_with_a_note() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, model) = (dir.path().join("data.csv"), dir.path().join("model.json"));
+    let short: String = synthetic()
+        .lines()
+        .take(56)
+        .map(|l| l.to_string() + "\n")
+        .collect();
+    std::fs::write(&data, short).unwrap();
+    let note = "note: 55 samples: 5 held-out time blocks instead of 8";
+    for args in [
+        vec!["thermal", "fit", s(&data), "-o", s(&model)],
+        vec!["thermal", "diagnose", s(&data)],
+    ] {
+        let o = metrolog(&args);
+        assert_eq!(o.code, Some(0), "metrolog {args:?}: {}", o.stderr);
+        assert!(o.stderr.contains(note), "{args:?}: {}", o.stderr);
+    }
+    assert!(model.exists());
+    let o = metrolog(&["thermal", "fit", s(&data), "-o", s(&model), "--blocks", "8"]);
+    assert_ne!(o.code, Some(0));
+    assert!(
+        o.stderr
+            .contains("8 blocks on 55 samples: use 3 or more blocks of 10 samples or more"),
+        "{}",
+        o.stderr
+    );
+    assert!(!o.stderr.contains(note), "{}", o.stderr);
+}
+
 #[test]
 fn predict_refuses_missing_sensors_and_unwritable_outputs() {
     let dir = tempfile::tempdir().unwrap();

@@ -230,9 +230,10 @@ fn scheduled_unplug_and_replug() {
     let mut p = env.open(Device::Psd);
     send(&mut *p, "CONF:RATE 100\n");
     send(&mut *p, "INIT:CONT ON\n");
-    env.sim().start_program();
-    // Reads end at the unplug (EOF or error), about 0.2 s in.
+    // Reads end at the unplug (EOF or error), about 0.2 s in (timed from before the start: a
+    // lower bound must not depend on when this thread runs again).
     let t = std::time::Instant::now();
+    env.sim().start_program();
     let mut buf = [0u8; 4096];
     loop {
         match p.read(&mut buf) {

@@ -338,7 +338,7 @@ pub fn print_analyses(log: &Path, out: &Path) {
             input: log.to_path_buf(),
             out: model,
             sensors: Vec::new(),
-            blocks: 8,
+            blocks: None,
             max_terms: 6,
         },
     ));

@@ -24,7 +24,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
          measured displacements",
         a.input.display()
     );
-    let d = thermal::diagnose(&ds, &thermal::DiagnoseOptions::default())
+    let mut opts = thermal::DiagnoseOptions::default();
+    opts.fit.blocks = super::blocks_for(ds.len(), None);
+    let d = thermal::diagnose(&ds, &opts)
         .with_context(|| format!("diagnosing {}", a.input.display()))?;
     let text = if a.json {
         let v = serde_json::to_value(&d)?;

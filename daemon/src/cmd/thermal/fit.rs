@@ -18,9 +18,10 @@ pub struct Args {
     /// Only these sensors may be used (comma-separated names without `_c`) [default: all].
     #[arg(long, value_delimiter = ',', value_name = "NAMES")]
     pub sensors: Vec<String>,
-    /// Contiguous time blocks held out in turn to judge each step.
-    #[arg(long, default_value_t = 8, value_name = "N")]
-    pub blocks: usize,
+    /// Contiguous time blocks held out in turn to judge each step [default: 8, fewer (at least
+    /// 3) for a test of under 80 samples].
+    #[arg(long, value_name = "N")]
+    pub blocks: Option<usize>,
     /// Most terms per channel.
     #[arg(long, default_value_t = 6, value_name = "N")]
     pub max_terms: usize,
@@ -43,7 +44,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     let opts = thermal::FitOptions {
-        blocks: a.blocks,
+        blocks: super::blocks_for(ds.len(), a.blocks),
         max_terms: a.max_terms,
         sensors: (!a.sensors.is_empty()).then(|| a.sensors.clone()),
         ..thermal::FitOptions::default()

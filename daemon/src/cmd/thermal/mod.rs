@@ -20,6 +20,23 @@ pub enum Command {
     Diagnose(diagnose::Args),
 }
 
+/// The held-out blocks for a test of `n` samples: `asked`, else the library's default (8), or
+/// for a shorter test as many blocks of 10 samples or more as it has (at least 3, below which
+/// the fit says what is needed), with a note on stderr saying so.
+pub fn blocks_for(n: usize, asked: Option<usize>) -> usize {
+    if let Some(b) = asked {
+        return b;
+    }
+    let default = thermal::FitOptions::default().blocks;
+    let fit = (n / 10).clamp(3, default);
+    if fit < default {
+        errln!(
+            "note: {n} samples: {fit} held-out time blocks instead of {default} (each needs 10 samples or more)"
+        );
+    }
+    fit
+}
+
 pub fn run(c: Command) -> anyhow::Result<()> {
     match c {
         Command::Fit(a) => fit::run(a),

@@ -59,8 +59,9 @@ fn term(model: &serde_json::Value, channel: &str, sensor: &str) -> Option<(f64, 
     ))
 }
 
-/// Runs the daemon binary through the thermal run; returns the log.
-fn run_daemon(dir: &Path) -> PathBuf {
+/// Runs the daemon binary through the thermal run; returns the log and the CapBall samples the
+/// simulator dropped because the host was not reading (its output buffer full).
+fn run_daemon(dir: &Path) -> (PathBuf, u64) {
     let scale = THERMAL_TIME_SCALE;
     let plan = plan_thermal(&ThermalPlanOptions {
         measure: [120.0, 80.0, 100.0, 0.0, 0.0],
@@ -124,16 +125,17 @@ fn run_daemon(dir: &Path) -> PathBuf {
             tokio::time::sleep(Duration::from_millis(50)).await;
         };
         assert!(status.success(), "metrolog run failed");
+        let overflow = sim.record().capball.faults.overflow;
         sim.shutdown().await;
         module.shutdown().await;
-        the_log(&logs)
+        (the_log(&logs), overflow)
     })
 }
 
 #[test]
 fn thermal_fit_recovers_the_simulated_machines_sensitivities_and_time_constant() {
     let dir = tempfile::tempdir().unwrap();
-    let log = run_daemon(dir.path());
+    let (log, overflow) = run_daemon(dir.path());
     let model_path = dir.path().join("model.json");
     let out = Command::new(env!("CARGO_BIN_EXE_metrolog"))
         .args(["thermal", "fit"])
@@ -152,7 +154,8 @@ fn thermal_fit_recovers_the_simulated_machines_sensitivities_and_time_constant()
     // compressed 480× (0.2 s of real time per dwell, the most a 3-min period leaves beside the
     // moves): with this test sharing 2 cores with three others, 4 and then 10 of the 81 visits
     // ended `never_steady` (cause not established; the simulator runs in this test's process
-    // and may fall behind its clock). The fit then holds out fewer blocks and says so. The
+    // and may fall behind its clock; or the daemon, starved, let the simulated CapBall's buffer
+    // overflow: the count below says). The fit then holds out fewer blocks and says so. The
     // spindle speed came from the module's channel.
     let visits: usize = text
         .split(" samples over ")
@@ -160,7 +163,13 @@ fn thermal_fit_recovers_the_simulated_machines_sensitivities_and_time_constant()
         .and_then(|h| h.rsplit('(').next())
         .and_then(|n| n.parse().ok())
         .unwrap_or(0);
-    assert!((65..=81).contains(&visits), "{visits} visits: {text}");
+    assert!(
+        (65..=81).contains(&visits),
+        "{visits} visits ({overflow} CapBall samples dropped by the simulator, buffer full): {text}"
+    );
+    if visits < 81 {
+        eprintln!("{visits} of 81 visits ok; {overflow} CapBall samples dropped (buffer full)");
+    }
     assert!(text.contains(", spindle speed"), "{text}");
     let model: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&model_path).unwrap()).unwrap();

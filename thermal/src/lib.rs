@@ -29,5 +29,7 @@ pub use diagnose::{
     ChannelDiagnosis, DiagnoseOptions, Finding, Rung, ThermalDiagnosis, describe, diagnose,
 };
 pub use error::ThermalError;
-pub use model::{ChannelModel, FitOptions, Input, Interval, MAX_SIZE, Term, ThermalModel, fit};
+pub use model::{
+    ChannelModel, FitOptions, Input, Interval, MAX_SIZE, MIN_BLOCK_SAMPLES, Term, ThermalModel, fit,
+};
 pub use predict::{ChannelPrediction, Prediction};

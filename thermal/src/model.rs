@@ -204,9 +204,12 @@ pub(crate) fn searcher<'a>(inputs: &'a Inputs, y: &'a [f64], opts: &FitOptions) 
     }
 }
 
+/// The fewest samples a held-out block may have.
+pub const MIN_BLOCK_SAMPLES: usize = 10;
+
 fn check_options(ds: &ThermalDataset, opts: &FitOptions) -> Result<(), ThermalError> {
     let bad = |what: String| Err(ThermalError::Parameter { what });
-    if opts.blocks < 3 || ds.len() < 10 * opts.blocks {
+    if opts.blocks < 3 || ds.len() < MIN_BLOCK_SAMPLES * opts.blocks {
         return bad(format!(
             "{} blocks on {} samples: use 3 or more blocks of 10 samples or more",
             opts.blocks,

@@ -28,7 +28,7 @@ pub fn blocks_for(n: usize, asked: Option<usize>) -> usize {
         return b;
     }
     let default = thermal::FitOptions::default().blocks;
-    let fit = (n / 10).clamp(3, default);
+    let fit = (n / thermal::MIN_BLOCK_SAMPLES).clamp(3, default);
     if fit < default {
         errln!(
             "note: {n} samples: {fit} held-out time blocks instead of {default} (each needs 10 samples or more)"

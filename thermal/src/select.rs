@@ -289,6 +289,40 @@ impl<'a> Search<'a> {
 }
 
 impl Search<'_> {
+    /// `sel` with its terms exchanged one at a time for the pool's best other term (its time
+    /// constant searched, then every term's), while an exchange lowers the held-out score, at
+    /// most `passes` times. A greedy path can keep a term that stands in for two: an ambient
+    /// lag in place of the column beside a housing lag whose τ it then pulls off.
+    pub(crate) fn exchange(&self, mut sel: Selection, pool: &Pool, passes: usize) -> Selection {
+        for _ in 0..passes {
+            let Some(better) = (0..sel.specs.len())
+                .filter_map(|idx| self.exchanged(&sel, idx, pool))
+                .min_by(|a, b| a.score.total().total_cmp(&b.score.total()))
+                .filter(|b| b.score.total() < sel.score.total())
+            else {
+                break;
+            };
+            sel = better;
+        }
+        sel
+    }
+
+    /// `sel` with term `idx` replaced by the pool's best other term, refitted.
+    fn exchanged(&self, sel: &Selection, idx: usize, pool: &Pool) -> Option<Selection> {
+        let others = without(&sel.specs, idx);
+        let cands: Vec<Spec> = self
+            .symmetric_candidates(&others, pool)
+            .into_iter()
+            .filter(|c| !others.contains(c) && c.src != sel.specs[idx].src)
+            .collect();
+        let (c, _) = best_of(self.scores_with(&others, &cands).into_iter())?;
+        let mut specs = others;
+        specs.push(c);
+        self.refitted(specs)
+    }
+}
+
+impl Search<'_> {
     /// `m` with its symmetric spindle term made asymmetric: heating and cooling time
     /// constants searched with the other terms fixed, then every term's searched again. The
     /// asymmetry is then judged on the same other terms, not on whatever a greedy path took
@@ -548,5 +582,75 @@ mod tests {
             m.specs
         );
         assert!(m.score.rms() < 0.05, "held-out RMS {}", m.score.rms());
+    }
+
+    /// A displacement that lags the housing by 50 min and follows the column, and a start
+    /// that holds an ambient lag in the column's place (a greedy path's stand-in): the
+    /// exchange puts the column in and the housing's τ back where it belongs.
+    #[test]
+    fn an_exchange_replaces_a_stand_in_term() {
+        let (dt, n, sub, tau_lag) = (60.0, 1200usize, 20, 3000.0);
+        let mut csv = String::from("time_s,x_um,housing_c,column_c,ambient_c\n");
+        let housing = |t: f64| 2.0 * (t / 9_000.0).sin() + 0.5 * (t / 2_000.0).cos();
+        // The lagged mass starts at rest with the housing, as the analysis' lag does.
+        let (mut lagged, mut column) = (housing(0.0), 0.0f64);
+        let ambient = |t: f64| (t / 15_000.0).sin() + 0.2 * (t / 1_500.0).sin();
+        for k in 0..n {
+            let t = k as f64 * dt;
+            let y = 3.0 * lagged + 2.0 * column + 0.002 * (((k * 7919) % 13) as f64 - 6.0);
+            csv += &format!(
+                "{t},{y},{},{},{}\n",
+                20.0 + housing(t),
+                20.0 + column,
+                20.0 + ambient(t)
+            );
+            for j in 0..sub {
+                let h = dt / sub as f64;
+                let tt = t + j as f64 * h;
+                lagged += (housing(tt) - lagged) * h / tau_lag;
+                column += (ambient(tt) + 0.3 * housing(tt) - column) * h / 7200.0;
+            }
+        }
+        let ds = ThermalDataset::from_csv(&csv).expect("reads");
+        let inputs = Inputs::new(&ds, &reference_temperatures(&ds));
+        let s = searcher(&inputs, &ds.displacements_um[0], &FitOptions::default());
+        let pool = Pool {
+            sensors: vec![0, 1, 2],
+            spindle_exponents: vec![],
+            asymmetric: false,
+            max_spindle_terms: 0,
+        };
+        let mut start = vec![
+            Spec::symmetric(Src::Sensor(0), 1200.0),
+            Spec::symmetric(Src::Sensor(2), 7200.0),
+        ];
+        let score = s.backfit(&mut start).expect("scores");
+        let start = Selection {
+            specs: start,
+            score,
+        };
+        let m = s.exchange(start.clone(), &pool, 3);
+        assert!(
+            m.score.rms() < 0.2 * start.score.rms() && m.score.rms() < 0.01,
+            "held-out RMS {} from {}: {:?}",
+            m.score.rms(),
+            start.score.rms(),
+            m.specs
+        );
+        let lag = m
+            .specs
+            .iter()
+            .find(|sp| sp.src == Src::Sensor(0))
+            .map(|sp| sp.tau_heat_s);
+        assert!(
+            lag.is_some_and(|t| (t / tau_lag - 1.0).abs() < 0.1),
+            "{:?}",
+            m.specs
+        );
+        assert!(
+            m.specs.iter().any(|sp| sp.src == Src::Sensor(1)),
+            "{:?}",
+            m.specs
+        );
     }
 }

@@ -12,6 +12,21 @@ pub(crate) fn short_term_noise(x: &[f64]) -> f64 {
     1.4826 * d[d.len() / 2] / std::f64::consts::SQRT_2
 }
 
+/// Short-term noise of a series that moves: robust standard deviation of its second
+/// differences / √6 (white noise σ gives second differences of variance 6σ²; a steady slope
+/// adds nothing, where it widens the first differences).
+pub(crate) fn short_term_noise_of_moving(x: &[f64]) -> f64 {
+    let mut d: Vec<f64> = x
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+        .collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    d.sort_by(f64::total_cmp);
+    1.4826 * d[d.len() / 2] / 6f64.sqrt()
+}
+
 /// Jumps: differences beyond `k` robust scales of the differences that also stand out
 /// `k/2` times from the typical difference around them (not a steep but smooth change).
 pub(crate) fn jumps(x: &[f64], k: f64) -> usize {
@@ -59,6 +74,31 @@ pub(crate) fn vifs(series: &[&[f64]]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    /// Gaussian noise of σ 0.1 on a curve that rises 0.15 a step (a displacement heating,
+    /// as in the generator's fast runs), then bends over: the first differences' estimate
+    /// widens with the slope, the second differences' stays at σ.
+    #[test]
+    fn the_noise_of_a_moving_series_ignores_its_slope() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let n = Normal::new(0.0, 0.1).expect("a normal");
+        let x: Vec<f64> = (0..4000)
+            .map(|i| 0.15 * (i.min(2000) as f64) + 30.0 * (1.0 - (-(i as f64) / 200.0).exp()))
+            .map(|v| v + n.sample(&mut rng))
+            .collect();
+        let second = short_term_noise_of_moving(&x);
+        assert!(
+            (second / 0.1 - 1.0).abs() < 0.05,
+            "second differences: {second}"
+        );
+        let flat: Vec<f64> = (0..4000).map(|_| n.sample(&mut rng)).collect();
+        let ratio = short_term_noise_of_moving(&flat) / short_term_noise(&flat);
+        assert!((ratio - 1.0).abs() < 0.05, "on a flat series: {ratio}");
+        let first = short_term_noise(&x);
+        assert!(first > 1.3 * 0.1, "first differences: {first}");
+    }
 
     #[test]
     fn jumps_are_found_and_ramps_are_not() {

@@ -870,9 +870,12 @@ fn effect_findings(
     let Some(m) = chosen_model(fam, noise, o) else {
         return out;
     };
+    // A lag is named on the evidence it reports: the chosen model may hold one that gained
+    // against the model without it, but not against the best model without a lag.
     if has_lag(&m)
         && let Some((i, tau_s)) = largest_lag(s, &m)
         && let Some(gain) = lag_gain(fam, &m, o)
+        && gain.significant
     {
         out.push(Finding::Lag {
             sensor: ds.sensor_names[i].clone(),

@@ -50,6 +50,11 @@ pub struct DiagnoseOptions {
     /// → 100, lag+unseen 85 → 86; with this rule 15 of the 600 runs without a lag name an
     /// effect not there, 12 counted at t ≥ 3 from one run with t free; docs/methods.md).
     pub lag_beside_heat_min_t: f64,
+    /// Least t of spindle heat preferred to the sensors' lags when the two predict alike (2,
+    /// as the asymmetry's: an asymmetric heat source gains in the few blocks with a speed
+    /// change, and at t ≥ 3 asymmetry runs named a lag alone; calibration seeds, 100
+    /// asymmetry runs: 3 → 0 with a false finding, lag runs 0 → 0; docs/methods.md).
+    pub spindle_over_lag_min_t: f64,
 }
 
 impl Default for DiagnoseOptions {
@@ -65,6 +70,7 @@ impl Default for DiagnoseOptions {
             min_effect_noise_ratio: 0.5,
             asymmetry_min_t: 2.0,
             lag_beside_heat_min_t: 2.0,
+            spindle_over_lag_min_t: 2.0,
         }
     }
 }
@@ -806,11 +812,13 @@ fn chosen_model(fam: &Families, noise: f64, o: &DiagnoseOptions) -> Option<Selec
     let lag_only = best_by_score(fam.members.iter(), |m| has_lag(m) && !has_spindle(m));
     let spindle_only = best_by_score(fam.members.iter(), |m| has_spindle(m) && !has_lag(m));
     // A heat source no sensor sees is the stronger claim: it is preferred to the sensors'
-    // lags only when it predicts significantly better than they do.
+    // lags only when it predicts significantly better than they do (at t ≥
+    // `spindle_over_lag_min_t`).
     let single = match (lag_only, spindle_only) {
         (Some(l), Some(sp)) => {
-            let g = HeldOutGain::between(&l.score, &sp.score, &o.finding_rule);
-            Some(if passes(&g, noise, o) { sp } else { l })
+            let over_lags = with_min_t(o, o.spindle_over_lag_min_t);
+            let g = HeldOutGain::between(&l.score, &sp.score, &over_lags.finding_rule);
+            Some(if passes(&g, noise, &over_lags) { sp } else { l })
         }
         (l, sp) => l.or(sp),
     };

@@ -47,6 +47,16 @@ fn sweep(runs: usize, seed0: u64) -> Vec<Row> {
     rows
 }
 
+/// The numbers a calibration aid's variable holds ("runs seed0 ..."), if set.
+fn env_numbers(var: &str) -> Option<Vec<u64>> {
+    let spec = std::env::var(var).ok()?;
+    Some(
+        spec.split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect(),
+    )
+}
+
 /// The class indices THERMAL_CLASSES names, if set (calibration aids only).
 fn only_classes() -> Option<Vec<usize>> {
     std::env::var("THERMAL_CLASSES")
@@ -158,13 +168,9 @@ fn hidden_effects_are_named_sweep() {
 #[test]
 #[ignore = "a calibration aid: THERMAL_SWEEP='40 500000' cargo test ... sweep_on_seeds -- --ignored --nocapture"]
 fn sweep_on_seeds() {
-    let Ok(spec) = std::env::var("THERMAL_SWEEP") else {
+    let Some(v) = env_numbers("THERMAL_SWEEP") else {
         return;
     };
-    let v: Vec<u64> = spec
-        .split_whitespace()
-        .map(|v| v.parse().unwrap())
-        .collect();
     print_table(&sweep(v[0] as usize, v[1]));
 }
 
@@ -190,13 +196,9 @@ fn show_one_run() {
 #[test]
 #[ignore = "a calibration aid: THERMAL_DUMP='20 500000 [1]' cargo test ... dump_candidates -- --ignored --nocapture"]
 fn dump_candidates() {
-    let Ok(spec) = std::env::var("THERMAL_DUMP") else {
+    let Some(v) = env_numbers("THERMAL_DUMP") else {
         return;
     };
-    let v: Vec<u64> = spec
-        .split_whitespace()
-        .map(|v| v.parse().unwrap())
-        .collect();
     let (runs, seed0) = (v[0], v[1]);
     let mut opts = DiagnoseOptions::default();
     if v.get(2) != Some(&1) {

@@ -255,6 +255,22 @@ impl<'a> Search<'a> {
         Some(score)
     }
 
+    /// [`Search::backfit`] repeated, at most `passes` times, until a pass lowers the held-out
+    /// score by less than a millionth: one pass is one step of a coordinate descent, short of
+    /// the least in a narrow valley where two time constants trade off.
+    pub(crate) fn backfit_settled(&self, specs: &mut [Spec], passes: usize) -> Option<CvScore> {
+        let mut score = self.backfit(specs)?;
+        for _ in 1..passes {
+            let next = self.backfit(specs)?;
+            let settled = next.total() >= score.total() * (1.0 - 1e-6);
+            score = next;
+            if settled {
+                break;
+            }
+        }
+        Some(score)
+    }
+
     /// Forward selection from `start`, each step kept when it gains on held-out blocks.
     pub(crate) fn forward(
         &self,
@@ -442,15 +458,26 @@ impl Search<'_> {
             .filter_map(|&tau_lag| {
                 let mut specs = base.to_vec();
                 specs[idx] = Spec::symmetric(Src::Sensor(i), tau_lag);
-                let (sp, sc) = best_of(self.scores_with(&specs, spindle).into_iter())?;
+                // The spindle term's τ searched between its grid neighbours for each lag: the
+                // valley is narrow, and a grid τ 20-30 % off made a wrong lag look best.
+                let best = best_of(self.scores_with(&specs, spindle).into_iter())?;
+                let (sp, sc) = self.golden(&specs, best, true);
                 specs.push(sp);
                 Some((specs, sc))
             })
             .min_by(|a, b| a.1.total().total_cmp(&b.1.total()))?;
-        let score = self.backfit(&mut specs)?;
+        let score = self.backfit_settled(&mut specs, JOINT_BACKFIT_PASSES)?;
         Some(Selection { specs, score })
     }
 }
+
+/// Most backfit passes of the joint lag-and-spindle search. A sensor's lag and the spindle
+/// term's time constant trade off along a narrow valley (the mass heated through the
+/// housing reads as the housing plus a heat source of about its τ): after one pass the lag
+/// was left 20-30 % off and the model judged worse than spindle heat alone, which hid the
+/// lag and chose the wrong timing of the speed readings (reporting seeds, lag+unseen 93 → 95
+/// of 100; docs/methods.md, twenty-eighth round).
+const JOINT_BACKFIT_PASSES: usize = 4;
 
 fn without(specs: &[Spec], idx: usize) -> Vec<Spec> {
     specs
@@ -582,6 +609,82 @@ mod tests {
             m.specs
         );
         assert!(m.score.rms() < 0.05, "held-out RMS {}", m.score.rms());
+    }
+
+    /// As the generator's lag+unseen runs: a mass heated only through the housing (its lag
+    /// off the grid, 43 min), the housing heated by the motor, and a heat source no sensor
+    /// reads (speed² through 23 min, off the grid too). The two time constants trade off
+    /// along a narrow valley: with the spindle τ only on the grid at each trial lag, the
+    /// search settled on the housing lagged 79 min and the column 28 min, at 12× the held-out
+    /// RMS of the model it finds now (lag 44.9 min, spindle 22.9 min, within the 5 % asked;
+    /// the generator's Euler steps and the analysis' exact steps differ that much).
+    #[test]
+    fn the_joint_search_settles_two_time_constants_that_trade_off() {
+        let (dt, n, sub) = (60.0, 1200usize, 20);
+        let (tau_lag, tau_sp, tau_h) = (2600.0, 1380.0, 7200.0);
+        let mut csv = String::from("time_s,spindle_rpm,x_um,housing_c,column_c\n");
+        let (mut housing, mut lagged, mut heat) = (0.0f64, 0.0f64, 0.0f64);
+        let column = |t: f64| 0.8 * (t / 15_000.0).sin();
+        for k in 0..n {
+            let t = k as f64 * dt;
+            let krpm = [0.0, 4.0, 0.0, 6.0, 2.0, 0.0, 5.0, 0.0][(k / 150) % 8];
+            let noise = 0.002 * (((k * 7919) % 13) as f64 - 6.0);
+            let y = -3.0 * lagged + 3.0 * column(t) + 2.0 * heat + noise;
+            csv += &format!(
+                "{t},{},{y},{},{}\n",
+                krpm * 1000.0,
+                20.0 + housing,
+                20.0 + column(t)
+            );
+            for j in 0..sub {
+                let h = dt / sub as f64;
+                let tt = t + j as f64 * h;
+                let drive = 0.1 * krpm * krpm + 0.5 * column(tt);
+                housing += (drive - housing) * h / tau_h;
+                lagged += (housing - lagged) * h / tau_lag;
+                heat += (krpm * krpm - heat) * h / tau_sp;
+            }
+        }
+        let ds = ThermalDataset::from_csv(&csv).expect("reads");
+        let inputs = Inputs::new(&ds, &reference_temperatures(&ds)).with_spindle_hold(1.0);
+        let s = searcher(&inputs, &ds.displacements_um[0], &FitOptions::default());
+        let pool = Pool {
+            sensors: vec![0, 1],
+            spindle_exponents: vec![2],
+            asymmetric: false,
+            max_spindle_terms: 1,
+        };
+        let base = [
+            Spec::symmetric(Src::Sensor(0), 0.0),
+            Spec::symmetric(Src::Sensor(1), 0.0),
+        ];
+        let found = s.lag_beside_spindle(&base, &pool);
+        let m = found
+            .iter()
+            .find(|m| {
+                m.specs
+                    .iter()
+                    .any(|sp| sp.src == Src::Sensor(0) && sp.tau_heat_s > 0.0)
+            })
+            .expect("the housing lagged");
+        let tau_of = |src: Src| {
+            m.specs
+                .iter()
+                .find(|sp| sp.src == src)
+                .map(|sp| sp.tau_heat_s)
+        };
+        let (lag, sp) = (tau_of(Src::Sensor(0)), tau_of(Src::Spindle(2)));
+        assert!(
+            lag.is_some_and(|t| (t / tau_lag - 1.0).abs() < 0.05),
+            "lag τ {lag:?}: {:?}",
+            m.specs
+        );
+        assert!(
+            sp.is_some_and(|t| (t / tau_sp - 1.0).abs() < 0.05),
+            "spindle τ {sp:?}: {:?}",
+            m.specs
+        );
+        assert!(m.score.rms() < 0.02, "held-out RMS {}", m.score.rms());
     }
 
     /// A displacement that lags the housing by 50 min and follows the column, and a start

@@ -36,6 +36,8 @@ fn sweep(runs: usize, seed0: u64) -> Vec<Row> {
             let kinds: Vec<&str> = d.channels[0].findings.iter().map(|f| f.kind()).collect();
             if expect.iter().all(|k| kinds.contains(k)) {
                 row.detected += 1;
+            } else {
+                eprintln!("{} seed {seed} missed: {kinds:?}", row.class);
             }
             if kinds.iter().any(|k| !expect.contains(k)) {
                 row.false_runs += 1;

@@ -473,10 +473,12 @@ impl Search<'_> {
 
 /// Most backfit passes of the joint lag-and-spindle search. A sensor's lag and the spindle
 /// term's time constant trade off along a narrow valley (the mass heated through the
-/// housing reads as the housing plus a heat source of about its τ): after one pass the lag
-/// was left 20-30 % off and the model judged worse than spindle heat alone, which hid the
-/// lag and chose the wrong timing of the speed readings (reporting seeds, lag+unseen 93 → 95
-/// of 100; docs/methods.md, twenty-eighth round).
+/// housing reads as the housing plus a heat source of about its τ): one pass left the lag
+/// 20-30 % off, the model judged worse than spindle heat alone, which hid the lag and chose
+/// the wrong timing of the speed readings. Repeating it alone took the reporting seeds'
+/// lag+unseen from 93 to 95 of 100; with the spindle τ searched at each trial lag, 96 with or
+/// without it (docs/methods.md, twenty-eighth round). It stops after one pass when nothing
+/// moves.
 const JOINT_BACKFIT_PASSES: usize = 4;
 
 fn without(specs: &[Spec], idx: usize) -> Vec<Spec> {

@@ -114,7 +114,7 @@ fn hidden_effects_are_named_fast() {
     check(&rows, 5.0 / 6.0, 0.05);
 }
 
-/// The default (CI) guard, ~15-50 s: the same 6 runs per class, held to what the code
+/// The default (CI) guard, ~80-140 s on a loaded 2-core machine: the same 6 runs per class, held to what the code
 /// reaches now (not the targets; docs/methods.md): each class named in at least as many runs
 /// as now, and no more runs naming an effect not there than now (none of the 90).
 #[test]

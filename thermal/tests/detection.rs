@@ -61,9 +61,7 @@ fn env_numbers(var: &str) -> Option<Vec<u64>> {
 
 /// The class indices THERMAL_CLASSES names, if set (calibration aids only).
 fn only_classes() -> Option<Vec<usize>> {
-    std::env::var("THERMAL_CLASSES")
-        .ok()
-        .map(|v| v.split_whitespace().map(|c| c.parse().unwrap()).collect())
+    env_numbers("THERMAL_CLASSES").map(|v| v.into_iter().map(|c| c as usize).collect())
 }
 
 fn print_table(rows: &[Row]) {
@@ -114,9 +112,10 @@ fn hidden_effects_are_named_fast() {
     check(&rows, 5.0 / 6.0, 0.05);
 }
 
-/// The default (CI) guard, ~80-140 s on a loaded 2-core machine: the same 6 runs per class, held to what the code
-/// reaches now (not the targets; docs/methods.md): each class named in at least as many runs
-/// as now, and no more runs naming an effect not there than now (none of the 90).
+/// The default (CI) guard, ~80-140 s on a loaded 2-core machine: the same 6 runs per class,
+/// held to what the code reaches now (not the targets; docs/methods.md): each class named in
+/// at least as many runs as now, and no more runs naming an effect not there than now (none
+/// of the 90).
 #[test]
 fn fast_sweep_holds_its_current_level() {
     // (class, least runs of 6 with every effect named, most runs naming one not there)
@@ -180,11 +179,10 @@ fn sweep_on_seeds() {
 #[test]
 #[ignore = "a debugging aid: THERMAL_RUN='2 2002' cargo test ... show_one_run -- --ignored --nocapture"]
 fn show_one_run() {
-    let Ok(spec) = std::env::var("THERMAL_RUN") else {
+    let Some(v) = env_numbers("THERMAL_RUN") else {
         return;
     };
-    let mut it = spec.split_whitespace().map(|v| v.parse::<u64>().unwrap());
-    let (ci, seed) = (it.next().unwrap() as usize, it.next().unwrap());
+    let (ci, seed) = (v[0] as usize, v[1]);
     let run = generate(CLASSES[ci], seed, 20.0, 60.0);
     let ds = ThermalDataset::from_csv(&run.csv).unwrap();
     let d = diagnose(&ds, &DiagnoseOptions::default()).unwrap();

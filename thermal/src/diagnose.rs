@@ -9,9 +9,10 @@ use crate::dataset::ThermalDataset;
 use crate::error::ThermalError;
 use crate::inputs::{Inputs, Spec, Src};
 use crate::model::{FitOptions, pool, reference_temperatures, searcher};
-use crate::select::{Pool, Search, Selection};
+use crate::select::{Pool, ScoreMemo, Search, Selection};
 use crate::sensors::{jumps, short_term_noise, short_term_noise_of_moving, vifs};
 use serde::{Deserialize, Serialize};
+use std::rc::Rc;
 
 /// Thresholds of the diagnosis.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -218,7 +219,7 @@ pub fn diagnose(
         max_spindle_terms: 1,
         ..pool(ds, &o.fit)?
     };
-    let inputs = with_best_hold(ds, &refs, &base_pool, o);
+    let (inputs, memos) = with_best_hold(ds, &refs, &base_pool, o);
     let mut sensor_notes = screen.notes.clone();
     if inputs.spindle_hold() != 0.5 {
         sensor_notes.push(format!(
@@ -227,9 +228,13 @@ pub fn diagnose(
             1.0 - inputs.spindle_hold()
         ));
     }
+    let mut memos = memos.into_iter();
     let mut channels = vec![];
     for (c, y) in ds.displacements_um.iter().enumerate() {
-        let search = searcher(&inputs, y, &o.fit);
+        let mut search = searcher(&inputs, y, &o.fit);
+        if let Some(m) = memos.next() {
+            search.memo = m;
+        }
         channels.push(diagnose_channel(ds, &search, &base_pool, &screen, o, c)?);
     }
     Ok(ThermalDiagnosis {
@@ -242,15 +247,16 @@ pub fn diagnose(
 /// change halfway between readings (0.5), or a reading that holds until the next (1) or
 /// that holds since the one before (0). The one kept is the one whose simple spindle models
 /// (one lagged spindle term beside the sensors, see [`hold_score`]) predict the held-out
-/// blocks of every channel best.
+/// blocks of every channel best. Returned with the scores its searches computed, one memo
+/// per channel, for the diagnosis to read back.
 fn with_best_hold(
     ds: &ThermalDataset,
     refs: &[f64],
     base_pool: &Pool,
     o: &DiagnoseOptions,
-) -> Inputs {
+) -> (Inputs, Vec<Rc<ScoreMemo>>) {
     if ds.spindle_rpm.is_none() || base_pool.spindle_exponents.is_empty() {
-        return Inputs::new(ds, refs);
+        return (Inputs::new(ds, refs), vec![]);
     }
     let simple = Pool {
         asymmetric: false,
@@ -261,20 +267,25 @@ fn with_best_hold(
         .iter()
         .map(|&i| Spec::symmetric(Src::Sensor(i), 0.0))
         .collect();
-    let score = |inputs: &Inputs| -> f64 {
-        ds.displacements_um
-            .iter()
-            .map(|y| hold_score(&searcher(inputs, y, &o.fit), &all, &simple, o))
-            .sum()
+    let scored = |inputs: Inputs| {
+        let mut memos = vec![];
+        let mut total = 0.0;
+        for y in &ds.displacements_um {
+            let s = searcher(&inputs, y, &o.fit);
+            total += hold_score(&s, &all, &simple, o);
+            memos.push(Rc::clone(&s.memo));
+        }
+        (total, inputs, memos)
     };
-    [0.5, 1.0, 0.0]
-        .into_iter()
-        .map(|w| {
-            let inputs = Inputs::new(ds, refs).with_spindle_hold(w);
-            (score(&inputs), inputs)
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map_or_else(|| Inputs::new(ds, refs), |(_, i)| i)
+    // One timing's memos kept at a time beside the best so far.
+    let mut best = scored(Inputs::new(ds, refs).with_spindle_hold(0.5));
+    for w in [1.0, 0.0] {
+        let next = scored(Inputs::new(ds, refs).with_spindle_hold(w));
+        if next.0.total_cmp(&best.0).is_lt() {
+            best = next;
+        }
+    }
+    (best.1, best.2)
 }
 
 /// The held-out score by which a speed timing is judged on one channel: the best of all
@@ -401,6 +412,7 @@ fn clone_search<'a>(s: &Search<'a>) -> Search<'a> {
         grid: s.grid.clone(),
         rule: s.rule,
         sensor_lags: s.sensor_lags,
+        memo: Rc::clone(&s.memo),
     }
 }
 

@@ -2,8 +2,9 @@
 
 use crate::dataset::ThermalDataset;
 use crate::filter::{lag_held, zero_phase};
+use rustc_hash::FxHashMap as HashMap;
 use std::cell::RefCell;
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
 use std::rc::Rc;
 
 /// Where a term's input comes from.
@@ -40,7 +41,7 @@ impl Spec {
         self.tau_heat_s != self.tau_cool_s
     }
 
-    fn key(&self) -> Key {
+    pub(crate) fn key(&self) -> Key {
         (
             self.src,
             self.tau_heat_s.to_bits(),
@@ -50,7 +51,8 @@ impl Spec {
 }
 
 /// A column's cache key: its input and its two time constants' bits.
-type Key = (Src, u64, u64);
+/// A term as a hash key: its input and its time constants' bits.
+pub(crate) type Key = (Src, u64, u64);
 
 /// The raw inputs of one dataset and the lagged columns computed from them (cached).
 pub(crate) struct Inputs {

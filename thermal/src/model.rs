@@ -201,6 +201,7 @@ pub(crate) fn searcher<'a>(inputs: &'a Inputs, y: &'a [f64], opts: &FitOptions) 
         grid: tau_grid(&inputs.time_s),
         rule: opts.rule,
         sensor_lags: opts.sensor_lags,
+        memo: Default::default(),
     }
 }
 

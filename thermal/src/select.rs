@@ -1,7 +1,9 @@
 //! Forward selection of lagged inputs judged on held-out time blocks.
 
 use crate::cv::{BlockStats, Blocks, CvScore, GainRule, HeldOutGain};
-use crate::inputs::{Inputs, Spec, Src};
+use crate::inputs::{Inputs, Key, Spec, Src};
+use rustc_hash::FxHashMap as HashMap;
+use std::cell::{Cell, RefCell};
 use std::rc::Rc;
 
 /// Which terms a selection may use.
@@ -23,6 +25,63 @@ pub(crate) struct Search<'a> {
     pub(crate) rule: GainRule,
     /// Whether sensor terms may have a lag (their τ is searched).
     pub(crate) sensor_lags: bool,
+    /// Scores already computed for these inputs, displacement and blocks; shared by every
+    /// search of the channel (the diagnosis' many greedy paths try the same models again).
+    pub(crate) memo: Rc<ScoreMemo>,
+}
+
+/// Held-out scores of models already scored, keyed by their terms in order (the order of
+/// the sums, so a score read back is the one computed, bit for bit). At most
+/// [`MEMO_MAX_ENTRIES`]; past that, scores are computed and not kept.
+#[derive(Default)]
+pub(crate) struct ScoreMemo {
+    map: RefCell<HashMap<Vec<Key>, CvScore>>,
+    hits: Cell<u64>,
+    misses: Cell<u64>,
+}
+
+/// Bounds a channel's memo to some tens of MB (a key of a few terms and a score of a few
+/// blocks: about 300 bytes an entry).
+const MEMO_MAX_ENTRIES: usize = 100_000;
+
+impl ScoreMemo {
+    fn key(base: &[Spec], cand: &Spec) -> Vec<Key> {
+        base.iter()
+            .chain(std::iter::once(cand))
+            .map(Spec::key)
+            .collect()
+    }
+
+    fn get(&self, key: &[Key]) -> Option<CvScore> {
+        let found = self.map.borrow().get(key).cloned();
+        let counter = if found.is_some() {
+            &self.hits
+        } else {
+            &self.misses
+        };
+        counter.set(counter.get() + 1);
+        found
+    }
+
+    fn put(&self, key: Vec<Key>, score: &CvScore) {
+        let mut map = self.map.borrow_mut();
+        if map.len() < MEMO_MAX_ENTRIES {
+            map.insert(key, score.clone());
+        }
+    }
+}
+
+impl Drop for ScoreMemo {
+    fn drop(&mut self) {
+        if std::env::var_os("THERMAL_MEMO_STATS").is_some() {
+            eprintln!(
+                "memo: {} hits, {} misses, {} kept",
+                self.hits.get(),
+                self.misses.get(),
+                self.map.borrow().len()
+            );
+        }
+    }
 }
 
 /// A selected model: its terms, held-out score and the gain of each step.
@@ -54,22 +113,33 @@ impl<'a> Search<'a> {
         self.stats(specs)?.score()
     }
 
-    /// Scores of `base` plus each of `cands` in turn.
+    /// Scores of `base` plus each of `cands` in turn (those that can be scored, in order).
     fn scores_with(&self, base: &[Spec], cands: &[Spec]) -> Vec<(Spec, CvScore)> {
+        let mut out: Vec<(Spec, Option<CvScore>)> = cands
+            .iter()
+            .map(|c| (*c, self.memo.get(&ScoreMemo::key(base, c))))
+            .collect();
+        if out.iter().any(|(_, s)| s.is_none()) {
+            self.score_missing(base, &mut out);
+        }
+        out.into_iter().filter_map(|(c, s)| Some((c, s?))).collect()
+    }
+
+    /// The scores `out` lacks, computed from one fit of `base`'s statistics and kept.
+    fn score_missing(&self, base: &[Spec], out: &mut [(Spec, Option<CvScore>)]) {
         let (Some(stats), Some(cols)) = (self.stats(base), self.columns(base)) else {
-            return vec![];
+            return;
         };
         let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-        cands
-            .iter()
-            .filter_map(|c| {
-                let col = self.inputs.column(c)?;
-                let s = stats
-                    .with_column(&refs, &col, self.y, &self.blocks)
-                    .score()?;
-                Some((*c, s))
-            })
-            .collect()
+        for (c, slot) in out.iter_mut().filter(|(_, s)| s.is_none()) {
+            let Some(col) = self.inputs.column(c) else {
+                continue;
+            };
+            *slot = stats.with_column(&refs, &col, self.y, &self.blocks).score();
+            if let Some(s) = slot {
+                self.memo.put(ScoreMemo::key(base, c), s);
+            }
+        }
     }
 
     fn symmetric_candidates(&self, sel: &[Spec], pool: &Pool) -> Vec<Spec> {
@@ -220,23 +290,34 @@ impl<'a> Search<'a> {
             }
         };
         let eval = |x: f64| self.scores_with(others, &[make(x.exp())]).pop();
-        let (mut a, mut b) = (lo.ln(), hi.ln());
         let r = 0.618_033_988_749_895;
+        let (mut a, mut b) = (lo.ln(), hi.ln());
+        let (mut x1, mut x2) = (b - r * (b - a), a + r * (b - a));
+        let (Some(mut f1), Some(mut f2)) = (eval(x1), eval(x2)) else {
+            return best;
+        };
         let mut out = best;
-        for _ in 0..10 {
-            let (x1, x2) = (b - r * (b - a), a + r * (b - a));
-            let (Some(f1), Some(f2)) = (eval(x1), eval(x2)) else {
-                break;
-            };
-            let better = if f1.1.total() < f2.1.total() {
-                b = x2;
-                f1
-            } else {
-                a = x1;
-                f2
-            };
+        // Ten brackets compared, nine shrinks, one new point each: the inner point kept is
+        // already scored (r² = 1 − r).
+        for step in 0..10 {
+            let f1_lower = f1.1.total() < f2.1.total();
+            let better = if f1_lower { &f1 } else { &f2 };
             if better.1.total() < out.1.total() {
-                out = better;
+                out = better.clone();
+            }
+            if step == 9 {
+                break;
+            }
+            if f1_lower {
+                (b, x2, f2) = (x2, x1, f1);
+                x1 = b - r * (b - a);
+                let Some(f) = eval(x1) else { break };
+                f1 = f;
+            } else {
+                (a, x1, f1) = (x1, x2, f2);
+                x2 = a + r * (b - a);
+                let Some(f) = eval(x2) else { break };
+                f2 = f;
             }
         }
         out
@@ -611,6 +692,45 @@ mod tests {
             m.specs
         );
         assert!(m.score.rms() < 0.05, "held-out RMS {}", m.score.rms());
+    }
+
+    /// The golden-section search scores two points, then one new point per shrink of its
+    /// bracket (eleven models in all; it scored two per shrink before, twenty), and finds a
+    /// lag off the grid; a
+    /// model scored again is read from the memo, the same score bit for bit.
+    #[test]
+    fn the_golden_search_scores_one_new_point_per_shrink_and_the_memo_reads_back() {
+        let tau: f64 = 1900.0;
+        let mut csv = String::from("time_s,x_um,housing_c\n");
+        let mut lagged = 0.0f64;
+        for k in 0..800 {
+            let t = k as f64 * 60.0;
+            let housing = (t / 9_000.0).sin() + 0.4 * (t / 2_500.0).sin();
+            csv += &format!("{t},{},{}\n", 2.0 * lagged, 20.0 + housing);
+            lagged += (housing - lagged) * (1.0 - (-60.0 / tau).exp());
+        }
+        let ds = ThermalDataset::from_csv(&csv).expect("reads");
+        let inputs = Inputs::new(&ds, &reference_temperatures(&ds));
+        let s = searcher(&inputs, &ds.displacements_um[0], &FitOptions::default());
+        let start = Spec::symmetric(Src::Sensor(0), 1800.0);
+        let first = s.scores_with(&[], &[start]).pop().expect("scored");
+        let misses = s.memo.misses.get();
+        let (found, score) = s.golden(&[], first.clone(), true);
+        assert_eq!(
+            s.memo.misses.get() - misses,
+            11,
+            "models scored by the search"
+        );
+        assert!(
+            (found.tau_heat_s / tau - 1.0).abs() < 0.05,
+            "τ {}",
+            found.tau_heat_s
+        );
+        assert!(score.total() < first.1.total());
+        let hits = s.memo.hits.get();
+        let again = s.scores_with(&[], &[start]).pop().expect("scored");
+        assert_eq!(s.memo.hits.get(), hits + 1);
+        assert_eq!(again.1, first.1);
     }
 
     /// As the generator's lag+unseen runs: a mass heated only through the housing (its lag

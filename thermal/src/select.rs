@@ -71,19 +71,6 @@ impl ScoreMemo {
     }
 }
 
-impl Drop for ScoreMemo {
-    fn drop(&mut self) {
-        if std::env::var_os("THERMAL_MEMO_STATS").is_some() {
-            eprintln!(
-                "memo: {} hits, {} misses, {} kept",
-                self.hits.get(),
-                self.misses.get(),
-                self.map.borrow().len()
-            );
-        }
-    }
-}
-
 /// A selected model: its terms, held-out score and the gain of each step.
 #[derive(Debug, Clone)]
 pub(crate) struct Selection {

@@ -296,11 +296,7 @@ fn with_best_hold(
 /// holds to the next reading), and the timing error hid the lag.
 fn hold_score(s: &Search, all: &[Spec], simple: &Pool, o: &DiagnoseOptions) -> f64 {
     let terms = o.fit.max_terms + all.len();
-    let static_sensors = Search {
-        sensor_lags: false,
-        ..clone_search(s)
-    }
-    .forward(all.to_vec(), simple, terms);
+    let static_sensors = s.without_lags().forward(all.to_vec(), simple, terms);
     let joint = if all.len() <= JOINT_FROM_ALL_MAX_SENSORS {
         s.lag_beside_spindle(all, simple)
     } else {
@@ -345,10 +341,7 @@ fn diagnose_channel(
         asymmetric: false,
         ..pool.clone()
     };
-    let static_search = Search {
-        sensor_lags: false,
-        ..clone_search(s)
-    };
+    let static_search = s.without_lags();
     let s1 = static_search
         .forward(vec![], &static_pool, o.fit.max_terms)
         .ok_or_else(err)?;
@@ -402,18 +395,6 @@ fn diagnose_channel(
         unexplained,
         notes,
     })
-}
-
-fn clone_search<'a>(s: &Search<'a>) -> Search<'a> {
-    Search {
-        inputs: s.inputs,
-        y: s.y,
-        blocks: s.blocks.clone(),
-        grid: s.grid.clone(),
-        rule: s.rule,
-        sensor_lags: s.sensor_lags,
-        memo: Rc::clone(&s.memo),
-    }
 }
 
 /// A flagged sensor the static fit does not need, or kept for the extended model to decide.
@@ -648,10 +629,7 @@ fn families(
     // where the generator's lag reaches the noise, and named a heat source in lag runs
     // (calibration seeds 501 000+: 2 of 40 → 0 with the exchange; docs/methods.md).
     let no_spindle = s.exchange(no_spindle, &no_spindle_pool, EXCHANGE_PASSES);
-    let no_lags = Search {
-        sensor_lags: false,
-        ..clone_search(s)
-    };
+    let no_lags = s.without_lags();
     let symmetric = Pool {
         asymmetric: false,
         ..pool.clone()

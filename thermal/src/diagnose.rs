@@ -928,9 +928,7 @@ fn lag_gain(fam: &Families, m: &Selection, o: &DiagnoseOptions) -> Option<HeldOu
 }
 
 fn coefficient_of(s: &Search, specs: &[Spec], idx: usize) -> Option<f64> {
-    let cols = s.columns(specs)?;
-    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    Some(BlockStats::new(&refs, s.y, &s.blocks).coefficients(None)?[idx + 1])
+    s.coefficients(specs)?.get(idx).copied()
 }
 
 impl ThermalDiagnosis {

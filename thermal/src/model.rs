@@ -174,7 +174,7 @@ pub fn fit(ds: &ThermalDataset, opts: &FitOptions) -> Result<ThermalModel, Therm
     for (c, st) in stat.channels.iter().enumerate() {
         let search = searcher(&inputs, &ds.displacements_um[c], opts);
         let sel = search
-            .select_for_fit(&pool, opts.max_terms)
+            .select(&pool, opts.max_terms)
             .ok_or_else(|| ThermalError::NonFinite {
                 what: format!("selection for `{}`", st.channel),
             })?;

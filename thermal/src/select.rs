@@ -618,45 +618,6 @@ impl<'a> Search<'a> {
 }
 
 impl Search<'_> {
-    /// [`Search::select`], and one more path for the fit: the sensors a static forward
-    /// selection keeps, then the whole pool with lags from there, then exchanges. The better
-    /// of the two predicting forward in time. A greedy path from nothing can take one sensor's
-    /// lag at a τ where it stands in for a second sensor's share too; every term of the
-    /// second sensor is then scored beside that τ and none gains enough (the demo's thermal
-    /// segment: the head lagged 28 min alone, where the column lags head and air by 38 min).
-    pub(crate) fn select_for_fit(&self, pool: &Pool, max_terms: usize) -> Option<Selection> {
-        let sensors_only = Pool {
-            spindle_exponents: vec![],
-            asymmetric: false,
-            ..pool.clone()
-        };
-        let from_static = self
-            .without_lags()
-            .forward(vec![], &sensors_only, max_terms)
-            .and_then(|s| {
-                let chosen = Pool {
-                    sensors: pool
-                        .sensors
-                        .iter()
-                        .copied()
-                        .filter(|&i| s.specs.iter().any(|t| t.src == Src::Sensor(i)))
-                        .collect(),
-                    ..pool.clone()
-                };
-                self.forward(s.specs, &chosen, max_terms)
-                    .map(|s| self.exchange(s, &chosen, FIT_EXCHANGE_PASSES))
-                    .map(|s| self.prune(s))
-            });
-        [self.select(pool, max_terms), from_static]
-            .into_iter()
-            .flatten()
-            .filter_map(|c| Some((self.forward_score(&c.specs)?.total(), c)))
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .map(|(_, c)| c)
-    }
-}
-
-impl Search<'_> {
     /// The coefficients of `specs`' terms fitted on every block (the intercept left out).
     pub(crate) fn coefficients(&self, specs: &[Spec]) -> Option<Vec<f64>> {
         let cols = self.columns(specs)?;
@@ -664,50 +625,7 @@ impl Search<'_> {
         let k = BlockStats::new(&refs, self.y, &self.blocks).coefficients(None)?;
         Some(k.iter().skip(1).copied().collect())
     }
-
-    /// `sel` with a term dropped, one at a time, while the model without it (the others' time
-    /// constants searched again) loses less than the rule counts as a gain. Only a term whose
-    /// input is in the model twice with coefficients of opposite signs: a difference of two
-    /// lags, which fits a swing of one frequency with any gain at rest. A path that went
-    /// through a stand-in kept one (the demo's air lagged 177 and 123 min with −81 and
-    /// +67 µm/K, where the column lags it once by 38 min with +2.9 µm/K). Dropping any term
-    /// was tried: on the real spindle file it took two channels from 0.3 to 1.1 and 1.5× the
-    /// static fit on the held-out 40 % (docs/methods.md, thirtieth round).
-    pub(crate) fn prune(&self, mut sel: Selection) -> Selection {
-        while sel.specs.len() > 1 {
-            let Some(k) = self.coefficients(&sel.specs) else {
-                break;
-            };
-            let Some(smaller) = (0..sel.specs.len())
-                .filter(|&idx| cancels(&sel.specs, &k, idx))
-                .filter_map(|idx| {
-                    let mut specs = without(&sel.specs, idx);
-                    let score = self.backfit_settled(&mut specs, JOINT_BACKFIT_PASSES)?;
-                    Some(Selection { specs, score })
-                })
-                .min_by(|a, b| a.score.total().total_cmp(&b.score.total()))
-                .filter(|m| !HeldOutGain::between(&m.score, &sel.score, &self.rule).significant)
-            else {
-                break;
-            };
-            sel = smaller;
-        }
-        sel
-    }
 }
-
-/// Whether term `idx`'s input is in `specs` again with a coefficient (`k`) of the opposite sign.
-fn cancels(specs: &[Spec], k: &[f64], idx: usize) -> bool {
-    let ki = k.get(idx).copied().unwrap_or(0.0);
-    specs
-        .iter()
-        .zip(k)
-        .enumerate()
-        .any(|(j, (sp, kj))| j != idx && sp.src == specs[idx].src && kj * ki < 0.0)
-}
-
-/// Exchange passes of the fit's path from the static sensors (the diagnosis' families use 3).
-const FIT_EXCHANGE_PASSES: usize = 2;
 
 fn spindle_terms(specs: &[Spec]) -> usize {
     specs
@@ -738,7 +656,7 @@ fn best_of(it: impl Iterator<Item = (Spec, CvScore)>) -> Option<(Spec, CvScore)>
 mod tests {
     use super::*;
     use crate::dataset::ThermalDataset;
-    use crate::model::{FitOptions, Input, pool, reference_temperatures, searcher};
+    use crate::model::{FitOptions, reference_temperatures, searcher};
 
     /// A displacement that is a housing sensor lagged by 50 min plus a heat source no sensor
     /// reads (speed² through 20 min), written with its own fine Euler steps: the joint search
@@ -979,81 +897,5 @@ mod tests {
             "{:?}",
             m.specs
         );
-    }
-
-    /// The demo's machine, integrated here with its own Euler steps: a spindle head heated
-    /// by 2000 then 5000 rpm, a column (no sensor) heated by the head and the air, the
-    /// displacement 4 µm/K of the column's rise, so the column lags the head and the air by
-    /// 37.9 min; one reading every 3 min for 4 h with 0.1 µm of noise. A greedy path takes the
-    /// head lagged alone at a τ where it stands in for the air's share too; the fit's path from
-    /// the static sensors finds both lags, each sensor once (without the pruning, the air
-    /// lagged twice with coefficients of opposite signs).
-    #[test]
-    fn the_fit_finds_two_sensors_lagged_where_a_greedy_path_keeps_one() {
-        use rand::SeedableRng;
-        use rand_distr::{Distribution, Normal};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let noise = Normal::new(0.0, 0.1).expect("a normal");
-        let krpm = |t: f64| -> f64 {
-            match t {
-                t if t < 900.0 => 0.0,
-                t if t < 4500.0 => 2.0,
-                t if t < 9900.0 => 5.0,
-                _ => 0.0,
-            }
-        };
-        let air = |t: f64| 0.3 * (2.0 * std::f64::consts::PI * t / 14_400.0).sin();
-        let mut csv = String::from("time_s,spindle_rpm,x_um,head_c,air_c\n");
-        let (mut head, mut column) = (0.0f64, 0.0f64);
-        let step = 1.0;
-        for k in 0..81 {
-            let t = k as f64 * 180.0;
-            let x = 4.0 * column + noise.sample(&mut rng);
-            csv += &format!(
-                "{t},{},{x},{},{}\n",
-                krpm(t) * 1e3,
-                20.0 + head,
-                20.0 + air(t)
-            );
-            for j in 0..180 {
-                let tt = t + j as f64 * step;
-                let p = 2.5 * krpm(tt).powi(2);
-                let (ta, flow) = (air(tt), 3.0 * (head - column));
-                head += (p - 5.0 * (head - ta) - flow) / 12_000.0 * step;
-                column += (flow - 8.0 * (column - ta)) / 25_000.0 * step;
-            }
-        }
-        let ds = ThermalDataset::from_csv(&csv).expect("reads");
-        let inputs = Inputs::new(&ds, &reference_temperatures(&ds));
-        let s = searcher(&inputs, &ds.displacements_um[0], &FitOptions::default());
-        let pool = pool(&ds, &FitOptions::default()).expect("a pool");
-        // The greedy path alone: the head lagged about 28 min, 1.7× the noise held out.
-        let greedy = s
-            .select(&pool, FitOptions::default().max_terms)
-            .expect("selects");
-        assert!(greedy.score.rms() > 0.15, "{:?}", greedy.specs);
-        let m = &crate::model::fit(&ds, &FitOptions::default())
-            .expect("fits")
-            .channels[0];
-        assert!(m.heldout_rms_um < 0.12, "held out {} µm", m.heldout_rms_um);
-        // Each sensor once, in physical terms: the head's share (1.091 µm/K) lagged 37.9 min;
-        // the air's (2.909 µm/K), one swing of ±0.3 K, trades its τ against its gain.
-        let terms = |name: &str| {
-            m.terms
-                .iter()
-                .filter(|t| matches!(&t.input, Input::Sensor { name: n, .. } if n == name))
-                .map(|t| (t.tau_heat_s / 60.0, t.coefficient))
-                .collect::<Vec<_>>()
-        };
-        let (head, air) = (terms("head"), terms("air"));
-        assert!(
-            matches!(head[..], [(tau, k)] if (tau / 37.9 - 1.0).abs() < 0.1 && (k / 1.091 - 1.0).abs() < 0.1),
-            "head {head:?} (min, µm/K)"
-        );
-        assert!(
-            matches!(air[..], [(_, k)] if (2.0..4.5).contains(&k)),
-            "air {air:?} (min, µm/K)"
-        );
-        assert_eq!(m.terms.len(), 2, "{:?}", m.terms);
     }
 }

@@ -147,3 +147,24 @@ fn no_channel_worse_than_static_on_either_split() {
         }
     }
 }
+
+/// A measuring aid, not a check: more splits of the file, each fitting the part before a cut
+/// and predicting the rest (`THERMAL_SPLITS="0.55 0.65 0.7"`, fractions of the file), to see
+/// how a change of the fit moves the figures beyond the two splits the tests hold.
+/// `cargo test --release -p metrolog-thermal --test real_data more_splits -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn more_splits() {
+    let Some(text) = real_file() else { return };
+    let ds = ThermalDataset::from_csv(&text).expect("the real file reads");
+    let cuts = std::env::var("THERMAL_SPLITS").unwrap_or_else(|_| "0.55 0.65 0.7 0.75 0.8".into());
+    for cut in cuts.split_whitespace() {
+        let cut: f64 = cut.parse().expect("THERMAL_SPLITS: fractions such as 0.65");
+        let f = split(&ds, cut, 1.0, false);
+        let worse = f.iter().filter(|c| c.model_um > c.static_um).count();
+        eprintln!(
+            "SPLIT {cut}: mean ratio {:.3}, {worse} channels worse than static",
+            mean_ratio(&f)
+        );
+    }
+}

@@ -132,7 +132,15 @@ pub struct ChannelModel {
     /// The same for the static all-temperature fit, µm.
     pub static_heldout_rms_um: f64,
     pub interval: Interval,
+    /// Short-term noise of the displacement, µm (robust, from its second differences): what
+    /// no model of temperatures and speed can predict. 0 in a model written before it existed.
+    #[serde(default)]
+    pub noise_um: f64,
 }
+
+/// A held-out RMS above this many times the displacement's short-term noise is mostly what the
+/// model does not describe, and `describe` says so.
+const MISSED_NOISE_RATIO: f64 = 2.0;
 
 /// A fitted thermal model (serialisable to JSON).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -314,6 +322,9 @@ fn channel_model(
         fit_rms_um: rms(&fitted),
         heldout_rms_um: rms(&heldout),
         static_heldout_rms_um: static_rms,
+        noise_um: Some(crate::sensors::short_term_noise_of_moving(search.y))
+            .filter(|v| v.is_finite())
+            .unwrap_or(0.0),
         interval: {
             // Extrapolation, not interpolation, is what a prediction does: the interval is
             // taken from the residuals of the later blocks predicted forward in time from the
@@ -359,6 +370,7 @@ pub(crate) fn term_of(ds: &ThermalDataset, refs: &[f64], s: &Spec, coefficient: 
 fn check_model(m: &ChannelModel) -> Option<()> {
     let mut all = vec![
         m.intercept_um,
+        m.noise_um,
         m.fit_rms_um,
         m.heldout_rms_um,
         m.interval.half_width_um,
@@ -506,6 +518,7 @@ impl ThermalModel {
                 m.interval.half_width_um,
                 100.0 * m.interval.heldout_coverage
             );
+            s += &noise_line(m);
             s += &format!("  constant {:+.3} µm\n", m.intercept_um);
             for t in &m.terms {
                 s += &format!("  {}\n", t.describe());
@@ -518,5 +531,70 @@ impl ThermalModel {
 fn mismatch(what: &str) -> ThermalError {
     ThermalError::Mismatch {
         what: what.to_string(),
+    }
+}
+
+/// The held-out RMS against the displacement's short-term noise, and what it means when the
+/// model leaves well above it (nothing for a model written before the noise was kept).
+fn noise_line(m: &ChannelModel) -> String {
+    if m.noise_um.is_nan() || m.noise_um <= 0.0 {
+        return String::new();
+    }
+    let ratio = m.heldout_rms_um / m.noise_um;
+    if !ratio.is_finite() {
+        return String::new();
+    }
+    let mut s = format!(
+        "  held out, {ratio:.1}× the displacement's short-term noise ({:.3} µm)",
+        m.noise_um
+    );
+    if ratio > MISSED_NOISE_RATIO {
+        s += ": the model misses an effect; `metrolog thermal diagnose` names what it can";
+    }
+    s + "\n"
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn channel(heldout_rms_um: f64, noise_um: f64) -> ChannelModel {
+        ChannelModel {
+            channel: "x_um".into(),
+            intercept_um: 0.0,
+            terms: vec![],
+            fit_rms_um: heldout_rms_um,
+            heldout_rms_um,
+            static_heldout_rms_um: 1.0,
+            interval: Interval {
+                level: 0.95,
+                half_width_um: 0.5,
+                heldout_coverage: 0.9,
+            },
+            noise_um,
+        }
+    }
+
+    /// The held-out RMS is put against the displacement's noise, with a word when the model
+    /// leaves more than twice it; a model written before the noise was kept reads back as 0
+    /// and says nothing of it.
+    #[test]
+    fn the_description_puts_the_heldout_rms_against_the_noise() {
+        let near = noise_line(&channel(0.12, 0.1));
+        assert_eq!(
+            near,
+            "  held out, 1.2× the displacement's short-term noise (0.100 µm)\n"
+        );
+        let far = noise_line(&channel(0.25, 0.1));
+        assert!(
+            far.starts_with("  held out, 2.5×") && far.contains("misses an effect"),
+            "{far}"
+        );
+        assert_eq!(noise_line(&channel(0.1, 0.0)), "");
+        assert_eq!(noise_line(&channel(1.0, 1e-320)), "");
+        let mut old = serde_json::to_value(channel(0.2, 0.1)).expect("serialises");
+        old.as_object_mut().expect("an object").remove("noise_um");
+        let read: ChannelModel = serde_json::from_value(old).expect("an old model reads");
+        assert_eq!(read.noise_um, 0.0);
     }
 }

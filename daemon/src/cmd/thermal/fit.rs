@@ -79,6 +79,7 @@ pub(crate) fn model_json(model: &thermal::ThermalModel) -> anyhow::Result<String
             c.fit_rms_um,
             c.heldout_rms_um,
             c.static_heldout_rms_um,
+            c.noise_um,
             c.interval.level,
             c.interval.half_width_um,
             c.interval.heldout_coverage,

@@ -138,6 +138,29 @@ pub struct ChannelModel {
     pub noise_um: f64,
 }
 
+impl ChannelModel {
+    /// Every number the model holds: a model is written or used only when all are finite.
+    pub fn numbers(&self) -> Vec<f64> {
+        let mut all = vec![
+            self.intercept_um,
+            self.noise_um,
+            self.fit_rms_um,
+            self.heldout_rms_um,
+            self.static_heldout_rms_um,
+            self.interval.level,
+            self.interval.half_width_um,
+            self.interval.heldout_coverage,
+        ];
+        for t in &self.terms {
+            all.extend([t.coefficient, t.tau_heat_s, t.tau_cool_s]);
+            if let Input::Sensor { reference_c, .. } = &t.input {
+                all.push(*reference_c);
+            }
+        }
+        all
+    }
+}
+
 /// A held-out RMS above this many times the displacement's short-term noise is mostly what the
 /// model does not describe, and `describe` says so.
 const MISSED_NOISE_RATIO: f64 = 2.0;
@@ -368,19 +391,7 @@ pub(crate) fn term_of(ds: &ThermalDataset, refs: &[f64], s: &Spec, coefficient: 
 }
 
 fn check_model(m: &ChannelModel) -> Option<()> {
-    let mut all = vec![
-        m.intercept_um,
-        m.noise_um,
-        m.fit_rms_um,
-        m.heldout_rms_um,
-        m.interval.half_width_um,
-    ];
-    all.extend(
-        m.terms
-            .iter()
-            .flat_map(|t| [t.coefficient, t.tau_heat_s, t.tau_cool_s]),
-    );
-    all.iter().all(|v| v.is_finite()).then_some(())
+    m.numbers().iter().all(|v| v.is_finite()).then_some(())
 }
 
 /// The interval's half-width from all held-out residuals, and its coverage block by block

@@ -595,24 +595,16 @@ impl Search<'_> {
 }
 
 impl<'a> Search<'a> {
-    /// The same search, sharing the memo of scores.
-    pub(crate) fn shared(&self) -> Search<'a> {
+    /// The same search without sensor lags (static terms of the sensors), sharing the memo.
+    pub(crate) fn without_lags(&self) -> Search<'a> {
         Search {
             inputs: self.inputs,
             y: self.y,
             blocks: self.blocks.clone(),
             grid: self.grid.clone(),
             rule: self.rule,
-            sensor_lags: self.sensor_lags,
-            memo: Rc::clone(&self.memo),
-        }
-    }
-
-    /// The same search without sensor lags (static terms of the sensors), sharing the memo.
-    pub(crate) fn without_lags(&self) -> Search<'a> {
-        Search {
             sensor_lags: false,
-            ..self.shared()
+            memo: Rc::clone(&self.memo),
         }
     }
 }

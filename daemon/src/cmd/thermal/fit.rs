@@ -74,22 +74,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 /// `null`, which no reader could take back as a number).
 pub(crate) fn model_json(model: &thermal::ThermalModel) -> anyhow::Result<String> {
     for c in &model.channels {
-        let mut all = vec![
-            c.intercept_um,
-            c.fit_rms_um,
-            c.heldout_rms_um,
-            c.static_heldout_rms_um,
-            c.noise_um,
-            c.interval.level,
-            c.interval.half_width_um,
-            c.interval.heldout_coverage,
-        ];
-        for t in &c.terms {
-            all.extend([t.coefficient, t.tau_heat_s, t.tau_cool_s]);
-            if let thermal::Input::Sensor { reference_c, .. } = &t.input {
-                all.push(*reference_c);
-            }
-        }
+        let all = c.numbers();
         anyhow::ensure!(
             all.iter().all(|v| v.is_finite()),
             "the fitted model of `{}` holds a non-finite number; not written (the data are \
